@@ -1,0 +1,1 @@
+"""Gossip: SWIM membership with Lifeguard refinements, dissemination, and the UDP shell."""

@@ -1,0 +1,79 @@
+"""Membership and dissemination settings, with presets.
+
+Every duration is in seconds. Formulas that use these live in `sdrpeer.gossip.formulas`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+
+@dataclass(frozen=True, slots=True)
+class GossipConfig:
+    """Tunables of the SWIM core. Use a preset (`lan()`, `fast_test()`) and `replace()` fields."""
+
+    probe_interval: float = 0.2
+    """Time between two probes sent by a robot (scaled by the local-health multiplier)."""
+    probe_timeout: float = 0.1
+    """Wait for a direct ack before indirect probes are sent (scaled by local health)."""
+    indirect_checks: int = 3
+    """k: how many other members are asked to probe a target that missed its direct ack."""
+    suspicion_mult: float = 4.0
+    """Minimum suspicion timeout = suspicion_mult * max(1, log10(n)) * probe_interval."""
+    suspicion_max_mult: float = 3.0
+    """Maximum suspicion timeout = suspicion_max_mult * minimum; confirmations shrink it."""
+    retransmit_mult: int = 4
+    """Each update is sent retransmit_mult * ceil(log10(n + 1)) times by every robot."""
+    gossip_interval: float = 0.1
+    """Time between gossip rounds (only sent while there is something to spread)."""
+    gossip_fanout: int = 4
+    """Members each gossip round is sent to."""
+    gossip_to_dead_time: float = 5.0
+    """Dead members still receive gossip for this long (helps them refute quickly)."""
+    push_pull_interval: float = 5.0
+    """Mean time between full-state exchanges with one random peer (scaled up for large N)."""
+    reconnect_time: float = 3600.0
+    """How long the address of a dead member is still tried in full-state exchanges (heals
+    long partitions)."""
+    dead_reap_time: float = 60.0
+    """A dead or left member is forgotten after this long."""
+    awareness_max: int = 8
+    """Ceiling of the local-health score; timeouts are scaled by (1 + score)."""
+    max_datagram: int = 1400
+    """Largest datagram the core builds, in bytes (Wi-Fi MTU minus headers)."""
+    packet_overhead: int = 48
+    """Bytes the wire envelope adds to every datagram (header, key id, MAC)."""
+
+    def with_(self, **changes: Any) -> GossipConfig:
+        """A copy with some fields changed."""
+        return replace(self, **changes)
+
+
+def lan() -> GossipConfig:
+    """Robots on one Wi-Fi network: sub-2-second failure detection, tolerant of 30 % loss."""
+    return GossipConfig()
+
+
+def fast_test() -> GossipConfig:
+    """Loopback tests: everything fast, short reaping so tests finish quickly."""
+    return GossipConfig(
+        probe_interval=0.1,
+        probe_timeout=0.05,
+        suspicion_mult=3.0,
+        gossip_interval=0.05,
+        push_pull_interval=1.0,
+        gossip_to_dead_time=2.0,
+        dead_reap_time=10.0,
+    )
+
+
+PRESETS = {"lan": lan, "fast_test": fast_test}
+
+
+def preset(name: str) -> GossipConfig:
+    """The preset called `name` (lan, fast_test)."""
+    try:
+        return PRESETS[name]()
+    except KeyError:
+        raise ValueError(f"unknown gossip preset {name!r} (known: {', '.join(PRESETS)})") from None

@@ -1,0 +1,140 @@
+"""Gossip messages: frozen, slotted dataclasses. The codec for them lives in `sdrpeer.wire`.
+
+Two layers:
+- *updates* are facts that spread epidemically (piggybacked on any packet): a member is alive,
+  suspect or dead; a robot's record changed; a one-off event (a trap) happened;
+- *packets* are what one datagram carries: a probe, its acks, a gossip round, a sync chunk. Every
+  packet names its sender and carries a tuple of piggybacked updates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+Addr = tuple[str, int]
+"""A UDP address: (host, port)."""
+
+# Member states, as small ints on the wire.
+ALIVE = 0
+SUSPECT = 1
+DEAD = 2
+LEFT = 3
+STATE_NAMES = {ALIVE: "alive", SUSPECT: "suspect", DEAD: "dead", LEFT: "left"}
+
+
+@dataclass(frozen=True, slots=True)
+class Alive:
+    """`name` is alive at `addr` with `incarnation` (a refutation raises the incarnation)."""
+
+    name: str
+    addr: Addr
+    incarnation: int
+
+
+@dataclass(frozen=True, slots=True)
+class Suspect:
+    """`source` suspects `name` at `incarnation` (its probes failed)."""
+
+    name: str
+    incarnation: int
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
+class Dead:
+    """`source` declares `name` dead at `incarnation`; source == name means a graceful leave."""
+
+    name: str
+    incarnation: int
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
+class Record:
+    """The versioned record owned by robot `name` (opaque bytes to gossip; see `sdrpeer.record`)."""
+
+    name: str
+    version: int
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """A one-off broadcast from `source` (a trap, for instance), unique by (source, seq)."""
+
+    source: str
+    seq: int
+    kind: str
+    payload: bytes
+
+
+Update = Alive | Suspect | Dead | Record | Event
+
+
+@dataclass(frozen=True, slots=True)
+class Ping:
+    """Direct probe of `target` by `sender`; answered with an Ack of the same seq."""
+
+    sender: str
+    seq: int
+    target: str
+    updates: tuple[Update, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class PingReq:
+    """`sender` asks the receiver to probe `target` at `target_addr` on its behalf."""
+
+    sender: str
+    seq: int
+    target: str
+    target_addr: Addr
+    want_nack: bool
+    updates: tuple[Update, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    """Answer to a Ping (or a forwarded answer to a PingReq) with the probe's seq."""
+
+    sender: str
+    seq: int
+    updates: tuple[Update, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Nack:
+    """An intermediary could not reach the target of a PingReq in time (Lifeguard)."""
+
+    sender: str
+    seq: int
+    updates: tuple[Update, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Gossip:
+    """A gossip round: nothing but piggybacked updates."""
+
+    sender: str
+    updates: tuple[Update, ...] = ()
+
+
+SyncEntry = tuple[str, Addr, int, int, int]
+"""One member in a sync digest: (name, addr, incarnation, state, record_version)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Sync:
+    """One self-contained chunk of a full-state exchange (anti-entropy).
+
+    `reply` asks the receiver to answer with its own full state. Each chunk merges on its own, so
+    a lost chunk costs only its entries, never the exchange.
+    """
+
+    sender: str
+    reply: bool
+    entries: tuple[SyncEntry, ...]
+    updates: tuple[Update, ...] = ()
+
+
+Packet = Ping | PingReq | Ack | Nack | Gossip | Sync
