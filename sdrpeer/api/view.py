@@ -1,0 +1,52 @@
+"""What the HTTP API needs from an agent: a read-only view plus a few token-protected actions.
+
+The agent implements this protocol; the API and its tests depend only on it.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+
+class AgentView(Protocol):
+    """The agent as the HTTP API sees it. All returned values are JSON-ready."""
+
+    @property
+    def name(self) -> str:
+        """This robot's name."""
+        ...
+
+    def members_view(self) -> list[dict[str, Any]]:
+        """Every known member (self included), sorted by name.
+
+        Each dict: name, addr ("host:port"), state ("alive"|"suspect"|"dead"|"left"), incarnation,
+        since (unix seconds of the last state change), api (URL or None), record_version,
+        metrics (dict or None: cpu_pct, mem_total, mem_free, battery_pct, rssi_dbm, pos [x, y]),
+        links (dict peer -> {rtt_ms, jitter_ms, loss, distance_m}).
+        """
+        ...
+
+    def agent_view(self) -> dict[str, Any]:
+        """This agent's own counters and settings.
+
+        Keys: name, addr, api, version, uptime_s, insecure (bool), preset, health_score,
+        messages {in, out, bytes_in, bytes_out, bytes_in_per_s, bytes_out_per_s},
+        rejected {reason: count}, members {alive, suspect, dead, left}.
+        """
+        ...
+
+    def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
+        """Event log entries with id > since, oldest first (at most `limit`).
+
+        Each dict: id (int, increasing), ts (unix seconds), kind (e.g. "member.join",
+        "member.suspect", "member.dead", "member.alive", "member.left", "member.reaped", "trap",
+        "agent.start", "wire.rejected"), robot (the robot concerned), detail (dict).
+        """
+        ...
+
+    def set_virtual(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """Change this virtual robot's hardware facts live (battery, rssi, pos, drain, ...).
+
+        Returns the new metrics dict. Raises sdrpeer.errors.ConfigError on a bad field.
+        """
+        ...
