@@ -1,0 +1,575 @@
+"""Wire format: gossip packets <-> authenticated datagrams. The only codec for `gossip.messages`.
+
+How it works
+------------
+A datagram is a fixed 39-byte header followed by a msgpack body::
+
+    b"SP" | version (1) | key id (4) | MAC (32) | body
+
+- *version* is `PROTOCOL_VERSION`; any other value is dropped as "version".
+- *key id* is the first 4 bytes of sha256(key) of the key that signed; all zeros when unsigned.
+- *MAC* is HMAC-SHA256 under that key over magic + version + key id + body (everything but the
+  MAC itself, so the version and key id cannot be altered either); all zeros when unsigned.
+- *body* is a short *stream* of msgpack arrays, not one nested array:
+  the head ``[tag, sender, seq, ts_ms, *fields]``, then (Sync only) one array per entry, then
+  one array per piggybacked update ``[utag, *fields]``. Keeping every array small and flat lets
+  the decoder cap each array at `MAX_FIELDS` elements, so a hostile datagram cannot make msgpack
+  preallocate megabytes of nested lists; and a packet's size is exactly its head plus the sum of
+  `encoded_size(u)` of its updates.
+
+Checks on receive, cheapest and safest first: size, magic, version, key id + MAC (before the body
+is parsed), body (every field type-checked), then freshness (|now - ts| within the window) and
+replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs, as in IPsec). A failure raises
+`WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else escapes `decode`.
+
+Keys: a `Keyring` holds the cluster keys; the first signs, every one verifies. To rotate: add the
+new key second everywhere (both verify), then move it first everywhere (it signs, the old still
+verifies), then remove the old one. `Codec(sender, None)` is the explicit insecure choice: it sends
+unsigned datagrams and accepts anything well-formed, signed or not, without verifying.
+
+Seqs: each `Codec` numbers its datagrams from `seq_start` (the shell passes wall-clock
+microseconds, so seqs keep rising across restarts); receivers track them per sender name, so a
+codec only encodes packets whose `sender` is its own.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hashlib
+import hmac
+import os
+import re
+from collections import Counter, OrderedDict
+from collections.abc import Sequence
+from pathlib import Path
+
+import msgpack  # type: ignore[import-untyped]
+
+from sdrpeer.errors import ConfigError, WireError
+from sdrpeer.gossip.messages import (
+    STATE_NAMES,
+    Ack,
+    Addr,
+    Alive,
+    Dead,
+    Event,
+    Gossip,
+    Nack,
+    Packet,
+    Ping,
+    PingReq,
+    Record,
+    Suspect,
+    Sync,
+    SyncEntry,
+    Update,
+)
+
+PROTOCOL_VERSION = 1
+"""Bumped on any incompatible change of the header or body layout."""
+MAGIC = b"SP"
+KEY_ID_SIZE = 4
+MAC_SIZE = 32
+HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + MAC_SIZE
+"""Bytes the envelope adds before the body (39; `GossipConfig.packet_overhead` budgets 48)."""
+INSECURE_KEY_ID = b"\0" * KEY_ID_SIZE
+MIN_KEY_SIZE = 16
+REPLAY_WINDOW = 1024
+"""How many seqs below a sender's highest one are remembered (older ones are rejected)."""
+_WINDOW_MASK = (1 << REPLAY_WINDOW) - 1
+MAX_FIELDS = 32
+"""Largest msgpack array or map accepted anywhere in a body (a head has at most 8 fields)."""
+MAX_NAME = 255
+"""Longest robot name, host or event kind, in characters."""
+
+REASONS = (
+    "oversized",
+    "malformed",
+    "version",
+    "unauthenticated",
+    "unknown_key",
+    "stale",
+    "replayed",
+)
+"""Every reason `Codec.decode` can reject a datagram for."""
+
+# Packet and update tags (small ints on the wire; never reuse a retired one).
+T_PING, T_PINGREQ, T_ACK, T_NACK, T_GOSSIP, T_SYNC = range(6)
+U_ALIVE, U_SUSPECT, U_DEAD, U_RECORD, U_EVENT = range(5)
+
+_PACKER = msgpack.Packer(use_bin_type=True)
+_pack = _PACKER.pack
+_MAC_OFFSET = HEADER_SIZE - MAC_SIZE
+_HEX = re.compile(r"(?:[0-9a-fA-F]{2})+")
+
+
+# ---------------------------------------------------------------------------------------------
+# Keys
+
+
+def key_id(key: bytes) -> bytes:
+    """The 4-byte id of `key` sent in every datagram it signs: sha256(key)[:4]."""
+    return hashlib.sha256(key).digest()[:KEY_ID_SIZE]
+
+
+def format_key(key: bytes) -> str:
+    """`key` as a line for a key file (lowercase hex)."""
+    return key.hex()
+
+
+def parse_key(text: str) -> bytes:
+    """A key written as hex or base64 (prefix "hex:" or "base64:" to say which; else detected)."""
+    if text.startswith("hex:"):
+        return bytes.fromhex(text[4:])
+    if text.startswith("base64:"):
+        return base64.b64decode(text[7:], validate=True)
+    if _HEX.fullmatch(text):
+        return bytes.fromhex(text)
+    return base64.b64decode(text, validate=True)
+
+
+class Keyring:
+    """Cluster keys: the first signs, every key verifies (so keys rotate without downtime)."""
+
+    def __init__(self, keys: Sequence[bytes]) -> None:
+        unique = list(dict.fromkeys(keys))
+        if not unique:
+            raise ConfigError("keyring: at least one key is needed")
+        for i, key in enumerate(unique):
+            if len(key) < MIN_KEY_SIZE:
+                raise ConfigError(
+                    f"keyring: key #{i + 1} has {len(key)} bytes, at least {MIN_KEY_SIZE} needed"
+                )
+        self._keys = tuple(unique)
+        self._ids = tuple(key_id(k) for k in unique)
+        if INSECURE_KEY_ID in self._ids:
+            raise ConfigError("keyring: a key has the all-zero key id of unsigned datagrams")
+        self._macs: dict[bytes, list[hmac.HMAC]] = {}
+        for kid, key in zip(self._ids, self._keys, strict=True):
+            self._macs.setdefault(kid, []).append(hmac.new(key, digestmod=hashlib.sha256))
+        self._signer = self._macs[self._ids[0]][0]
+
+    @property
+    def signing_key(self) -> bytes:
+        """The key that signs outgoing datagrams (the first one)."""
+        return self._keys[0]
+
+    @property
+    def key_ids(self) -> tuple[bytes, ...]:
+        """Ids of every key, the signing key's first."""
+        return self._ids
+
+    def __len__(self) -> int:
+        """Number of distinct keys."""
+        return len(self._keys)
+
+    def __repr__(self) -> str:
+        """Key ids only: a keyring never prints its keys."""
+        return f"Keyring(key_ids=[{', '.join(k.hex() for k in self._ids)}])"
+
+    def knows(self, kid: bytes) -> bool:
+        """Whether some key in the ring has id `kid`."""
+        return kid in self._macs
+
+    def sign(self, data: bytes) -> tuple[bytes, bytes]:
+        """(key id, HMAC-SHA256 of `data`) under the signing key."""
+        mac = self._signer.copy()
+        mac.update(data)
+        return self._ids[0], mac.digest()
+
+    def verify(self, kid: bytes, data: bytes, mac: bytes) -> bool:
+        """Whether `mac` is the HMAC of `data` under a key with id `kid` (constant-time compare)."""
+        ok = False
+        for base in self._macs.get(kid, ()):
+            h = base.copy()
+            h.update(data)
+            ok |= hmac.compare_digest(h.digest(), mac)
+        return ok
+
+    @staticmethod
+    def generate() -> bytes:
+        """A new random 32-byte key."""
+        return os.urandom(32)
+
+    format_key = staticmethod(format_key)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike[str]) -> Keyring:
+        """Keys from a file: one per line, hex or base64, `#` comments; the first key signs.
+
+        A line of an even number of hex digits is hex, anything else must be base64 (a 32-byte
+        key is 64 chars in hex, 44 chars ending in "=" in base64); "hex:" or "base64:" in front
+        of a key says which explicitly.
+        """
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ConfigError(f"{path}: cannot read key file: {e}") from e
+        keys: list[bytes] = []
+        for lineno, raw in enumerate(text.splitlines(), 1):
+            line = raw.split("#", 1)[0].strip()
+            if not line:
+                continue
+            try:
+                key = parse_key(line)
+            except (ValueError, binascii.Error):
+                raise ConfigError(
+                    f"{path}:{lineno}: not a hex or base64 key (one key per line, # comments)"
+                ) from None
+            if len(key) < MIN_KEY_SIZE:
+                raise ConfigError(
+                    f"{path}:{lineno}: key has {len(key)} bytes, at least {MIN_KEY_SIZE} needed"
+                )
+            keys.append(key)
+        if not keys:
+            raise ConfigError(f"{path}: no key in key file")
+        return cls(keys)
+
+
+# ---------------------------------------------------------------------------------------------
+# Replay protection
+
+
+class ReplayGuard:
+    """Rejects stale timestamps and repeated or too old per-sender seqs (no clock of its own)."""
+
+    def __init__(self, freshness_s: float = 30.0, max_senders: int = 4096) -> None:
+        if freshness_s <= 0 or max_senders < 1:
+            raise ValueError("freshness_s must be > 0 and max_senders >= 1")
+        self.freshness_ms = int(freshness_s * 1000)
+        self.max_senders = max_senders
+        # sender -> [highest seq, bitmap]; bit i set = seq (highest - i) was accepted.
+        self._senders: OrderedDict[str, list[int]] = OrderedDict()
+
+    def __len__(self) -> int:
+        """Number of senders tracked."""
+        return len(self._senders)
+
+    def check(self, sender: str, seq: int, ts_ms: int, now_ms: int) -> str | None:
+        """None if acceptable (the seq is then recorded), else "stale" or "replayed"."""
+        if abs(now_ms - ts_ms) > self.freshness_ms:
+            return "stale"
+        state = self._senders.get(sender)
+        if state is None:
+            if len(self._senders) >= self.max_senders:
+                self._senders.popitem(last=False)
+            self._senders[sender] = [seq, 1]
+            return None
+        top, bits = state
+        if seq > top:
+            shift = seq - top
+            state[0] = seq
+            state[1] = ((bits << shift) | 1) & _WINDOW_MASK if shift < REPLAY_WINDOW else 1
+        else:
+            offset = top - seq
+            if offset >= REPLAY_WINDOW or (bits >> offset) & 1:
+                return "replayed"
+            state[1] = bits | (1 << offset)
+        self._senders.move_to_end(sender)
+        return None
+
+
+
+# ---------------------------------------------------------------------------------------------
+# Body encoding
+
+
+def encode_update(u: Update) -> list[object]:
+    """`u` as the msgpack array sent on the wire: [utag, *fields]."""
+    if isinstance(u, Alive):
+        return [U_ALIVE, u.name, u.addr, u.incarnation]
+    if isinstance(u, Suspect):
+        return [U_SUSPECT, u.name, u.incarnation, u.source]
+    if isinstance(u, Dead):
+        return [U_DEAD, u.name, u.incarnation, u.source]
+    if isinstance(u, Record):
+        return [U_RECORD, u.name, u.version, u.payload]
+    if isinstance(u, Event):
+        return [U_EVENT, u.source, u.seq, u.kind, u.payload]
+    raise TypeError(f"not an update: {u!r}")
+
+
+def encoded_size(u: Update) -> int:
+    """Bytes `u` adds to a datagram body."""
+    return len(_pack(encode_update(u)))
+
+
+def _head(p: Packet, seq: int, ts_ms: int) -> tuple[object, ...]:
+    if isinstance(p, Ping):
+        return (T_PING, p.sender, seq, ts_ms, p.seq, p.target)
+    if isinstance(p, PingReq):
+        return (T_PINGREQ, p.sender, seq, ts_ms, p.seq, p.target, p.target_addr, p.want_nack)
+    if isinstance(p, Ack):
+        return (T_ACK, p.sender, seq, ts_ms, p.seq)
+    if isinstance(p, Nack):
+        return (T_NACK, p.sender, seq, ts_ms, p.seq)
+    if isinstance(p, Gossip):
+        return (T_GOSSIP, p.sender, seq, ts_ms)
+    if isinstance(p, Sync):
+        return (T_SYNC, p.sender, seq, ts_ms, p.reply, len(p.entries))
+    raise TypeError(f"not a packet: {p!r}")
+
+
+# Placeholders with the wire width of real seqs (microseconds) and timestamps (milliseconds).
+_TYPICAL_SEQ = 1 << 62
+_TYPICAL_TS_MS = 1 << 42
+
+
+def packet_body(packet: Packet, seq: int = _TYPICAL_SEQ, ts_ms: int = _TYPICAL_TS_MS) -> bytes:
+    """The unsigned msgpack body of `packet` (a datagram is `HEADER_SIZE` bytes more).
+
+    The default seq and ts_ms are placeholders as wide on the wire as real ones, so the length
+    is that of a real datagram body.
+    """
+    parts = [_pack(_head(packet, seq, ts_ms))]
+    if isinstance(packet, Sync):
+        parts.extend(map(_pack, packet.entries))
+    parts.extend([_pack(encode_update(u)) for u in packet.updates])
+    return b"".join(parts)
+
+
+# ---------------------------------------------------------------------------------------------
+# Body decoding: every field is checked; a violation raises WireError("malformed").
+
+
+def _bad(what: str, value: object) -> WireError:
+    return WireError("malformed", f"bad {what}: {value!r:.60}")
+
+
+def _name(v: object, what: str) -> str:
+    if type(v) is not str or not 0 < len(v) <= MAX_NAME:
+        raise _bad(what, v)
+    return v
+
+
+def _uint(v: object, what: str) -> int:
+    if type(v) is not int or v < 0:
+        raise _bad(what, v)
+    return v
+
+
+def _bool(v: object, what: str) -> bool:
+    if type(v) is not bool:
+        raise _bad(what, v)
+    return v
+
+
+def _bytes(v: object, what: str) -> bytes:
+    if type(v) is not bytes:
+        raise _bad(what, v)
+    return v
+
+
+def _addr(v: object) -> Addr:
+    if type(v) is not list or len(v) != 2:
+        raise _bad("addr", v)
+    port = v[1]
+    if type(port) is not int or not 0 <= port <= 65535:
+        raise _bad("port", port)
+    return (_name(v[0], "host"), port)
+
+
+def decode_update(obj: object) -> Update | None:
+    """The update an array from the wire stands for; None for an unknown (newer) update tag.
+
+    Trailing fields beyond the known ones are ignored (a newer peer may append some).
+    """
+    if type(obj) is not list or not obj or type(obj[0]) is not int:
+        raise _bad("update", obj)
+    tag = obj[0]
+    n = len(obj)
+    if tag == U_ALIVE and n >= 4:
+        return Alive(_name(obj[1], "name"), _addr(obj[2]), _uint(obj[3], "incarnation"))
+    if tag == U_SUSPECT and n >= 4:
+        return Suspect(_name(obj[1], "name"), _uint(obj[2], "incarnation"), _name(obj[3], "source"))
+    if tag == U_DEAD and n >= 4:
+        return Dead(_name(obj[1], "name"), _uint(obj[2], "incarnation"), _name(obj[3], "source"))
+    if tag == U_RECORD and n >= 4:
+        return Record(_name(obj[1], "name"), _uint(obj[2], "version"), _bytes(obj[3], "payload"))
+    if tag == U_EVENT and n >= 5:
+        return Event(
+            _name(obj[1], "source"),
+            _uint(obj[2], "seq"),
+            _name(obj[3], "kind"),
+            _bytes(obj[4], "payload"),
+        )
+    if U_ALIVE <= tag <= U_EVENT:
+        raise _bad("update (too few fields)", obj)
+    return None
+
+
+def _entry(obj: object) -> SyncEntry:
+    if type(obj) is not list or len(obj) < 5:
+        raise _bad("sync entry", obj)
+    state = obj[3]
+    if type(state) is not int or state not in STATE_NAMES:
+        raise _bad("member state", state)
+    return (
+        _name(obj[0], "name"),
+        _addr(obj[1]),
+        _uint(obj[2], "incarnation"),
+        state,
+        _uint(obj[4], "record version"),
+    )
+
+
+# Fields in a head after [tag, sender, seq, ts_ms], per packet tag.
+_HEAD_FIELDS = {T_PING: 2, T_PINGREQ: 4, T_ACK: 1, T_NACK: 1, T_GOSSIP: 0, T_SYNC: 2}
+
+
+def _parse_body(data: bytes, max_size: int) -> tuple[Packet, int, int, int]:
+    """(packet, seq, ts_ms, unknown updates skipped) from the body at data[HEADER_SIZE:]."""
+    unpacker = msgpack.Unpacker(
+        None,
+        raw=False,
+        max_buffer_size=max_size,
+        max_str_len=max_size,
+        max_bin_len=max_size,
+        max_ext_len=max_size,
+        max_array_len=MAX_FIELDS,
+        max_map_len=MAX_FIELDS,
+    )
+    unpacker.feed(memoryview(data)[HEADER_SIZE:])
+    head = unpacker.unpack()
+    if type(head) is not list or len(head) < 4 or type(head[0]) is not int:
+        raise _bad("head", head)
+    tag = head[0]
+    extra = _HEAD_FIELDS.get(tag)
+    if extra is None:
+        raise WireError("malformed", f"unknown packet tag {tag}")
+    if len(head) < 4 + extra:
+        raise _bad("head (too few fields)", head)
+    sender = _name(head[1], "sender")
+    seq = _uint(head[2], "seq")
+    ts_ms = _uint(head[3], "timestamp")
+    entries: tuple[SyncEntry, ...] = ()
+    if tag == T_SYNC:
+        entries = tuple([_entry(unpacker.unpack()) for _ in range(_uint(head[5], "entries"))])
+    updates: list[Update] = []
+    unknown = 0
+    for obj in unpacker:
+        u = decode_update(obj)
+        if u is None:
+            unknown += 1
+        else:
+            updates.append(u)
+    if unpacker.tell() != len(data) - HEADER_SIZE:
+        raise WireError("malformed", "truncated body")
+    ups = tuple(updates)
+    packet: Packet
+    if tag == T_PING:
+        packet = Ping(sender, _uint(head[4], "probe seq"), _name(head[5], "target"), ups)
+    elif tag == T_PINGREQ:
+        packet = PingReq(
+            sender,
+            _uint(head[4], "probe seq"),
+            _name(head[5], "target"),
+            _addr(head[6]),
+            _bool(head[7], "want_nack"),
+            ups,
+        )
+    elif tag == T_ACK:
+        packet = Ack(sender, _uint(head[4], "probe seq"), ups)
+    elif tag == T_NACK:
+        packet = Nack(sender, _uint(head[4], "probe seq"), ups)
+    elif tag == T_GOSSIP:
+        packet = Gossip(sender, ups)
+    else:
+        packet = Sync(sender, _bool(head[4], "reply"), entries, ups)
+    return packet, seq, ts_ms, unknown
+
+
+# ---------------------------------------------------------------------------------------------
+# The codec
+
+
+class Codec:
+    """Encodes this robot's packets into datagrams and checks and decodes incoming ones."""
+
+    def __init__(
+        self,
+        sender: str,
+        keyring: Keyring | None,
+        *,
+        max_datagram: int = 65000,
+        freshness_s: float = 30.0,
+        seq_start: int | None = None,
+        max_senders: int = 4096,
+    ) -> None:
+        if max_datagram <= HEADER_SIZE:
+            raise ValueError(f"max_datagram must exceed the {HEADER_SIZE}-byte header")
+        self.sender = sender
+        """The robot whose packets this codec encodes (packets from others are refused)."""
+        self.keyring = keyring
+        """Keys that sign and verify; None is the explicit insecure mode."""
+        self.max_datagram = max_datagram
+        """Largest datagram sent or accepted, header included."""
+        self.guard = ReplayGuard(freshness_s, max_senders)
+        """Freshness and per-sender replay window of incoming datagrams."""
+        self.counters: Counter[str] = Counter()
+        """Rejections by reason, plus "accepted", "sent", "unknown_update" (updates skipped)."""
+        self._seq = seq_start
+        self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
+
+    @property
+    def secure(self) -> bool:
+        """Whether datagrams are signed and verified."""
+        return self.keyring is not None
+
+    def reject(self, reason: str, detail: str = "") -> WireError:
+        """Count a rejection under `reason` and return the error to raise."""
+        self.counters[reason] += 1
+        return WireError(reason, detail)
+
+    def encode(self, packet: Packet, now_wall: float) -> bytes:
+        """The datagram carrying `packet`, with the next seq and `now_wall` as its timestamp."""
+        if packet.sender != self.sender:
+            raise ValueError(f"codec of {self.sender!r} cannot send as {packet.sender!r}")
+        seq = int(now_wall * 1e6) if self._seq is None else self._seq
+        self._seq = seq + 1
+        body = packet_body(packet, seq, int(now_wall * 1000))
+        if len(body) + HEADER_SIZE > self.max_datagram:
+            self.counters["send_oversized"] += 1
+            raise WireError(
+                "oversized",
+                f"{type(packet).__name__} of {len(body) + HEADER_SIZE} bytes > {self.max_datagram}",
+            )
+        self.counters["sent"] += 1
+        if self.keyring is None:
+            return self._insecure_header + body
+        prefix = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0]
+        _, mac = self.keyring.sign(prefix + body)
+        return prefix + mac + body
+
+    def decode(self, data: bytes, now_wall: float) -> Packet:
+        """The packet in datagram `data`, received at `now_wall`; else WireError (counted)."""
+        size = len(data)
+        if size > self.max_datagram:
+            raise self.reject("oversized", f"{size} bytes > {self.max_datagram}")
+        if size < HEADER_SIZE or data[:2] != MAGIC:
+            raise self.reject("malformed", "not an sdrpeer datagram")
+        if data[2] != PROTOCOL_VERSION:
+            raise self.reject("version", f"protocol version {data[2]}, {PROTOCOL_VERSION} known")
+        if self.keyring is not None:
+            kid = data[3:_MAC_OFFSET]
+            if kid == INSECURE_KEY_ID:
+                raise self.reject("unauthenticated", "unsigned datagram")
+            if not self.keyring.knows(kid):
+                raise self.reject("unknown_key", f"key id {kid.hex()}")
+            signed = data[:_MAC_OFFSET] + data[HEADER_SIZE:]
+            if not self.keyring.verify(kid, signed, data[_MAC_OFFSET:HEADER_SIZE]):
+                raise self.reject("unauthenticated", f"bad MAC under key id {kid.hex()}")
+        try:
+            packet, seq, ts_ms, unknown = _parse_body(data, self.max_datagram)
+        except WireError as e:
+            raise self.reject(e.reason, e.detail) from None
+        except Exception as e:  # msgpack's own errors: ValueError, OutOfData, ... all malformed
+            raise self.reject("malformed", f"{type(e).__name__}: {e}"[:120]) from None
+        reason = self.guard.check(packet.sender, seq, ts_ms, int(now_wall * 1000))
+        if reason is not None:
+            raise self.reject(reason, f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms")
+        self.counters["accepted"] += 1
+        if unknown:
+            self.counters["unknown_update"] += unknown
+        return packet
