@@ -1,0 +1,185 @@
+"""The agent's HTTP API (aiohttp): JSON under /v1, Prometheus text at /metrics.
+
+How it works:
+- `ROUTES` is the route table; a later feature adds a `Route` (or calls `add_routes`).
+- Reads are open (the API listens on loopback by default). Every state-changing request (any
+  method but GET/HEAD/OPTIONS), and any handler marked `@require_token`, needs
+  `Authorization: Bearer <token>`; `auth_middleware` checks it with `hmac.compare_digest`.
+- Every error is JSON `{"error": "..."}`, including 404/405 and unexpected exceptions.
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+import logging
+from collections.abc import Awaitable, Callable, Iterable
+from dataclasses import dataclass
+
+from aiohttp import web
+from prometheus_client import CollectorRegistry
+
+from sdrpeer.api import metrics
+from sdrpeer.api.view import AgentView
+from sdrpeer.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+VIEW_KEY = web.AppKey("view", AgentView)
+TOKEN_KEY = web.AppKey("token", str)
+REGISTRY_KEY = web.AppKey("registry", CollectorRegistry)
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+MAX_EVENTS_LIMIT = 10_000
+_TOKEN_ATTR = "_sdrpeer_requires_token"
+
+
+@dataclass(frozen=True, slots=True)
+class Route:
+    """One entry of the route table."""
+
+    method: str
+    path: str
+    handler: Handler
+
+
+def require_token(handler: Handler) -> Handler:
+    """Mark a handler as needing the bearer token even for GET (writes always need it)."""
+    setattr(handler, _TOKEN_ATTR, True)
+    return handler
+
+
+def json_error(status: int, message: str) -> web.Response:
+    """A JSON error response `{"error": message}`."""
+    return web.json_response({"error": message}, status=status)
+
+
+def view_of(request: web.Request) -> AgentView:
+    """The AgentView the app was built with."""
+    return request.app[VIEW_KEY]
+
+
+def _needs_token(request: web.Request) -> bool:
+    if request.method not in SAFE_METHODS:
+        return True
+    handler = request.match_info.handler
+    return bool(getattr(handler, _TOKEN_ATTR, False))
+
+
+def _token_ok(request: web.Request) -> bool:
+    header = request.headers.get("Authorization", "")
+    scheme, _, given = header.partition(" ")
+    if scheme.lower() != "bearer" or not given:
+        return False
+    return hmac.compare_digest(given.strip().encode(), request.app[TOKEN_KEY].encode())
+
+
+@web.middleware
+async def auth_middleware(request: web.Request, handler: Handler) -> web.StreamResponse:
+    """Reject unauthenticated state-changing requests with 401."""
+    if _needs_token(request) and not _token_ok(request):
+        response = json_error(401, "missing or wrong token: send Authorization: Bearer <token>")
+        response.headers["WWW-Authenticate"] = 'Bearer realm="sdrpeer"'
+        return response
+    return await handler(request)
+
+
+@web.middleware
+async def error_middleware(request: web.Request, handler: Handler) -> web.StreamResponse:
+    """Turn aiohttp's HTTP errors and unexpected exceptions into JSON errors."""
+    try:
+        return await handler(request)
+    except web.HTTPException as exc:
+        if exc.status < 400:
+            raise
+        return json_error(exc.status, exc.reason)
+    except Exception:
+        log.exception("API handler failed: %s %s", request.method, request.path)
+        return json_error(500, "internal error (see the agent log)")
+
+
+def _int_param(request: web.Request, name: str, default: int, low: int, high: int) -> int:
+    text = request.query.get(name)
+    if text is None:
+        return default
+    try:
+        value = int(text)
+    except ValueError:
+        raise web.HTTPBadRequest(reason=f"{name} must be an integer, got {text!r}") from None
+    if not low <= value <= high:
+        raise web.HTTPBadRequest(reason=f"{name} must be in {low}..{high}, got {value}")
+    return value
+
+
+async def get_members(request: web.Request) -> web.Response:
+    """GET /v1/members: every known member, sorted by name."""
+    return web.json_response(view_of(request).members_view())
+
+
+async def get_agent(request: web.Request) -> web.Response:
+    """GET /v1/agent: this agent's counters and settings."""
+    return web.json_response(view_of(request).agent_view())
+
+
+async def get_events(request: web.Request) -> web.Response:
+    """GET /v1/events?since=N&limit=M: event log entries with id > since."""
+    since = _int_param(request, "since", 0, 0, 2**63 - 1)
+    limit = _int_param(request, "limit", 500, 1, MAX_EVENTS_LIMIT)
+    return web.json_response(view_of(request).events_view(since=since, limit=limit))
+
+
+async def get_metrics(request: web.Request) -> web.Response:
+    """GET /metrics: Prometheus text exposition."""
+    body = metrics.render(request.app[REGISTRY_KEY])
+    return web.Response(body=body, headers={"Content-Type": metrics.CONTENT_TYPE})
+
+
+async def get_healthz(request: web.Request) -> web.Response:
+    """GET /healthz: 200 while the agent serves requests."""
+    return web.json_response({"status": "ok", "name": view_of(request).name})
+
+
+async def post_robot(request: web.Request) -> web.Response:
+    """POST /v1/robot: change this virtual robot's facts (JSON object of changes)."""
+    try:
+        changes = await request.json()
+    except json.JSONDecodeError as exc:
+        return json_error(400, f"body is not JSON: {exc}")
+    if not isinstance(changes, dict) or not changes:
+        return json_error(400, 'body must be a non-empty JSON object, e.g. {"battery": "30%"}')
+    view = view_of(request)
+    try:
+        new_metrics = view.set_virtual(changes)
+    except ConfigError as exc:
+        return json_error(400, str(exc))
+    return web.json_response({"name": view.name, "metrics": new_metrics})
+
+
+ROUTES: list[Route] = [
+    Route("GET", "/healthz", get_healthz),
+    Route("GET", "/metrics", get_metrics),
+    Route("GET", "/v1/members", get_members),
+    Route("GET", "/v1/agent", get_agent),
+    Route("GET", "/v1/events", get_events),
+    Route("POST", "/v1/robot", post_robot),
+]
+
+
+def add_routes(app: web.Application, routes: Iterable[Route]) -> None:
+    """Register routes on an app built by `build_app` (token rules apply automatically)."""
+    for route in routes:
+        app.router.add_route(route.method, route.path, route.handler)
+
+
+def build_app(
+    view: AgentView, *, token: str, extra_routes: Iterable[Route] = ()
+) -> web.Application:
+    """The API application for one agent; `token` guards every state-changing route."""
+    if not token:
+        raise ValueError("the API token must not be empty")
+    app = web.Application(middlewares=[error_middleware, auth_middleware])
+    app[VIEW_KEY] = view
+    app[TOKEN_KEY] = token
+    app[REGISTRY_KEY] = metrics.make_registry(view)
+    add_routes(app, [*ROUTES, *extra_routes])
+    return app
