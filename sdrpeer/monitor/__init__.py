@@ -1,0 +1,1 @@
+"""Monitoring: metric sources (real and virtual), scenarios, link estimators and traps."""
