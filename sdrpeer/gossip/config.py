@@ -13,9 +13,9 @@ from typing import Any
 class GossipConfig:
     """Tunables of the SWIM core. Use a preset (`lan()`, `fast_test()`) and `replace()` fields."""
 
-    probe_interval: float = 0.2
+    probe_interval: float = 0.15
     """Time between two probes sent by a robot (scaled by the local-health multiplier)."""
-    probe_timeout: float = 0.1
+    probe_timeout: float = 0.075
     """Wait for a direct ack before indirect probes are sent (scaled by local health)."""
     indirect_checks: int = 3
     """k: how many other members are asked to probe a target that missed its direct ack."""
