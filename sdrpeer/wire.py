@@ -270,7 +270,6 @@ class ReplayGuard:
         return None
 
 
-
 # ---------------------------------------------------------------------------------------------
 # Body encoding
 
@@ -418,9 +417,9 @@ def _entry(obj: object) -> SyncEntry:
 _HEAD_FIELDS = {T_PING: 2, T_PINGREQ: 4, T_ACK: 1, T_NACK: 1, T_GOSSIP: 0, T_SYNC: 2}
 
 
-def _parse_body(data: bytes, max_size: int) -> tuple[Packet, int, int, int]:
-    """(packet, seq, ts_ms, unknown updates skipped) from the body at data[HEADER_SIZE:]."""
-    unpacker = msgpack.Unpacker(
+def _new_unpacker(max_size: int) -> msgpack.Unpacker:
+    """An unpacker that refuses any array or map longer than MAX_FIELDS (bounded allocation)."""
+    return msgpack.Unpacker(
         None,
         raw=False,
         max_buffer_size=max_size,
@@ -430,6 +429,14 @@ def _parse_body(data: bytes, max_size: int) -> tuple[Packet, int, int, int]:
         max_array_len=MAX_FIELDS,
         max_map_len=MAX_FIELDS,
     )
+
+
+def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, int, int]:
+    """(packet, seq, ts_ms, unknown updates skipped) from the body at data[HEADER_SIZE:].
+
+    `unpacker` must be empty; it is empty again on success (on failure, throw it away).
+    """
+    start = unpacker.tell()
     unpacker.feed(memoryview(data)[HEADER_SIZE:])
     head = unpacker.unpack()
     if type(head) is not list or len(head) < 4 or type(head[0]) is not int:
@@ -448,14 +455,13 @@ def _parse_body(data: bytes, max_size: int) -> tuple[Packet, int, int, int]:
         entries = tuple([_entry(unpacker.unpack()) for _ in range(_uint(head[5], "entries"))])
     updates: list[Update] = []
     unknown = 0
-    for obj in unpacker:
-        u = decode_update(obj)
+    end = start + len(data) - HEADER_SIZE
+    while unpacker.tell() < end:  # (iterating would silently stop at a truncated update)
+        u = decode_update(unpacker.unpack())
         if u is None:
             unknown += 1
         else:
             updates.append(u)
-    if unpacker.tell() != len(data) - HEADER_SIZE:
-        raise WireError("malformed", "truncated body")
     ups = tuple(updates)
     packet: Packet
     if tag == T_PING:
@@ -510,6 +516,7 @@ class Codec:
         self.counters: Counter[str] = Counter()
         """Rejections by reason, plus "accepted", "sent", "unknown_update" (updates skipped)."""
         self._seq = seq_start
+        self._unpacker = _new_unpacker(max_datagram)
         self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
 
     @property
@@ -561,11 +568,14 @@ class Codec:
             if not self.keyring.verify(kid, signed, data[_MAC_OFFSET:HEADER_SIZE]):
                 raise self.reject("unauthenticated", f"bad MAC under key id {kid.hex()}")
         try:
-            packet, seq, ts_ms, unknown = _parse_body(data, self.max_datagram)
-        except WireError as e:
-            raise self.reject(e.reason, e.detail) from None
-        except Exception as e:  # msgpack's own errors: ValueError, OutOfData, ... all malformed
-            raise self.reject("malformed", f"{type(e).__name__}: {e}"[:120]) from None
+            packet, seq, ts_ms, unknown = _parse_body(self._unpacker, data)
+        except BaseException as e:
+            self._unpacker = _new_unpacker(self.max_datagram)  # it may hold half a body
+            if isinstance(e, WireError):
+                raise self.reject(e.reason, e.detail) from None
+            if isinstance(e, Exception):  # msgpack's ValueError, OutOfData, ...: all malformed
+                raise self.reject("malformed", f"{type(e).__name__}: {e}"[:120]) from None
+            raise
         reason = self.guard.check(packet.sender, seq, ts_ms, int(now_wall * 1000))
         if reason is not None:
             raise self.reject(reason, f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms")
