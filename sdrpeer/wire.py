@@ -133,7 +133,7 @@ class Keyring:
     """Cluster keys: the first signs, every key verifies (so keys rotate without downtime)."""
 
     def __init__(self, keys: Sequence[bytes]) -> None:
-        unique = list(dict.fromkeys(keys))
+        unique = list(dict.fromkeys(bytes(k) for k in keys))
         if not unique:
             raise ConfigError("keyring: at least one key is needed")
         for i, key in enumerate(unique):
@@ -508,13 +508,15 @@ class Codec:
         self.sender = sender
         """The robot whose packets this codec encodes (packets from others are refused)."""
         self.keyring = keyring
-        """Keys that sign and verify; None is the explicit insecure mode."""
+        """Keys that sign and verify (assign a new ring to rotate keys while running); None is
+        the explicit insecure mode."""
         self.max_datagram = max_datagram
         """Largest datagram sent or accepted, header included."""
         self.guard = ReplayGuard(freshness_s, max_senders)
         """Freshness and per-sender replay window of incoming datagrams."""
         self.counters: Counter[str] = Counter()
-        """Rejections by reason, plus "accepted", "sent", "unknown_update" (updates skipped)."""
+        """Rejections by reason, plus "accepted", "sent", "unknown_update" (updates skipped) and
+        "send_oversized" (packets too big to encode)."""
         self._seq = seq_start
         self._unpacker = _new_unpacker(max_datagram)
         self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
@@ -549,8 +551,10 @@ class Codec:
         _, mac = self.keyring.sign(prefix + body)
         return prefix + mac + body
 
-    def decode(self, data: bytes, now_wall: float) -> Packet:
+    def decode(self, data: bytes | bytearray | memoryview, now_wall: float) -> Packet:
         """The packet in datagram `data`, received at `now_wall`; else WireError (counted)."""
+        if type(data) is not bytes:
+            data = bytes(data)  # a bytearray or memoryview: key ids must be hashable
         size = len(data)
         if size > self.max_datagram:
             raise self.reject("oversized", f"{size} bytes > {self.max_datagram}")

@@ -572,3 +572,10 @@ def test_wrong_typed_fields_only_raise_wire_error(
 ) -> None:
     datagram = raw([tag, "a", 1, T_MS, *fields], *([i % 6, *rest] for i, rest in enumerate(items)))
     decode_or_wire_error(Codec("b", None), datagram)
+
+
+def test_decode_accepts_any_bytes_like() -> None:
+    a, b = pair([KEY_A], [KEY_A])
+    data = a.encode(Gossip("a", UPDATES), T)
+    assert b.decode(bytearray(data), T) == Gossip("a", UPDATES)
+    assert b.decode(memoryview(a.encode(Gossip("a"), T)), T) == Gossip("a")
