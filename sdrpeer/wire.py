@@ -44,7 +44,7 @@ from collections import Counter, OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
-import msgpack  # type: ignore[import-untyped]
+import msgpack
 
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.gossip.messages import (

@@ -1,0 +1,430 @@
+"""The agent: one per robot. Wires gossip, monitoring and the HTTP API together.
+
+How it works: the agent binds its UDP gossip socket and its HTTP API (either may be port 0),
+writes `DATA_DIR/agent.json` so a lab or a person can find them, joins through the seeds, and
+then once per metrics interval samples the robot (real hardware, or a virtual robot driven by a
+robot file and a scenario), raises traps on threshold crossings at once, and publishes its record
+(metrics, measured links, API address, priority) through gossip. Everything the API shows comes
+from the gossip core's view plus the records decoded here. SIGINT/SIGTERM: graceful leave;
+a second signal: immediate exit.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import random
+import secrets
+import signal
+import time
+from typing import Any
+
+from aiohttp import web
+
+from sdrpeer import __version__
+from sdrpeer.api.app import build_app
+from sdrpeer.config import AgentConfig, parse_hostport
+from sdrpeer.errors import ConfigError, WireError
+from sdrpeer.eventlog import EventLog
+from sdrpeer.gossip.config import preset
+from sdrpeer.gossip.core import Membership
+from sdrpeer.gossip.events import (
+    REAPED,
+    CoreEvent,
+    EventReceived,
+    MemberChanged,
+    ProbeOutcome,
+    RecordChanged,
+)
+from sdrpeer.gossip.messages import STATE_NAMES
+from sdrpeer.gossip.udp import GossipShell, open_gossip
+from sdrpeer.logs import setup_logging
+from sdrpeer.monitor.links import LinkTable, distance
+from sdrpeer.monitor.scenario import Scenario
+from sdrpeer.monitor.sources import HostMetrics
+from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
+from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
+from sdrpeer.procstats import ProcessTreeMeter
+from sdrpeer.record import (
+    Metrics,
+    RobotRecord,
+    decode_record,
+    encode_record,
+    metrics_to_json,
+    record_to_json,
+)
+from sdrpeer.wire import Codec, Keyring
+
+log = logging.getLogger("sdrpeer.agent")
+_HEARTBEAT = 5.0  # publish the record at least this often even when nothing changed (seconds)
+_COUNTER_KEYS = ("accepted", "sent", "unknown_update", "send_oversized")
+
+
+class Agent:
+    """One robot's agent (implements `sdrpeer.api.view.AgentView`)."""
+
+    def __init__(self, config: AgentConfig) -> None:
+        self.config = config
+        self.events = EventLog()
+        self.links = LinkTable()
+        self.records: dict[str, tuple[int, RobotRecord]] = {}
+        self.metrics: Metrics | None = None
+        self.api_url: str | None = None
+        self.shell: GossipShell | None = None
+        self.core: Membership | None = None
+        self.robot: VirtualRobot | None = None
+        self.host: HostMetrics | None = None
+        self.scenario: Scenario | None = None
+        self.traps = TrapDetector()
+        self.meter = ProcessTreeMeter(os.getpid())
+        self._runner: web.AppRunner | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._started_wall = time.time()
+        self._started = 0.0
+        self._last_payload = b""
+        self._last_publish = -1e9
+        self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
+        self.keyring: Keyring | None = None
+
+    @property
+    def name(self) -> str:
+        """This robot's name."""
+        return self.config.name
+
+    # ----------------------------------------------------------------- lifecycle
+    async def start(self) -> None:
+        """Load keys and robot facts, bind gossip and the API, write agent.json, join."""
+        cfg = self.config
+        loop = asyncio.get_running_loop()
+        self._started = loop.time()
+        cfg.data_dir.mkdir(parents=True, exist_ok=True)
+        if cfg.insecure:
+            log.warning("running INSECURE: gossip is neither authenticated nor replay-protected")
+        else:
+            assert cfg.key_file is not None
+            self.keyring = Keyring.from_file(cfg.key_file)
+        token = self._load_token()
+        if cfg.robot_file is not None:
+            robot_file = RobotFile.load(cfg.robot_file)
+            if robot_file.name != cfg.name:
+                raise ConfigError(
+                    f"{cfg.robot_file}: robot file is for {robot_file.name!r}, not {cfg.name!r}"
+                )
+            self.robot = VirtualRobot(robot_file, self.meter.measure, start=self._started)
+            if cfg.scenario is not None:
+                self.scenario = Scenario.load(cfg.scenario, robots=[robot_file])
+        else:
+            self.host = HostMetrics()
+        gossip_preset = preset(cfg.preset)
+        host, port = parse_hostport(cfg.bind)
+        codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=time.time_ns() // 1000)
+        self.shell, addr = await open_gossip(host, port, codec, self._on_core_event)
+        self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
+        self.shell.attach(self.core)
+        await self._start_api(token)
+        self._publish(force=True)
+        self._write_agent_json(addr)
+        self.events.add(
+            time.time(), "agent.start", cfg.name, gossip=f"{addr[0]}:{addr[1]}", api=self.api_url
+        )
+        seeds = [parse_hostport(s) for s in cfg.join]
+        if seeds:
+            self.shell.join(seeds)
+        self._tasks.append(asyncio.create_task(self._metrics_loop()))
+        log.info(
+            "agent %s up: gossip %s:%d, api %s, preset %s",
+            cfg.name,
+            addr[0],
+            addr[1],
+            self.api_url,
+            cfg.preset,
+        )
+
+    async def stop(self, *, leave: bool = True) -> None:
+        """Leave the cluster gracefully, then close the API and the socket."""
+        for task in self._tasks:
+            task.cancel()
+        if self.shell is not None and self.core is not None and leave:
+            self.shell.leave()
+            await asyncio.sleep(max(0.3, 3 * self.core.config.gossip_interval))
+        if self._runner is not None:
+            await self._runner.cleanup()
+        if self.shell is not None:
+            self.shell.close()
+        (self.config.data_dir / "agent.json").unlink(missing_ok=True)
+        log.info("agent %s stopped", self.name)
+
+    def _load_token(self) -> str:
+        cfg = self.config
+        path = cfg.token_file or cfg.data_dir / "token"
+        if path.is_file():
+            token = path.read_text().strip()
+            if not token:
+                raise ConfigError(f"{path}: the token file is empty")
+            return token
+        if cfg.token_file is not None:
+            raise ConfigError(f"{path}: token file not found")
+        token = secrets.token_urlsafe(32)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(token + "\n")
+        return token
+
+    async def _start_api(self, token: str) -> None:
+        host, port = parse_hostport(self.config.api)
+        self._runner = web.AppRunner(build_app(self, token=token), access_log=None)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, host, port)
+        await site.start()
+        server = site._server
+        assert isinstance(server, asyncio.base_events.Server)
+        bound = server.sockets[0].getsockname()
+        self.api_url = f"http://{host}:{bound[1]}"
+
+    def _write_agent_json(self, addr: tuple[str, int]) -> None:
+        info = {
+            "name": self.name,
+            "gossip": f"{addr[0]}:{addr[1]}",
+            "api": self.api_url,
+            "pid": os.getpid(),
+        }
+        path = self.config.data_dir / "agent.json"
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(info))
+        tmp.replace(path)
+
+    # ----------------------------------------------------------------- monitoring
+    async def _metrics_loop(self) -> None:
+        interval = self.config.metrics_interval
+        loop = asyncio.get_running_loop()
+        t_prev = 0.0
+        while True:
+            await asyncio.sleep(interval)
+            now = loop.time()
+            if self.scenario is not None and self.robot is not None:
+                t = now - self._started
+                changes = self.scenario.changes_for(self.name, t_prev, t)
+                t_prev = t
+                if changes:
+                    self.robot.set(now, changes)
+                    self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
+            self._publish()
+
+    def _sample(self, now: float) -> Metrics:
+        if self.robot is not None:
+            return self.robot.sample(now)
+        assert self.host is not None
+        return self.host.sample(now)
+
+    def _publish(self, *, force: bool = False) -> None:
+        """Sample, raise traps, and publish the record if it changed or the heartbeat is due."""
+        if self.shell is None:
+            return
+        now = asyncio.get_running_loop().time()
+        self.metrics = metrics = self._sample(now)
+        for trap in self.traps.feed(metrics, now):
+            self.shell.broadcast_event("trap", encode_trap(trap))
+            self.events.add(time.time(), "trap", self.name, **_trap_json(trap))
+            force = True
+        self._update_rates(now)
+        record = RobotRecord(
+            metrics, self.links.snapshot(now), self.api_url, self.config.priority, (), 0.0
+        )
+        payload = encode_record(record)
+        if force or payload != self._last_payload or now - self._last_publish >= _HEARTBEAT:
+            self._last_payload = payload
+            self._last_publish = now
+            stamped = RobotRecord(
+                record.metrics, record.links, record.api, record.priority, (), time.time()
+            )
+            self.shell.set_record(encode_record(stamped))
+
+    def _update_rates(self, now: float) -> None:
+        assert self.shell is not None
+        c, r = self.shell.counters, self._rate
+        dt = now - r["t"]
+        if dt > 0 and r["t"] > 0:
+            r["in_s"] = (c["bytes_in"] - r["in"]) / dt
+            r["out_s"] = (c["bytes_out"] - r["out"]) / dt
+        r["t"], r["in"], r["out"] = now, c["bytes_in"], c["bytes_out"]
+
+    # ----------------------------------------------------------------- core events
+    def _on_core_event(self, event: CoreEvent) -> None:
+        wall = time.time()
+        if isinstance(event, ProbeOutcome):
+            self.links.observe(event.name, event.rtt, event.at)
+        elif isinstance(event, RecordChanged):
+            if event.name == self.name:
+                return
+            try:
+                self.records[event.name] = (event.version, decode_record(event.payload))
+            except WireError as e:
+                self.events.add(wall, "record.malformed", event.name, error=str(e))
+        elif isinstance(event, MemberChanged):
+            self._on_member(event, wall)
+        elif isinstance(event, EventReceived) and event.kind == "trap":
+            try:
+                trap = decode_trap(event.payload)
+            except WireError as e:
+                self.events.add(wall, "trap.malformed", event.source, error=str(e))
+                return
+            self.events.add(wall, "trap", event.source, **_trap_json(trap))
+
+    def _on_member(self, event: MemberChanged, wall: float) -> None:
+        if event.state == REAPED:
+            self.records.pop(event.name, None)
+            self.links.forget(event.name)
+            kind = "member.reaped"
+        elif event.previous is None:
+            kind = "member.join"
+        else:
+            kind = "member." + STATE_NAMES[event.state]
+        detail: dict[str, Any] = {
+            "addr": f"{event.addr[0]}:{event.addr[1]}",
+            "incarnation": event.incarnation,
+        }
+        if event.previous is not None and event.previous in STATE_NAMES:
+            detail["previous"] = STATE_NAMES[event.previous]
+        self.events.add(wall, kind, event.name, **detail)
+        if kind in ("member.dead", "member.suspect", "member.left"):
+            log.info("%s is %s (incarnation %d)", event.name, kind[7:], event.incarnation)
+
+    # ----------------------------------------------------------------- AgentView
+    def _wall_of(self, t: float) -> float:
+        return round(time.time() - (asyncio.get_running_loop().time() - t), 3)
+
+    def members_view(self) -> list[dict[str, Any]]:
+        """Every known member with its metrics and links (see AgentView)."""
+        if self.core is None:
+            return []
+        out = []
+        positions = {n: r.metrics.pos for n, (_, r) in self.records.items()}
+        positions[self.name] = self.metrics.pos if self.metrics else None
+        for m in sorted(self.core.members(), key=lambda m: m.name):
+            rec: RobotRecord | None
+            if m.name == self.name:
+                own = self.core.record_of(self.name)
+                rec = decode_record(own[1]) if own else None
+                version = own[0] if own else 0
+            else:
+                version, rec = self.records.get(m.name, (0, None))
+            doc = record_to_json(rec) if rec is not None else {"metrics": None, "links": {}}
+            for peer, link in doc["links"].items():
+                d = distance(positions.get(m.name), positions.get(peer))
+                link["distance_m"] = None if d is None else round(d, 2)
+            out.append(
+                {
+                    "name": m.name,
+                    "addr": f"{m.addr[0]}:{m.addr[1]}",
+                    "state": STATE_NAMES.get(m.state, str(m.state)),
+                    "incarnation": m.incarnation,
+                    "since": self._wall_of(m.since),
+                    "api": rec.api if rec is not None else None,
+                    "record_version": version,
+                    "metrics": doc["metrics"],
+                    "links": doc["links"],
+                }
+            )
+        return out
+
+    def agent_view(self) -> dict[str, Any]:
+        """This agent's counters and settings (see AgentView)."""
+        assert self.core is not None
+        assert self.shell is not None
+        c = self.shell.counters
+        codec = self.shell.codec.counters
+        states = dict.fromkeys(STATE_NAMES.values(), 0)
+        for m in self.core.members():
+            states[STATE_NAMES[m.state]] += 1
+        return {
+            "name": self.name,
+            "addr": f"{self.core.addr[0]}:{self.core.addr[1]}",
+            "api": self.api_url,
+            "version": __version__,
+            "uptime_s": round(time.time() - self._started_wall, 3),
+            "insecure": self.keyring is None,
+            "preset": self.config.preset,
+            "health_score": self.core.health_score,
+            "messages": {
+                "in": c["messages_in"],
+                "out": c["messages_out"],
+                "bytes_in": c["bytes_in"],
+                "bytes_out": c["bytes_out"],
+                "bytes_in_per_s": round(self._rate["in_s"], 1),
+                "bytes_out_per_s": round(self._rate["out_s"], 1),
+            },
+            "rejected": {k: v for k, v in codec.items() if k not in _COUNTER_KEYS},
+            "members": states,
+            "gossip": dict(self.core.counters),
+        }
+
+    def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
+        """Event log entries after `since` (see AgentView)."""
+        return self.events.since(since, limit)
+
+    def set_virtual(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """Change this virtual robot's facts live and publish at once (see AgentView)."""
+        if self.robot is None:
+            raise ConfigError(f"{self.name} reads real hardware (no --robot-file): nothing to set")
+        self.robot.set(asyncio.get_running_loop().time(), changes)
+        self.events.add(time.time(), "robot.set", self.name, changes=_jsonable(changes))
+        self._publish(force=True)
+        assert self.metrics is not None
+        return metrics_to_json(self.metrics)
+
+
+def _jsonable(changes: dict[str, Any]) -> dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in changes.items()}
+
+
+def _trap_json(trap: Any) -> dict[str, Any]:
+    return {
+        "metric": trap.metric,
+        "value": trap.value,
+        "threshold": trap.threshold,
+        "state": trap.state,
+    }
+
+
+async def _serve(config: AgentConfig) -> int:
+    agent = Agent(config)
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    signals = 0
+    main_task = asyncio.current_task()
+
+    def on_signal() -> None:
+        nonlocal signals
+        signals += 1
+        if signals == 1:
+            log.info("shutting down (again to force)")
+            stop.set()
+        elif main_task is not None:
+            main_task.cancel()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, on_signal)
+    try:
+        await agent.start()
+    except (ConfigError, OSError) as e:
+        log.error("cannot start: %s", e)
+        await agent.stop(leave=False)
+        return 2
+    await stop.wait()
+    await agent.stop()
+    return 0
+
+
+def run_agent(config: AgentConfig) -> int:
+    """Run an agent until SIGINT/SIGTERM; returns the process exit code."""
+    setup_logging(config.name, config.log_level, config.log_format)
+    try:
+        return asyncio.run(_serve(config))
+    except asyncio.CancelledError:
+        log.warning("forced exit")
+        return 1
+    except ConfigError as e:
+        log.error("%s", e)
+        return 2

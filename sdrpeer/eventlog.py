@@ -1,0 +1,43 @@
+"""A bounded, ordered log of what happened on and around this robot (the API's /v1/events)."""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+
+class EventLog:
+    """Entries with increasing ids; the oldest fall off past `maxlen`."""
+
+    def __init__(self, maxlen: int = 10_000) -> None:
+        self._entries: deque[dict[str, Any]] = deque(maxlen=maxlen)
+        self._next_id = 1
+
+    def add(self, ts: float, kind: str, robot: str, **detail: Any) -> dict[str, Any]:
+        """Append an entry and return it."""
+        entry = {
+            "id": self._next_id,
+            "ts": round(ts, 3),
+            "kind": kind,
+            "robot": robot,
+            "detail": detail,
+        }
+        self._next_id += 1
+        self._entries.append(entry)
+        return entry
+
+    def since(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
+        """Entries with id > since, oldest first, at most `limit`."""
+        out: list[dict[str, Any]] = []
+        if not self._entries or self._entries[-1]["id"] <= since:
+            return out
+        first = self._entries[0]["id"]
+        start = max(0, since - first + 1)
+        for i in range(start, len(self._entries)):
+            out.append(self._entries[i])
+            if len(out) >= limit:
+                break
+        return out
+
+    def __len__(self) -> int:
+        return len(self._entries)

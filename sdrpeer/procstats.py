@@ -1,0 +1,42 @@
+"""Real measurements of the processes a robot hosts: CPU % and resident memory, with psutil.
+
+How it works: `ProcessTreeMeter` follows a root process (the agent) and all its descendants (the
+component hosts), keeping one `psutil.Process` per pid so that `cpu_percent()` measures the time
+between two calls. Processes that exit are dropped; new children are picked up on every call.
+"""
+
+from __future__ import annotations
+
+import psutil
+
+
+class ProcessTreeMeter:
+    """CPU % (of one core) and RSS bytes of a process and its descendants."""
+
+    def __init__(self, root_pid: int, *, include_root: bool = True) -> None:
+        self.root = psutil.Process(root_pid)
+        self.include_root = include_root
+        self._procs: dict[int, psutil.Process] = {}
+
+    def measure(self) -> tuple[float, int]:
+        """(cpu %, rss bytes) summed over the tree right now."""
+        try:
+            tree = self.root.children(recursive=True)
+        except psutil.Error:
+            tree = []
+        if self.include_root:
+            tree.append(self.root)
+        cpu = 0.0
+        rss = 0
+        alive: dict[int, psutil.Process] = {}
+        for proc in tree:
+            known = self._procs.get(proc.pid, proc)
+            try:
+                with known.oneshot():
+                    cpu += known.cpu_percent(None)
+                    rss += known.memory_info().rss
+            except psutil.Error:
+                continue
+            alive[proc.pid] = known
+        self._procs = alive
+        return cpu, rss
