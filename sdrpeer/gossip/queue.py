@@ -2,7 +2,7 @@
 
 How it works: every queued update has a key (the member or record it is about). Queueing a newer
 update with the same key replaces the older one, so stale facts are never sent. `take(budget)`
-returns the least-sent updates first (newest first among equals) that fit in `budget` bytes and
+returns the least-sent updates first (among equals, the one that entered its bucket last) that fit in `budget` bytes and
 counts one transmission for each; an update is dropped after `limit` transmissions. Updates are
 kept in buckets by transmit count, so `take` touches only what it sends.
 """
