@@ -1,8 +1,235 @@
-"""The `sdrpeer` command (placeholder until the CLI lands)."""
+"""The `sdrpeer` command: `agent`, the client commands, and (via `sdrpeer.cli_lab`) lab and demo.
+
+`sdrpeer agent` flags map one-to-one onto `AgentConfig` fields (`--key-file` -> `key_file`);
+`--config FILE` supplies the same fields from YAML and flags override it. Client commands find
+the agent with `--api`, `$SDRPEER_API` or the lab file, see `sdrpeer.client`.
+Exit codes: 0 ok, 1 an operation failed, 2 bad configuration or usage, 130 interrupted.
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
-def main() -> int:
-    """Entry point."""
+from sdrpeer import __version__
+from sdrpeer.cli_format import format_agent, format_event, format_members, want_color
+from sdrpeer.client import AgentClient, Endpoint, resolve_endpoint
+from sdrpeer.config import FIELDS, LOG_FORMATS, LOG_LEVELS, build_config, load_agent_config
+from sdrpeer.errors import ApiError, ConfigError, SdrpeerError
+from sdrpeer.gossip.config import PRESETS
+from sdrpeer.lab import DEFAULT_DIR, read_lab
+
+EVENTS_POLL = 0.5
+
+
+def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`sdrpeer agent`: one flag per AgentConfig field."""
+    p = sub.add_parser("agent", help="run the agent of one robot", description=__doc__)
+    p.set_defaults(func=cmd_agent)
+    p.add_argument("--config", type=Path, metavar="FILE", help="agent config file (YAML)")
+    p.add_argument("--name", help="this robot's name ([A-Za-z0-9_.-]+)")
+    p.add_argument("--bind", metavar="HOST:PORT", help="gossip UDP (127.0.0.1:7946)")
+    p.add_argument("--join", action="append", metavar="HOST:PORT", help="a member to join; repeat")
+    p.add_argument("--api", metavar="HOST:PORT", help="HTTP API address (default 127.0.0.1:8080)")
+    p.add_argument("--robot-file", type=Path, metavar="FILE", help="virtual robot's facts (YAML)")
+    p.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for the virtual robot")
+    p.add_argument("--key-file", type=Path, metavar="FILE", help="cluster key (hex)")
+    p.add_argument(
+        "--insecure", action="store_true", default=None, help="run without a cluster key"
+    )
+    p.add_argument("--token-file", type=Path, metavar="FILE", help="API token (default: generate)")
+    p.add_argument("--preset", choices=sorted(PRESETS), help="gossip tuning (default lan)")
+    p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")
+    p.add_argument("--metrics-interval", type=float, metavar="SECONDS", help="metrics period")
+    p.add_argument("--priority", type=int, metavar="N", help="election priority (default 0)")
+    p.add_argument("--log-level", choices=LOG_LEVELS, help="default info")
+    p.add_argument("--log-format", choices=LOG_FORMATS, help="default text")
+
+
+def agent_flag_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The AgentConfig fields given as flags (None = not given)."""
+    return {field: getattr(args, field, None) for field in FIELDS}
+
+
+def cmd_agent(args: argparse.Namespace) -> int:
+    """Build the configuration and run the agent until it is told to stop."""
+    file_values = load_agent_config(args.config) if args.config else None
+    config = build_config(file_values, agent_flag_values(args))
+    # Imported on use: the agent is heavy. The ignore is for while sdrpeer.agent does not exist.
+    from sdrpeer.agent import run_agent  # type: ignore[import-not-found,unused-ignore]  # noqa: PLC0415
+
+    return int(run_agent(config))
+
+
+# --- client commands -------------------------------------------------------------------------
+
+
+def _client_options() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--api", metavar="URL", help="agent API (default $SDRPEER_API, else the lab)")
+    p.add_argument("--token", help="API token (default $SDRPEER_TOKEN, else the lab file)")
+    p.add_argument("--lab-dir", type=Path, default=DEFAULT_DIR, metavar="DIR", help="lab directory")
+    return p
+
+
+def endpoint(args: argparse.Namespace) -> Endpoint:
+    """Where this client command sends its calls."""
+    return resolve_endpoint(args.api, args.token, args.lab_dir, os.environ)
+
+
+def client_for(args: argparse.Namespace) -> AgentClient:
+    """An AgentClient for the resolved endpoint."""
+    found = endpoint(args)
+    return AgentClient(found.api, found.token)
+
+
+def _print_json(value: Any) -> None:
+    print(json.dumps(value, indent=2, sort_keys=True))
+
+
+def cmd_members(args: argparse.Namespace) -> int:
+    """Print the members table (or the raw list with --json)."""
+    members = client_for(args).members()
+    if args.json:
+        _print_json(members)
+    else:
+        print(format_members(members, color=want_color(sys.stdout.isatty(), os.environ)))
     return 0
+
+
+def cmd_agent_info(args: argparse.Namespace) -> int:
+    """Print the agent's own counters."""
+    agent = client_for(args).agent()
+    if args.json:
+        _print_json(agent)
+    else:
+        print(format_agent(agent))
+    return 0
+
+
+def cmd_events(args: argparse.Namespace) -> int:
+    """Print the event log; with --follow keep polling until Ctrl-C."""
+    client = client_for(args)
+    color = want_color(sys.stdout.isatty(), os.environ)
+    since = args.since
+    try:
+        while True:
+            batch = client.events(since=since, limit=500)
+            for event in batch:
+                line = format_event(event, color=color)
+                print(json.dumps(event, sort_keys=True) if args.json else line)
+                since = max(since, int(event.get("id", since)))
+            sys.stdout.flush()
+            if len(batch) == 500:
+                continue
+            if not args.follow:
+                return 0
+            time.sleep(EVENTS_POLL)
+    except KeyboardInterrupt:
+        return 0
+
+
+def parse_assignment(text: str) -> tuple[str, Any]:
+    """'battery=30%' -> ('battery', '30%'); numbers become numbers; 'pos=3,4' -> [3, 4]."""
+    key, sep, value = text.partition("=")
+    if not sep or not key or not value:
+        raise ConfigError(f"{text!r}: expected key=value, e.g. battery=30% or rssi=-55dBm")
+
+    def scalar(item: str) -> Any:
+        for kind in (int, float):
+            try:
+                return kind(item)
+            except ValueError:
+                pass
+        return item
+
+    if "," in value:
+        return key, [scalar(v.strip()) for v in value.split(",")]
+    return key, scalar(value)
+
+
+def robot_client(args: argparse.Namespace) -> AgentClient:
+    """The client for the robot named by args.robot: its lab entry, else its `api` member field."""
+    lab = None if (args.api or os.environ.get("SDRPEER_API")) else read_lab(args.lab_dir)
+    entry = lab.robot(args.robot) if lab else None
+    if entry is not None and entry.api:
+        return AgentClient(entry.api, args.token or os.environ.get("SDRPEER_TOKEN") or entry.token)
+    found = endpoint(args)
+    members = AgentClient(found.api, found.token).members()
+    member = next((m for m in members if m.get("name") == args.robot), None)
+    if member is None:
+        known = ", ".join(str(m.get("name")) for m in members)
+        raise SdrpeerError(f"no robot {args.robot!r} in the cluster (members: {known})")
+    if not member.get("api"):
+        raise SdrpeerError(f"{args.robot} does not publish an API address; pass --api URL")
+    again = resolve_endpoint(str(member["api"]), args.token, args.lab_dir, os.environ)
+    return AgentClient(again.api, again.token)
+
+
+def cmd_robot_set(args: argparse.Namespace) -> int:
+    """Change a virtual robot's facts live: sdrpeer robot set robot-1 rssi=-55dBm battery=30%."""
+    changes = dict(parse_assignment(a) for a in args.assignments)
+    answer = robot_client(args).post("/v1/robot", changes)
+    if args.json:
+        _print_json(answer)
+    else:
+        metrics = answer.get("metrics") if isinstance(answer, dict) else None
+        print(f"{args.robot}: set {', '.join(args.assignments)}")
+        if metrics:
+            print(f"  now: {json.dumps(metrics, sort_keys=True)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole `sdrpeer` argument parser."""
+    from sdrpeer.cli_lab import add_lab_parsers  # noqa: PLC0415 - cli_lab imports this module
+
+    parser = argparse.ArgumentParser(prog="sdrpeer", description="A leaderless robot platform.")
+    parser.add_argument("--version", action="version", version=f"sdrpeer {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_agent_parser(sub)
+    client = _client_options()
+    as_json = argparse.ArgumentParser(add_help=False)
+    as_json.add_argument("--json", action="store_true", help="print JSON")
+    members = sub.add_parser("members", parents=[client, as_json], help="list the members")
+    members.set_defaults(func=cmd_members)
+    info = sub.add_parser("agent-info", parents=[client, as_json], help="the agent's counters")
+    info.set_defaults(func=cmd_agent_info)
+    events = sub.add_parser("events", parents=[client, as_json], help="the event log")
+    events.add_argument("--follow", "-f", action="store_true", help="keep printing new events")
+    events.add_argument("--since", type=int, default=0, metavar="ID", help="only events after ID")
+    events.set_defaults(func=cmd_events)
+    robot = sub.add_parser("robot", help="change a virtual robot")
+    robot_sub = robot.add_subparsers(dest="robot_command", required=True, metavar="ACTION")
+    robot_set = robot_sub.add_parser("set", parents=[client, as_json], help="set facts live")
+    robot_set.add_argument("robot", help="robot name, e.g. robot-1")
+    robot_set.add_argument("assignments", nargs="+", metavar="KEY=VALUE", help="e.g. battery=30%%")
+    robot_set.set_defaults(func=cmd_robot_set)
+    add_lab_parsers(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `sdrpeer` console script."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (ApiError, SdrpeerError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        # stdout was closed early (e.g. `sdrpeer members --json | head`): not an error.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0

@@ -120,6 +120,15 @@ class Cluster:
         self.unroutable = 0
         """Datagrams addressed to no node of the cluster."""
 
+    @property
+    def count_bytes(self) -> bool:
+        """Whether sent bytes are counted (encoding every datagram costs time)."""
+        return self._size is not None
+
+    @count_bytes.setter
+    def count_bytes(self, on: bool) -> None:
+        self._size = packet_size if on else None
+
     # -- set-up and faults --------------------------------------------------------------------
 
     def start(self, spread: float = 0.0) -> None:
