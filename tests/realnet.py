@@ -1,0 +1,327 @@
+"""Helpers for the real-network tests: start real agent processes on loopback and poll their API.
+
+How it works: a `RealCluster` owns a temporary directory with one cluster key (generated with
+`Keyring.generate()`) and starts agents as `python -m sdrpeer agent --preset fast_test --bind
+127.0.0.1:0 --api 127.0.0.1:0`, each in its own session with its output in `<data dir>/agent.log`.
+`start` waits for `agent.json` (the bound addresses); `wait_until` polls a condition every 0.1 s
+for at most 15 s by default and fails with a message that names what was awaited, the last value
+seen and the tail of every agent's log. `close` SIGKILLs whatever is still running, so a failed or
+interrupted test leaves no process behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from sdrpeer.wire import Keyring, format_key
+
+REPO = Path(__file__).resolve().parents[1]
+POLL = 0.1
+WAIT = 15.0
+START_WAIT = 10.0
+LOG_TAIL = 15
+T = TypeVar("T")
+
+
+class RealnetError(AssertionError):
+    """A bounded wait ran out, or an agent misbehaved; the message says what and shows logs."""
+
+
+def http(
+    method: str, url: str, body: Any = None, token: str | None = None, timeout: float = 2.0
+) -> tuple[int, Any]:
+    """(status, decoded JSON body) of one HTTP call; HTTP errors are returned, not raised."""
+    data = None if body is None else json.dumps(body).encode()
+    headers = {"Accept": "application/json"}
+    if data is not None:
+        headers["Content-Type"] = "application/json"
+    if token is not None:
+        headers["Authorization"] = f"Bearer {token}"
+    req = urllib.request.Request(url, data=data, headers=headers, method=method)
+    try:
+        with urllib.request.urlopen(req, timeout=timeout) as resp:
+            status, raw = resp.status, resp.read()
+    except urllib.error.HTTPError as exc:
+        status, raw = exc.code, exc.read()
+    return status, json.loads(raw) if raw else None
+
+
+def log_tail(path: Path, lines: int = LOG_TAIL) -> str:
+    """The last lines of a log, indented (or a note when there is none)."""
+    try:
+        text = path.read_text(errors="replace")
+    except OSError:
+        return "    (no log)"
+    tail = text.rstrip("\n").splitlines()[-lines:]
+    return "\n".join(f"    | {line}" for line in tail) or "    (empty log)"
+
+
+@dataclass
+class Agent:
+    """One agent process started by a `RealCluster`."""
+
+    name: str
+    data_dir: Path
+    proc: subprocess.Popen[bytes]
+    gossip: str = ""
+    api: str = ""
+    pid: int = 0
+    stopped: bool = False
+    """Set when the test stops the agent on purpose (its exit is then not a failure)."""
+
+    @property
+    def log(self) -> Path:
+        """Where the agent's stdout and stderr go."""
+        return self.data_dir / "agent.log"
+
+    @property
+    def gossip_addr(self) -> tuple[str, int]:
+        """The bound UDP gossip address."""
+        host, _, port = self.gossip.rpartition(":")
+        return host, int(port)
+
+    @property
+    def token(self) -> str:
+        """The API token the agent generated into DATA_DIR/token."""
+        return (self.data_dir / "token").read_text().strip()
+
+    def running(self) -> bool:
+        """Whether the process has not exited."""
+        return self.proc.poll() is None
+
+    def get(self, path: str) -> Any:
+        """GET an API path; an error status raises RealnetError."""
+        status, body = http("GET", self.api + path)
+        if status != 200:
+            raise RealnetError(f"{self.name}: GET {path} answered {status}: {body}")
+        return body
+
+    def members(self) -> dict[str, dict[str, Any]]:
+        """GET /v1/members as name -> member."""
+        return {m["name"]: m for m in self.get("/v1/members")}
+
+    def states(self) -> dict[str, str]:
+        """name -> state as this agent sees it."""
+        return {name: m["state"] for name, m in self.members().items()}
+
+    def agent_info(self) -> dict[str, Any]:
+        """GET /v1/agent."""
+        return dict(self.get("/v1/agent"))
+
+    def events(self) -> list[dict[str, Any]]:
+        """GET /v1/events (everything still in the log)."""
+        return list(self.get("/v1/events?limit=10000"))
+
+
+@dataclass
+class RealCluster:
+    """Real agents on 127.0.0.1 sharing one cluster key; `close()` kills them all."""
+
+    root: Path
+    preset: str = "fast_test"
+    agents: list[Agent] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.key = Keyring.generate()
+        self.key_file = self.root / "cluster.key"
+        self.key_file.write_text(format_key(self.key) + "\n")
+        os.chmod(self.key_file, 0o600)
+
+    # ------------------------------------------------------------------ processes
+    def robot_file(self, name: str) -> Path:
+        """A deterministic robot file: no noise, no drain, battery 100 %, -45 dBm."""
+        path = self.root / f"{name}.yaml"
+        if not path.exists():
+            index = len(list(self.root.glob("*.yaml")))
+            path.write_text(
+                f"name: {name}\nmemory: 4GB\ncpus: 4\nbattery: 100%\n"
+                f"position: [{3 * index}, 0]\nrssi: -45dBm\n"
+            )
+        return path
+
+    def start(self, name: str, join: Iterable[Agent] = (), *, run: int = 0) -> Agent:
+        """Start an agent (data dir `name` or `name.run<N>`), wait for its agent.json."""
+        data_dir = self.root / (name if run == 0 else f"{name}.run{run}")
+        data_dir.mkdir(parents=True)
+        command = [
+            sys.executable,
+            "-m",
+            "sdrpeer",
+            "agent",
+            "--name",
+            name,
+            "--bind",
+            "127.0.0.1:0",
+            "--api",
+            "127.0.0.1:0",
+            "--data-dir",
+            str(data_dir),
+            "--key-file",
+            str(self.key_file),
+            "--robot-file",
+            str(self.robot_file(name)),
+            "--preset",
+            self.preset,
+        ]
+        for peer in join:
+            command += ["--join", peer.gossip]
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH")) if p)
+        env.pop("SDRPEER_API", None)
+        env.pop("SDRPEER_TOKEN", None)
+        with (data_dir / "agent.log").open("ab") as out:
+            proc = subprocess.Popen(
+                command,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                env=env,
+                cwd=self.root,
+            )
+        agent = Agent(name, data_dir, proc)
+        self.agents.append(agent)
+        deadline = time.monotonic() + START_WAIT
+        while True:
+            info = _read_json(data_dir / "agent.json")
+            if info is not None and info.get("gossip") and info.get("api"):
+                agent.gossip = str(info["gossip"])
+                agent.api = str(info["api"]).rstrip("/")
+                agent.pid = int(info["pid"])
+                return agent
+            if proc.poll() is not None:
+                raise RealnetError(
+                    f"{name}: agent exited with code {proc.returncode} while starting:\n"
+                    + log_tail(agent.log)
+                )
+            if time.monotonic() > deadline:
+                raise RealnetError(
+                    f"{name}: no agent.json within {START_WAIT:g} s:\n" + log_tail(agent.log)
+                )
+            time.sleep(POLL)
+
+    def start_many(self, n: int) -> list[Agent]:
+        """robot-1 .. robot-n, the others joining robot-1, and wait until all see n alive."""
+        first = self.start("robot-1")
+        others = [self.start(f"robot-{i}", join=[first]) for i in range(2, n + 1)]
+        agents = [first, *others]
+        names = {a.name for a in agents}
+        for agent in agents:
+            self.wait_states(agent, dict.fromkeys(names, "alive"), what="convergence")
+        return agents
+
+    def kill(self, agent: Agent) -> None:
+        """SIGKILL the agent (no goodbye) and reap it."""
+        agent.stopped = True
+        _signal_group(agent.proc, signal.SIGKILL)
+        agent.proc.wait(timeout=5)
+
+    def terminate(self, agent: Agent, timeout: float = 5.0) -> int:
+        """SIGTERM (graceful leave) and wait for the exit code."""
+        agent.stopped = True
+        agent.proc.send_signal(signal.SIGTERM)
+        try:
+            return agent.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise RealnetError(
+                f"{agent.name}: still running {timeout:g} s after SIGTERM:\n" + log_tail(agent.log)
+            ) from None
+
+    def close(self) -> None:
+        """SIGKILL every agent that is still running and reap it."""
+        for agent in self.agents:
+            if agent.proc.poll() is None:
+                _signal_group(agent.proc, signal.SIGKILL)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                agent.proc.wait(timeout=5)
+
+    # ------------------------------------------------------------------ waiting
+    def logs(self) -> str:
+        """Every agent's log tail, for failure messages."""
+        parts = []
+        for a in self.agents:
+            state = "running" if a.running() else f"exited {a.proc.returncode}"
+            parts.append(f"  {a.name} ({a.data_dir.name}, {state}) log tail:\n{log_tail(a.log)}")
+        return "\n".join(parts)
+
+    def wait_until(
+        self,
+        probe: Callable[[], T],
+        ok: Callable[[T], bool],
+        what: str,
+        timeout: float = WAIT,
+    ) -> T:
+        """Poll `probe()` every 0.1 s until `ok(value)`; fail after `timeout` s with the logs."""
+        deadline = time.monotonic() + timeout
+        last: Any = "(never answered)"
+        while True:
+            try:
+                value = probe()
+            except (OSError, RealnetError, ValueError) as exc:  # URLError is an OSError
+                last = f"error: {exc}"
+            else:
+                if ok(value):
+                    return value
+                last = value
+            if time.monotonic() > deadline:
+                raise RealnetError(
+                    f"timed out after {timeout:g} s waiting for {what}; last seen: {last!r:.1500}\n"
+                    + self.logs()
+                )
+            crashed = [a for a in self.agents if not a.stopped and not a.running()]
+            if crashed:
+                a = crashed[0]
+                raise RealnetError(
+                    f"{a.name} exited with code {a.proc.returncode} while waiting for {what}\n"
+                    + self.logs()
+                )
+            time.sleep(POLL)
+
+    def wait_states(
+        self, agent: Agent, expected: dict[str, str], what: str = "", timeout: float = WAIT
+    ) -> dict[str, dict[str, Any]]:
+        """Wait until `agent` shows each named member in the expected state; its members."""
+
+        def ok(members: dict[str, dict[str, Any]]) -> bool:
+            return all(members.get(n, {}).get("state") == s for n, s in expected.items())
+
+        label = f"{agent.name} to see {expected}" + (f" ({what})" if what else "")
+        return self.wait_until(agent.members, ok, label, timeout)
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _signal_group(proc: subprocess.Popen[bytes], sig: int) -> None:
+    """Signal the agent's process group (it leads its own session), else the process alone."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(proc.pid, sig)
+        return
+    with contextlib.suppress(ProcessLookupError):
+        proc.send_signal(sig)
+
+
+def send_udp(addr: tuple[str, int], *datagrams: bytes) -> None:
+    """Send raw datagrams to `addr` from a fresh, plain UDP socket."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        for data in datagrams:
+            sock.sendto(data, addr)
