@@ -113,6 +113,10 @@ class Agent:
         """GET /v1/members as name -> member."""
         return {m["name"]: m for m in self.get("/v1/members")}
 
+    def member(self, name: str) -> dict[str, Any]:
+        """One member as this agent sees it (KeyError while it does not know it)."""
+        return self.members()[name]
+
     def states(self) -> dict[str, str]:
         """name -> state as this agent sees it."""
         return {name: m["state"] for name, m in self.members().items()}
@@ -271,7 +275,7 @@ class RealCluster:
         while True:
             try:
                 value = probe()
-            except (OSError, RealnetError, ValueError) as exc:  # URLError is an OSError
+            except (OSError, RealnetError, ValueError, LookupError) as exc:  # URLError: OSError
                 last = f"error: {exc}"
             else:
                 if ok(value):

@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -93,20 +94,20 @@ def test_restarted_robot_is_alive_again_at_its_new_address(
     assert again.api != three.api
     for agent in (one, two):
         left = max(0.1, RESTART_BOUND - (time.monotonic() - start))
-        members = cluster.wait_until(
-            agent.members,
-            lambda ms: ms["robot-3"]["state"] == "alive" and ms["robot-3"]["addr"] == again.gossip,
+        seen = cluster.wait_until(
+            partial(agent.member, "robot-3"),
+            lambda m: m["state"] == "alive" and m["addr"] == again.gossip,
             f"{agent.name} to see the restarted robot-3 alive at {again.gossip}",
             timeout=left,
         )
-        assert members["robot-3"]["incarnation"] > held[agent.name], members["robot-3"]
+        assert seen["incarnation"] > held[agent.name], seen
     elapsed = time.monotonic() - start
     assert elapsed < RESTART_BOUND, f"restart took {elapsed:.2f} s to be seen"
     # The new life's record (new API address) supersedes the old one everywhere.
     for agent in (one, two):
         cluster.wait_until(
-            agent.members,
-            lambda ms: ms["robot-3"]["api"] == again.api,
+            partial(agent.member, "robot-3"),
+            lambda m: m["api"] == again.api,
             f"{agent.name} to show robot-3's new api {again.api}",
             timeout=RESTART_BOUND,
         )
@@ -191,8 +192,8 @@ def test_api_needs_the_token_and_changes_travel_by_gossip(
     assert body["name"] == "robot-1"
     assert body["metrics"]["rssi_dbm"] == -55.0
     cluster.wait_until(
-        two.members,
-        lambda ms: (ms["robot-1"]["metrics"] or {}).get("rssi_dbm") == -55.0,
+        partial(two.member, "robot-1"),
+        lambda m: (m["metrics"] or {}).get("rssi_dbm") == -55.0,
         "robot-2 to see robot-1 at -55 dBm",
         timeout=PROPAGATION_BOUND,
     )
