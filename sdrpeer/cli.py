@@ -18,7 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer import __version__
-from sdrpeer.cli_format import format_agent, format_event, format_members, want_color
+from sdrpeer.cli_format import (
+    format_agent,
+    format_event,
+    format_members,
+    format_metrics,
+    want_color,
+)
 from sdrpeer.client import AgentClient, Endpoint, resolve_endpoint
 from sdrpeer.config import FIELDS, LOG_FORMATS, LOG_LEVELS, build_config, load_agent_config
 from sdrpeer.errors import ApiError, ConfigError, SdrpeerError
@@ -182,7 +188,7 @@ def cmd_robot_set(args: argparse.Namespace) -> int:
         metrics = answer.get("metrics") if isinstance(answer, dict) else None
         print(f"{args.robot}: set {', '.join(args.assignments)}")
         if metrics:
-            print(f"  now: {json.dumps(metrics, sort_keys=True)}")
+            print(f"  now: {format_metrics(metrics)}")
     return 0
 
 

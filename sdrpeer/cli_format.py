@@ -1,0 +1,232 @@
+"""Pure text rendering for the `sdrpeer` command: tables, human units, state colours.
+
+Nothing here does I/O; callers decide whether to colour (`want_color`) and where to print.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping, Sequence
+from datetime import datetime, tzinfo
+from typing import Any
+
+STATE_COLORS = {"alive": "32", "suspect": "33", "dead": "31", "left": "90"}
+MEMBER_COLUMNS = (
+    "NAME",
+    "ADDR",
+    "STATE",
+    "INC",
+    "CPU",
+    "MEM-FREE",
+    "BATTERY",
+    "RSSI",
+    "POS",
+    "LINKS",
+)
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+MISSING = "-"
+
+
+def want_color(is_tty: bool, env: Mapping[str, str]) -> bool:
+    """Colour only on a terminal, and never when NO_COLOR is set (https://no-color.org)."""
+    return is_tty and not env.get("NO_COLOR") and env.get("TERM") != "dumb"
+
+
+def paint(text: str, code: str, color: bool) -> str:
+    """`text` wrapped in an ANSI SGR code when `color` is on."""
+    return f"\x1b[{code}m{text}\x1b[0m" if color and code else text
+
+
+def visible_len(text: str) -> int:
+    """Length of `text` as shown on a terminal (ANSI codes take no room)."""
+    return len(_ANSI.sub("", text))
+
+
+def _num(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value)
+
+
+def human_bytes(n: Any) -> str:
+    """Bytes with one decimal in powers of 1000: 3_200_000_000 -> '3.2GB', 512 -> '512B'."""
+    value = _num(n)
+    if value is None:
+        return MISSING
+    for unit in ("B", "KB", "MB", "GB", "TB"):
+        if abs(value) < 1000 or unit == "TB":
+            return f"{value:.0f}{unit}" if unit == "B" else f"{value:.1f}{unit}"
+        value /= 1000
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def human_percent(pct: Any) -> str:
+    """A percentage: 87.4 -> '87%'."""
+    value = _num(pct)
+    return MISSING if value is None else f"{value:.0f}%"
+
+
+def human_dbm(dbm: Any) -> str:
+    """Signal strength: -47 -> '-47.0dBm'."""
+    value = _num(dbm)
+    return MISSING if value is None else f"{value:.1f}dBm"
+
+
+def human_ms(ms: Any) -> str:
+    """Milliseconds, short: 0.42 -> '0.4ms', 12.3 -> '12ms'."""
+    value = _num(ms)
+    if value is None:
+        return MISSING
+    return f"{value:.1f}ms" if value < 10 else f"{value:.0f}ms"
+
+
+def human_pos(pos: Any) -> str:
+    """A position [x, y] in metres: '3.0,0.0'."""
+    if not isinstance(pos, list | tuple) or len(pos) < 2:
+        return MISSING
+    coords = [_num(c) for c in pos[:2]]
+    if None in coords:
+        return MISSING
+    return ",".join(f"{c:.1f}" for c in coords if c is not None)
+
+
+def human_seconds(seconds: Any) -> str:
+    """A duration: 75 -> '1m15s', 3.2 -> '3.2s', 7300 -> '2h01m'."""
+    value = _num(seconds)
+    if value is None:
+        return MISSING
+    if value < 60:
+        return f"{value:.1f}s"
+    minutes, secs = divmod(int(value), 60)
+    if minutes < 60:
+        return f"{minutes}m{secs:02d}s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}h{minutes:02d}m"
+
+
+def format_link(peer: str, link: Mapping[str, Any]) -> str:
+    """One link, compact: 'robot-2 0.4ms/0.1ms/0%' (rtt/jitter/loss)."""
+    loss = _num(link.get("loss"))
+    loss_text = MISSING if loss is None else f"{loss * 100:.0f}%"
+    rtt, jitter = human_ms(link.get("rtt_ms")), human_ms(link.get("jitter_ms"))
+    return f"{peer} {rtt}/{jitter}/{loss_text}"
+
+
+def format_links(links: Mapping[str, Mapping[str, Any]] | None) -> str:
+    """Every link of a member, sorted by peer, comma-separated."""
+    if not links:
+        return MISSING
+    return ", ".join(format_link(peer, links[peer]) for peer in sorted(links))
+
+
+def format_metrics(metrics: Mapping[str, Any]) -> str:
+    """A metrics dict on one line: 'cpu 1%, mem-free 4.0GB/4.0GB, battery 30%, rssi -55.3dBm'."""
+    parts = [
+        f"cpu {human_percent(metrics.get('cpu_pct'))}",
+        f"mem-free {human_bytes(metrics.get('mem_free'))}/{human_bytes(metrics.get('mem_total'))}",
+        f"battery {human_percent(metrics.get('battery_pct'))}",
+        f"rssi {human_dbm(metrics.get('rssi_dbm'))}",
+        f"pos {human_pos(metrics.get('pos'))}",
+    ]
+    return ", ".join(parts)
+
+
+def member_row(member: Mapping[str, Any], *, color: bool) -> list[str]:
+    """The cells of one member in MEMBER_COLUMNS order."""
+    metrics = member.get("metrics") or {}
+    state = str(member.get("state", MISSING))
+    return [
+        str(member.get("name", MISSING)),
+        str(member.get("addr") or MISSING),
+        paint(state, STATE_COLORS.get(state, ""), color),
+        str(member.get("incarnation", MISSING)),
+        human_percent(metrics.get("cpu_pct")),
+        human_bytes(metrics.get("mem_free")),
+        human_percent(metrics.get("battery_pct")),
+        human_dbm(metrics.get("rssi_dbm")),
+        human_pos(metrics.get("pos")),
+        format_links(member.get("links")),
+    ]
+
+
+def render_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """Left-aligned columns separated by two spaces; no trailing spaces; ANSI-aware widths."""
+    widths = [len(h) for h in headers]
+    for row in rows:
+        for i, cell in enumerate(row):
+            widths[i] = max(widths[i], visible_len(cell))
+    lines = []
+    for row in [list(headers), *rows]:
+        cells = [cell + " " * (widths[i] - visible_len(cell)) for i, cell in enumerate(row)]
+        lines.append("  ".join(cells).rstrip())
+    return "\n".join(lines)
+
+
+def format_members(members: Sequence[Mapping[str, Any]], *, color: bool = False) -> str:
+    """The `sdrpeer members` table."""
+    return render_table(MEMBER_COLUMNS, [member_row(m, color=color) for m in members])
+
+
+def format_agent(agent: Mapping[str, Any]) -> str:
+    """The `sdrpeer agent-info` summary: one `key: value` line per counter group."""
+    messages = agent.get("messages") or {}
+    members = agent.get("members") or {}
+    rejected = agent.get("rejected") or {}
+    rejected_text = ", ".join(f"{k}={rejected[k]}" for k in sorted(rejected)) or "none"
+    rates = (
+        f"{human_bytes(messages.get('bytes_in_per_s'))}/s in, "
+        f"{human_bytes(messages.get('bytes_out_per_s'))}/s out"
+    )
+    pairs = [
+        ("name", agent.get("name", MISSING)),
+        ("version", agent.get("version", MISSING)),
+        ("gossip", agent.get("addr", MISSING)),
+        ("api", agent.get("api", MISSING)),
+        ("uptime", human_seconds(agent.get("uptime_s"))),
+        ("preset", agent.get("preset", MISSING)),
+        ("security", "INSECURE (no cluster key)" if agent.get("insecure") else "cluster key"),
+        ("health score", agent.get("health_score", MISSING)),
+        (
+            "members",
+            ", ".join(f"{s} {members.get(s, 0)}" for s in ("alive", "suspect", "dead", "left")),
+        ),
+        (
+            "messages",
+            f"{messages.get('in', 0)} in, {messages.get('out', 0)} out "
+            f"({human_bytes(messages.get('bytes_in'))} in, "
+            f"{human_bytes(messages.get('bytes_out'))} out; {rates})",
+        ),
+        ("rejected", rejected_text),
+    ]
+    width = max(len(k) for k, _ in pairs)
+    return "\n".join(f"{k + ':':<{width + 1}} {v}" for k, v in pairs)
+
+
+EVENT_COLORS = {
+    "member.join": "32",
+    "member.alive": "32",
+    "member.suspect": "33",
+    "member.dead": "31",
+    "member.left": "90",
+    "member.reaped": "90",
+    "trap": "35",
+    "wire.rejected": "31",
+}
+
+
+def format_event(event: Mapping[str, Any], *, color: bool = False, tz: tzinfo | None = None) -> str:
+    """One event log line: '  12 14:03:22.125 member.suspect  robot-2  {"by": "robot-3"}'."""
+    ts = _num(event.get("ts"))
+    when = (
+        datetime.fromtimestamp(ts, tz).strftime("%H:%M:%S.%f")[:-3] if ts is not None else MISSING
+    )
+    kind = str(event.get("kind", MISSING))
+    detail = event.get("detail") or {}
+    detail_text = json.dumps(detail, sort_keys=True, separators=(", ", ": ")) if detail else ""
+    line = (
+        f"{event.get('id', MISSING):>5} {when} "
+        f"{paint(f'{kind:<15}', EVENT_COLORS.get(kind, ''), color)} "
+        f"{event.get('robot', MISSING)!s:<9} {detail_text}"
+    )
+    return line.rstrip()

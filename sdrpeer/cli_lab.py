@@ -1,0 +1,193 @@
+"""`sdrpeer lab up|down|status` and `sdrpeer demo`: the local lab from the command line.
+
+Without `--detach`, `lab up` stays in the foreground and redraws the members table once a second
+(in place on a terminal, appended when piped) until `--seconds` pass or Ctrl-C, then stops every
+agent. `demo` is, for now, a foreground lab in a temporary directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from types import FrameType
+from typing import TextIO
+
+from sdrpeer.cli_format import format_members, render_table, want_color
+from sdrpeer.client import AgentClient
+from sdrpeer.errors import ApiError
+from sdrpeer.lab import DEFAULT_DIR, lab_down, lab_status
+from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+
+REFRESH = 1.0
+
+
+def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register `lab` (up, down, status) and `demo`."""
+    lab = sub.add_parser("lab", help="N agents on this machine (loopback)")
+    lab_sub = lab.add_subparsers(dest="lab_command", required=True, metavar="ACTION")
+    where = argparse.ArgumentParser(add_help=False)
+    where.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="lab directory")
+    up = lab_sub.add_parser("up", parents=[where], help="start a lab")
+    up.add_argument("--robots", type=int, default=3, metavar="N", help="how many (default 3)")
+    up.add_argument("--detach", action="store_true", help="leave the agents running and return")
+    up.add_argument("--preset", choices=("fast_test", "lan"), default="fast_test")
+    up.add_argument("--robot-files", type=Path, metavar="DIR", help="robot-K.yaml files")
+    up.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for every agent")
+    up.add_argument("--seconds", type=float, metavar="S", help="stop after S s (default: Ctrl-C)")
+    up.add_argument("--timeout", type=float, default=20.0, metavar="S", help="start timeout")
+    up.set_defaults(func=cmd_lab_up)
+    down = lab_sub.add_parser("down", parents=[where], help="stop the lab's agents")
+    down.set_defaults(func=cmd_lab_down)
+    status = lab_sub.add_parser("status", parents=[where], help="the lab's agents")
+    status.add_argument("--json", action="store_true", help="print JSON")
+    status.set_defaults(func=cmd_lab_status)
+    demo = sub.add_parser("demo", help="a short lab run in a temporary directory")
+    demo.add_argument("--seconds", type=float, default=30.0, metavar="S", help="default 30")
+    demo.add_argument("--robots", type=int, default=3, metavar="N", help="default 3")
+    demo.set_defaults(func=cmd_demo)
+
+
+def _say(text: str) -> None:
+    print(text, flush=True)
+
+
+def print_started(running: RunningLab) -> None:
+    """The API URL, gossip address and log of every robot, plus what to type next."""
+    rows = [[r.name, str(r.api), str(r.gossip), str(r.pid), r.log] for r in running.lab.robots]
+    _say(render_table(["ROBOT", "API", "GOSSIP", "PID", "LOG"], rows))
+
+
+def frame(running: RunningLab, elapsed: float, seconds: float | None, color: bool) -> str:
+    """One screenful: a header, the members table (from the first agent that answers), problems."""
+    limit = f" of {seconds:g}" if seconds is not None else ""
+    lines = [
+        f"lab {running.lab_dir}: {len(running.lab.robots)} robots, "
+        f"{elapsed:.0f}{limit} s  (Ctrl-C to stop)"
+    ]
+    error = "no agent is running"
+    for robot in running.lab.robots:
+        if not robot.api:
+            continue
+        try:
+            members = AgentClient(robot.api, timeout=0.5).members()
+        except ApiError as exc:
+            error = str(exc)
+            continue
+        lines += [f"members as {robot.name} sees them:", format_members(members, color=color)]
+        break
+    else:
+        lines.append(error)
+    lines += running.problems()
+    return "\n".join(lines)
+
+
+def watch(
+    running: RunningLab,
+    seconds: float | None,
+    out: TextIO,
+    *,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+) -> None:
+    """Redraw the frame every REFRESH s (in place on a TTY) until `seconds` pass or Ctrl-C."""
+    tty = out.isatty()
+    color = want_color(tty, os.environ)
+    start = clock()
+    drawn = 0
+    try:
+        while True:
+            elapsed = clock() - start
+            text = frame(running, elapsed, seconds, color)
+            if tty and drawn:
+                out.write(f"\x1b[{drawn}F\x1b[J")
+            elif drawn:
+                out.write("\n")
+            out.write(text + "\n")
+            out.flush()
+            drawn = text.count("\n") + 1
+            if seconds is not None and elapsed >= seconds:
+                return
+            remaining = REFRESH if seconds is None else min(REFRESH, seconds - elapsed)
+            sleep(max(remaining, 0.0))
+    except KeyboardInterrupt:
+        out.write("\n")
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM stops a foreground lab the way Ctrl-C does (cleanly)."""
+    raise KeyboardInterrupt
+
+
+def run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
+    """Start the lab; detach, or watch it and stop it when done."""
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _run_lab(options, detach=detach, seconds=seconds)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
+    running = start_lab(options, _say)
+    print_started(running)
+    if detach:
+        _say(
+            f"agents run in the background; try: sdrpeer members --lab-dir {options.lab_dir}\n"
+            f"stop them with: sdrpeer lab down --dir {options.lab_dir}"
+        )
+        return 0
+    try:
+        watch(running, seconds, sys.stdout)
+    finally:
+        _say("stopping the lab")
+        for line in running.stop():
+            _say(f"  {line}")
+    return 0
+
+
+def cmd_lab_up(args: argparse.Namespace) -> int:
+    """sdrpeer lab up."""
+    options = UpOptions(
+        robots=args.robots,
+        lab_dir=args.dir,
+        preset=args.preset,
+        robot_files=args.robot_files,
+        scenario=args.scenario,
+        timeout=args.timeout,
+    )
+    return run_lab(options, detach=args.detach, seconds=args.seconds)
+
+
+def cmd_lab_down(args: argparse.Namespace) -> int:
+    """sdrpeer lab down."""
+    for line in lab_down(args.dir):
+        _say(line)
+    return 0
+
+
+def cmd_lab_status(args: argparse.Namespace) -> int:
+    """sdrpeer lab status."""
+    status = lab_status(args.dir)
+    if args.json:
+        print(json.dumps(status, indent=2, sort_keys=True))
+        return 0
+    rows = [
+        [s["name"], str(s["pid"]), "running" if s["running"] else "stopped", str(s["api"])]
+        for s in status
+    ]
+    _say(render_table(["ROBOT", "PID", "PROCESS", "API"], rows))
+    return 0 if all(s["running"] for s in status) else 1
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """sdrpeer demo: a foreground lab in a temporary directory for --seconds."""
+    with tempfile.TemporaryDirectory(prefix="sdrpeer-demo-") as tmp:
+        options = UpOptions(robots=args.robots, lab_dir=Path(tmp), preset="fast_test")
+        return run_lab(options, detach=False, seconds=args.seconds)

@@ -1,0 +1,151 @@
+"""A small synchronous client for an agent's HTTP API (urllib; used by the CLI and the lab).
+
+Finding the agent: `--api URL`, else `$SDRPEER_API`, else the lab file (first robot). The token:
+`--token`, else `$SDRPEER_TOKEN`, else the lab robot whose API URL matches. Every failure is an
+`ApiError` whose message names the agent and says what to do.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import urllib.error
+import urllib.parse
+import urllib.request
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sdrpeer.errors import ApiError
+
+DEFAULT_TIMEOUT = 5.0
+
+
+@dataclass(frozen=True, slots=True)
+class AgentClient:
+    """Calls one agent's API at `base` (e.g. "http://127.0.0.1:8080")."""
+
+    base: str
+    token: str | None = None
+    timeout: float = DEFAULT_TIMEOUT
+
+    def get(self, path: str, **query: Any) -> Any:
+        """GET `path` with query parameters; the decoded JSON answer."""
+        if query:
+            path = f"{path}?{urllib.parse.urlencode(query)}"
+        return self.request("GET", path)
+
+    def post(self, path: str, body: Any) -> Any:
+        """POST a JSON body to `path` (with the token); the decoded JSON answer."""
+        return self.request("POST", path, body)
+
+    def request(self, method: str, path: str, body: Any = None) -> Any:
+        """One HTTP call; raises ApiError with a message meant for a person."""
+        url = self.base.rstrip("/") + path
+        headers = {"Accept": "application/json"}
+        data = None
+        if body is not None:
+            data = json.dumps(body).encode()
+            headers["Content-Type"] = "application/json"
+        if self.token:
+            headers["Authorization"] = f"Bearer {self.token}"
+        req = urllib.request.Request(url, data=data, headers=headers, method=method)
+        try:
+            with urllib.request.urlopen(req, timeout=self.timeout) as response:
+                raw = response.read()
+        except urllib.error.HTTPError as exc:
+            message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
+            raise ApiError(message) from None
+        except urllib.error.URLError as exc:
+            raise ApiError(unreachable_message(self.base, exc.reason)) from None
+        except (TimeoutError, ConnectionError) as exc:
+            raise ApiError(unreachable_message(self.base, exc)) from None
+        try:
+            return json.loads(raw) if raw else None
+        except json.JSONDecodeError:
+            raise ApiError(f"agent at {self.base} sent something that is not JSON") from None
+
+    def members(self) -> list[dict[str, Any]]:
+        """GET /v1/members."""
+        return list(self.get("/v1/members"))
+
+    def agent(self) -> dict[str, Any]:
+        """GET /v1/agent."""
+        return dict(self.get("/v1/agent"))
+
+    def events(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
+        """GET /v1/events?since=&limit=."""
+        return list(self.get("/v1/events", since=since, limit=limit))
+
+
+def _error_text(exc: urllib.error.HTTPError) -> str:
+    try:
+        body = json.loads(exc.read() or b"{}")
+    except (json.JSONDecodeError, OSError):
+        body = {}
+    if isinstance(body, dict) and "error" in body:
+        return str(body["error"])
+    return str(exc.reason)
+
+
+def unreachable_message(base: str, reason: object) -> str:
+    """'cannot reach agent at URL: connection refused; is it running? (sdrpeer lab up)'."""
+    if isinstance(reason, ConnectionRefusedError):
+        why = "connection refused"
+    elif isinstance(reason, TimeoutError | socket.timeout):
+        why = "timed out"
+    elif isinstance(reason, socket.gaierror):
+        why = f"unknown host ({reason.strerror})"
+    else:
+        why = str(getattr(reason, "strerror", None) or reason)
+    return f"cannot reach agent at {base}: {why}; is it running? (sdrpeer lab up)"
+
+
+def normalize_api(text: str) -> str:
+    """'127.0.0.1:8080' or 'http://127.0.0.1:8080/' -> 'http://127.0.0.1:8080'."""
+    text = text.strip().rstrip("/")
+    return text if "://" in text else f"http://{text}"
+
+
+@dataclass(frozen=True, slots=True)
+class Endpoint:
+    """Where the CLI sends its calls, and how it found out (for error messages)."""
+
+    api: str
+    token: str | None
+    source: str
+
+
+def read_lab_robots(lab_dir: Path) -> list[dict[str, Any]]:
+    """The robots listed in `lab_dir/lab.json`, or [] when there is no lab file."""
+    path = lab_dir / "lab.json"
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        return []
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ApiError(f"{path}: cannot read the lab file: {exc}") from None
+    robots = data.get("robots") if isinstance(data, dict) else None
+    return [r for r in robots or [] if isinstance(r, dict)]
+
+
+def resolve_endpoint(
+    api: str | None, token: str | None, lab_dir: Path, env: Mapping[str, str]
+) -> Endpoint:
+    """Find the agent to talk to: flag, then $SDRPEER_API, then the lab file's first robot."""
+    robots = read_lab_robots(lab_dir)
+    token = token or env.get("SDRPEER_TOKEN") or None
+    if api or env.get("SDRPEER_API"):
+        source = "--api" if api else "$SDRPEER_API"
+        base = normalize_api(api or env["SDRPEER_API"])
+        if token is None:
+            token = next((r.get("token") for r in robots if r.get("api") == base), None)
+        return Endpoint(base, token, source)
+    live = [r for r in robots if r.get("api")]
+    if not live:
+        raise ApiError(
+            f"no agent to talk to: pass --api URL, set SDRPEER_API, or start a lab "
+            f"(sdrpeer lab up; looked for {lab_dir / 'lab.json'})"
+        )
+    return Endpoint(str(live[0]["api"]), token or live[0].get("token"), str(lab_dir / "lab.json"))

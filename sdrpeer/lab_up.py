@@ -1,0 +1,281 @@
+"""`sdrpeer lab up`: start N agents on loopback, wait until they see each other, watch them.
+
+How it works: every agent binds port 0 (gossip and API) and writes `DATA_DIR/agent.json`
+(`name`, `gossip`, `api`, `pid`) once bound. The lab starts robot-1, waits for its agent.json,
+then starts the others with `--join <robot-1 gossip>`, and polls every agent's `/v1/members`
+until each sees all N alive. Everything is bounded by one deadline; a timeout or an agent that
+exits is reported with the robot's name and log path (plus the log's last lines). lab.json is
+rewritten after every step so `sdrpeer lab down` works even if this command dies.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import sdrpeer
+from sdrpeer.client import AgentClient
+from sdrpeer.errors import ApiError, SdrpeerError
+from sdrpeer.lab import (
+    Lab,
+    LabRobot,
+    default_robot_files,
+    lab_path,
+    new_cluster_key,
+    new_token,
+    read_lab,
+    robot_name,
+    running_pids,
+    stop_processes,
+    write_lab,
+    write_robot_file,
+    write_secret,
+)
+
+POLL = 0.1
+LOG_TAIL_LINES = 12
+
+
+@dataclass(frozen=True, slots=True)
+class UpOptions:
+    """What `sdrpeer lab up` was asked for."""
+
+    robots: int
+    lab_dir: Path
+    preset: str = "fast_test"
+    robot_files: Path | None = None
+    """Where robot-K.yaml files are taken from (None = examples/robots, when there is one)."""
+    scenario: Path | None = None
+    timeout: float = 20.0
+
+
+@dataclass(slots=True)
+class RunningLab:
+    """A started lab: lab.json contents plus the agent processes this command owns."""
+
+    lab_dir: Path
+    lab: Lab
+    procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+
+    def problems(self) -> list[str]:
+        """One line per agent process that has exited."""
+        return [
+            f"{name}: agent exited with code {proc.returncode}; see {self._log(name)}"
+            for name, proc in self.procs.items()
+            if proc.poll() is not None
+        ]
+
+    def stop(self, *, grace: float = 5.0) -> list[str]:
+        """Stop every agent (SIGTERM, then SIGKILL), reap them and remove lab.json."""
+        report = stop_processes(self.lab, grace=grace)
+        for proc in self.procs.values():
+            try:
+                proc.wait(timeout=grace)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        lab_path(self.lab_dir).unlink(missing_ok=True)
+        return report
+
+    def _log(self, name: str) -> str:
+        robot = self.lab.robot(name)
+        return robot.log if robot else "?"
+
+
+def log_tail(path: Path | str, lines: int = LOG_TAIL_LINES) -> str:
+    """The last `lines` lines of a log file, indented (empty when unreadable)."""
+    try:
+        text = Path(path).read_text(errors="replace")
+    except OSError:
+        return ""
+    tail = text.rstrip("\n").splitlines()[-lines:]
+    return "\n".join(f"    | {line}" for line in tail)
+
+
+def _fail(robot: LabRobot, message: str) -> SdrpeerError:
+    tail = log_tail(robot.log)
+    suffix = f"; last lines of {robot.log}:\n{tail}" if tail else f"; see {robot.log}"
+    return SdrpeerError(f"{robot.name}: {message}{suffix}")
+
+
+def agent_command(
+    robot: LabRobot, options: UpOptions, key_file: Path, join: str | None
+) -> list[str]:
+    """The command line that starts one lab agent."""
+    data_dir = Path(robot.data_dir)
+    command = [
+        sys.executable,
+        "-m",
+        "sdrpeer",
+        "agent",
+        "--name",
+        robot.name,
+        "--bind",
+        "127.0.0.1:0",
+        "--api",
+        "127.0.0.1:0",
+        "--data-dir",
+        str(data_dir),
+        "--key-file",
+        str(key_file),
+        "--token-file",
+        str(data_dir / "token"),
+        "--robot-file",
+        str(data_dir / "robot.yaml"),
+        "--preset",
+        options.preset,
+    ]
+    if options.scenario is not None:
+        command += ["--scenario", str(options.scenario.resolve())]
+    if join is not None:
+        command += ["--join", join]
+    return command
+
+
+def _spawn(command: list[str], log: Path) -> subprocess.Popen[bytes]:
+    env = dict(os.environ)
+    package_root = str(Path(sdrpeer.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
+    with log.open("ab") as out:
+        return subprocess.Popen(
+            command,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            env=env,
+        )
+
+
+def read_agent_json(data_dir: Path | str) -> dict[str, Any] | None:
+    """DATA_DIR/agent.json once it is complete (gossip and api present), else None."""
+    try:
+        data = json.loads((Path(data_dir) / "agent.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    if isinstance(data, dict) and data.get("gossip") and data.get("api"):
+        return data
+    return None
+
+
+def _wait_addresses(running: RunningLab, robot: LabRobot, deadline: float) -> None:
+    proc = running.procs[robot.name]
+    while True:
+        info = read_agent_json(robot.data_dir)
+        if info is not None:
+            robot.gossip, robot.api = str(info["gossip"]), str(info["api"]).rstrip("/")
+            return
+        if proc.poll() is not None:
+            raise _fail(robot, f"agent exited with code {proc.returncode} while starting")
+        if time.monotonic() > deadline:
+            agent_json = Path(robot.data_dir) / "agent.json"
+            raise _fail(robot, f"no {agent_json} within the start timeout")
+        time.sleep(POLL)
+
+
+def _missing_alive(robot: LabRobot, names: set[str]) -> str | None:
+    """What robot is still missing (None when it sees all `names` alive)."""
+    try:
+        members = AgentClient(str(robot.api), timeout=1.0).members()
+    except ApiError as exc:
+        return str(exc)
+    alive = {m.get("name") for m in members if m.get("state") == "alive"}
+    missing = sorted(names - alive)
+    if not missing:
+        return None
+    seen = len(names) - len(missing)
+    return f"sees {seen} of {len(names)} alive (missing {', '.join(missing)})"
+
+
+def _wait_converged(running: RunningLab, deadline: float) -> None:
+    names = {r.name for r in running.lab.robots}
+    pending = list(running.lab.robots)
+    while pending:
+        for robot in pending:
+            proc = running.procs[robot.name]
+            if proc.poll() is not None:
+                raise _fail(robot, f"agent exited with code {proc.returncode}")
+        lacking = {r.name: _missing_alive(r, names) for r in pending}
+        pending = [r for r in pending if lacking[r.name] is not None]
+        if pending and time.monotonic() > deadline:
+            robot = pending[0]
+            raise _fail(robot, f"the lab did not converge in time: {lacking[robot.name]}")
+        if pending:
+            time.sleep(POLL * 2)
+
+
+def _prepare(options: UpOptions) -> Lab:
+    lab_dir = options.lab_dir
+    lab_dir.mkdir(parents=True, exist_ok=True)
+    existing = read_lab(lab_dir)
+    if existing is not None and running_pids(existing):
+        raise SdrpeerError(
+            f"a lab is already running in {lab_dir} ({', '.join(running_pids(existing))}); "
+            f"stop it with: sdrpeer lab down --dir {lab_dir}"
+        )
+    robot_files = options.robot_files or default_robot_files()
+    if options.robot_files is not None and not options.robot_files.is_dir():
+        raise SdrpeerError(f"--robot-files {options.robot_files}: no such directory")
+    key_file = new_cluster_key(lab_dir).resolve()
+    robots = []
+    for index in range(1, options.robots + 1):
+        name = robot_name(index)
+        data_dir = (lab_dir / name).resolve()
+        write_robot_file(data_dir, index, robot_files)
+        (data_dir / "agent.json").unlink(missing_ok=True)
+        token = new_token()
+        write_secret(data_dir / "token", token + "\n")
+        robots.append(LabRobot(name, str(data_dir), str(data_dir / "agent.log"), token))
+    return Lab(robots=robots, key_file=str(key_file))
+
+
+def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> RunningLab:
+    """Start the lab's agents and wait until all of them see every robot alive."""
+    if options.robots < 1:
+        raise SdrpeerError(f"--robots must be at least 1, got {options.robots}")
+    lab = _prepare(options)
+    running = RunningLab(options.lab_dir, lab)
+    key_file = Path(lab.key_file)
+    deadline = time.monotonic() + options.timeout
+    try:
+        first, *others = lab.robots
+        say(f"starting {len(lab.robots)} agents in {options.lab_dir} (preset {options.preset})")
+        running.procs[first.name] = _spawn(
+            agent_command(first, options, key_file, None), Path(first.log)
+        )
+        first.pid = running.procs[first.name].pid
+        write_lab(options.lab_dir, lab)
+        _wait_addresses(running, first, deadline)
+        write_lab(options.lab_dir, lab)
+        for robot in others:
+            command = agent_command(robot, options, key_file, first.gossip)
+            running.procs[robot.name] = _spawn(command, Path(robot.log))
+            robot.pid = running.procs[robot.name].pid
+            write_lab(options.lab_dir, lab)
+        for robot in others:
+            _wait_addresses(running, robot, deadline)
+        write_lab(options.lab_dir, lab)
+        _wait_converged(running, deadline)
+    except BaseException:
+        running.stop(grace=2.0)
+        raise
+    return running
+
+
+@contextmanager
+def started_lab(options: UpOptions, say: Callable[[str], None] = print) -> Iterator[RunningLab]:
+    """Start a lab, and stop it (cleanly) when the block ends, however it ends."""
+    running = start_lab(options, say)
+    try:
+        yield running
+    finally:
+        for line in running.stop():
+            say(f"  {line}")
