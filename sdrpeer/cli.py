@@ -67,10 +67,9 @@ def cmd_agent(args: argparse.Namespace) -> int:
     """Build the configuration and run the agent until it is told to stop."""
     file_values = load_agent_config(args.config) if args.config else None
     config = build_config(file_values, agent_flag_values(args))
-    # Imported on use: the agent is heavy. The ignore is for while sdrpeer.agent does not exist.
-    from sdrpeer.agent import run_agent  # type: ignore[import-not-found,unused-ignore]  # noqa: PLC0415
+    from sdrpeer.agent import run_agent  # noqa: PLC0415 - heavy; only `agent` needs it
 
-    return int(run_agent(config))
+    return run_agent(config)
 
 
 # --- client commands -------------------------------------------------------------------------
