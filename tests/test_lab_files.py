@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import stat
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from sdrpeer.cli_lab import watch
 from sdrpeer.errors import SdrpeerError
 from sdrpeer.lab import (
     Lab,
@@ -27,7 +29,7 @@ from sdrpeer.lab import (
     write_lab,
     write_robot_file,
 )
-from sdrpeer.lab_up import UpOptions, agent_command, log_tail, read_agent_json
+from sdrpeer.lab_up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
 from sdrpeer.wire import Keyring
 
@@ -211,3 +213,19 @@ def test_down_and_status_without_a_lab(tmp_path: Path) -> None:
         lab_down(tmp_path)
     with pytest.raises(SdrpeerError, match="start one with sdrpeer lab up"):
         lab_status(tmp_path)
+
+
+def test_watch_appends_frames_when_piped(tmp_path: Path) -> None:
+    now = [0.0]
+
+    def sleep(seconds: float) -> None:
+        now[0] += seconds
+
+    running = RunningLab(tmp_path, Lab(robots=[robot(tmp_path, "robot-1", pid=1)], key_file="k"))
+    out = io.StringIO()
+    watch(running, 2.0, out, clock=lambda: now[0], sleep=sleep)
+    frames = out.getvalue().split("\n\n")
+    assert len(frames) == 3
+    assert frames[0] == f"lab {tmp_path}: 1 robots, 0 of 2 s  (Ctrl-C to stop)\nno agent is running"
+    assert frames[2].startswith(f"lab {tmp_path}: 1 robots, 2 of 2 s")
+    assert "\x1b[" not in out.getvalue()
