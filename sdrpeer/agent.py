@@ -19,12 +19,10 @@ import random
 import secrets
 import signal
 import time
-from typing import Any
-
-from aiohttp import web
+from typing import TYPE_CHECKING, Any
 
 from sdrpeer import __version__
-from sdrpeer.api.app import build_app
+from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.eventlog import EventLog
@@ -42,11 +40,12 @@ from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp import GossipShell, open_gossip
 from sdrpeer.logs import setup_logging
 from sdrpeer.monitor.links import LinkTable, distance
+from sdrpeer.monitor.publish import worth_publishing
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
 from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
-from sdrpeer.procstats import ProcessTreeMeter
+from sdrpeer.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.record import (
     Metrics,
     RobotRecord,
@@ -55,11 +54,13 @@ from sdrpeer.record import (
     metrics_to_json,
     record_to_json,
 )
-from sdrpeer.wire import Codec, Keyring
+from sdrpeer.wire import REASONS, Codec, Keyring
+
+if TYPE_CHECKING:
+    from aiohttp.web import AppRunner
 
 log = logging.getLogger("sdrpeer.agent")
 _HEARTBEAT = 5.0  # publish the record at least this often even when nothing changed (seconds)
-_COUNTER_KEYS = ("accepted", "sent", "unknown_update", "send_oversized")
 
 
 class Agent:
@@ -79,11 +80,11 @@ class Agent:
         self.scenario: Scenario | None = None
         self.traps = TrapDetector()
         self.meter = ProcessTreeMeter(os.getpid())
-        self._runner: web.AppRunner | None = None
+        self._runner: AppRunner | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = time.time()
         self._started = 0.0
-        self._last_payload = b""
+        self._published: RobotRecord | None = None
         self._last_publish = -1e9
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
@@ -120,7 +121,9 @@ class Agent:
         gossip_preset = preset(cfg.preset)
         host, port = parse_hostport(cfg.bind)
         codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=time.time_ns() // 1000)
-        self.shell, addr = await open_gossip(host, port, codec, self._on_core_event)
+        self.shell, addr = await open_gossip(
+            host, port, codec, self._on_core_event, self._on_reject
+        )
         self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
         self.shell.attach(self.core)
         await self._start_api(token)
@@ -133,6 +136,7 @@ class Agent:
         if seeds:
             self.shell.join(seeds)
         self._tasks.append(asyncio.create_task(self._metrics_loop()))
+        trim_heap()
         log.info(
             "agent %s up: gossip %s:%d, api %s, preset %s",
             cfg.name,
@@ -174,14 +178,7 @@ class Agent:
 
     async def _start_api(self, token: str) -> None:
         host, port = parse_hostport(self.config.api)
-        self._runner = web.AppRunner(build_app(self, token=token), access_log=None)
-        await self._runner.setup()
-        site = web.TCPSite(self._runner, host, port)
-        await site.start()
-        server = site._server
-        assert isinstance(server, asyncio.base_events.Server)
-        bound = server.sockets[0].getsockname()
-        self.api_url = f"http://{host}:{bound[1]}"
+        self._runner, self.api_url = await serve_api(self, token, host, port)
 
     def _write_agent_json(self, addr: tuple[str, int]) -> None:
         info = {
@@ -229,17 +226,16 @@ class Agent:
             self.events.add(time.time(), "trap", self.name, **_trap_json(trap))
             force = True
         self._update_rates(now)
-        record = RobotRecord(
-            metrics, self.links.snapshot(now), self.api_url, self.config.priority, (), 0.0
-        )
-        payload = encode_record(record)
-        if force or payload != self._last_payload or now - self._last_publish >= _HEARTBEAT:
-            self._last_payload = payload
+        links = self.links.snapshot(now)
+        record = RobotRecord(metrics, links, self.api_url, self.config.priority, (), time.time())
+        if (
+            force
+            or worth_publishing(self._published, record)
+            or now - self._last_publish >= _HEARTBEAT
+        ):
+            self._published = record
             self._last_publish = now
-            stamped = RobotRecord(
-                record.metrics, record.links, record.api, record.priority, (), time.time()
-            )
-            self.shell.set_record(encode_record(stamped))
+            self.shell.set_record(encode_record(record))
 
     def _update_rates(self, now: float) -> None:
         assert self.shell is not None
@@ -271,6 +267,11 @@ class Agent:
                 self.events.add(wall, "trap.malformed", event.source, error=str(e))
                 return
             self.events.add(wall, "trap", event.source, **_trap_json(trap))
+
+    def _on_reject(self, reason: str, detail: str, count: int) -> None:
+        self.events.add(
+            time.time(), "wire.rejected", self.name, reason=reason, count=count, detail=detail
+        )
 
     def _on_member(self, event: MemberChanged, wall: float) -> None:
         if event.state == REAPED:
@@ -355,7 +356,7 @@ class Agent:
                 "bytes_in_per_s": round(self._rate["in_s"], 1),
                 "bytes_out_per_s": round(self._rate["out_s"], 1),
             },
-            "rejected": {k: v for k, v in codec.items() if k not in _COUNTER_KEYS},
+            "rejected": {r: codec.get(r, 0) for r in REASONS},
             "members": states,
             "gossip": dict(self.core.counters),
         }

@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import msgpack  # type: ignore[import-untyped,unused-ignore]
+import msgpack
 
 from sdrpeer.errors import WireError
 

@@ -2,9 +2,10 @@
 
 How it works: every queued update has a key (the member or record it is about). Queueing a newer
 update with the same key replaces the older one, so stale facts are never sent. `take(budget)`
-returns the least-sent updates first (among equals, the one that entered its bucket last) that fit in `budget` bytes and
-counts one transmission for each; an update is dropped after `limit` transmissions. Updates are
-kept in buckets by transmit count, so `take` touches only what it sends.
+returns the least-sent updates that fit in `budget` bytes (among equals, the one that entered its
+bucket last) and counts one transmission for each; an update is dropped after `limit`
+transmissions. Updates are kept in buckets by transmit count, so `take` touches only what it
+sends.
 """
 
 from __future__ import annotations

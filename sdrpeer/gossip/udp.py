@@ -35,10 +35,14 @@ class GossipShell(asyncio.DatagramProtocol):
         codec: Codec,
         on_event: Callable[[CoreEvent], None],
         wall: Callable[[], float] = time.time,
+        on_reject: Callable[[str, str, int], None] | None = None,
     ) -> None:
         self.codec = codec
         self.core: Membership | None = None
         self._on_event = on_event
+        self._on_reject = on_reject
+        """Called (reason, detail, count since the last call) at most once per reason per 10 s."""
+        self._since_logged: Counter[str] = Counter()
         self._wall = wall
         self._loop = asyncio.get_running_loop()
         self._transport: asyncio.DatagramTransport | None = None
@@ -149,30 +153,41 @@ class GossipShell(asyncio.DatagramProtocol):
             self.flush()
 
     def _rejected(self, e: WireError, addr: tuple[str | int, ...]) -> None:
-        self._log_once(
+        self._since_logged[e.reason] += 1
+        if not self._log_once(
             "reject:" + e.reason,
             "dropped datagram from %s:%s (%s); counted in rejected[%s]",
             addr[0],
             addr[1],
             e,
             e.reason,
-        )
+        ):
+            return
+        count, self._since_logged[e.reason] = self._since_logged[e.reason], 0
+        if self._on_reject is not None:
+            self._on_reject(e.reason, f"from {addr[0]}:{addr[1]}: {e.detail}", count)
 
-    def _log_once(self, key: str, msg: str, *args: object) -> None:
+    def _log_once(self, key: str, msg: str, *args: object) -> bool:
         now = self._loop.time()
         last = self._logged.get(key)
         if last is None or now - last >= _LOG_EVERY:
             self._logged[key] = now
             log.warning(msg, *args)
+            return True
+        return False
 
 
 async def open_gossip(
-    host: str, port: int, codec: Codec, on_event: Callable[[CoreEvent], None]
+    host: str,
+    port: int,
+    codec: Codec,
+    on_event: Callable[[CoreEvent], None],
+    on_reject: Callable[[str, str, int], None] | None = None,
 ) -> tuple[GossipShell, Addr]:
     """Bind a UDP socket and return the shell and the address actually bound."""
     loop = asyncio.get_running_loop()
     transport, shell = await loop.create_datagram_endpoint(
-        lambda: GossipShell(codec, on_event), local_addr=(host, port)
+        lambda: GossipShell(codec, on_event, on_reject=on_reject), local_addr=(host, port)
     )
     sockname = transport.get_extra_info("sockname")
     return shell, (str(sockname[0]), int(sockname[1]))

@@ -21,7 +21,7 @@ import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-import msgpack  # type: ignore[import-untyped,unused-ignore]
+import msgpack
 
 from sdrpeer.errors import WireError
 from sdrpeer.record import Metrics
