@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-import msgpack  # type: ignore[import-untyped,unused-ignore]
+import msgpack
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st

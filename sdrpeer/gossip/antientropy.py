@@ -1,0 +1,120 @@
+"""Anti-entropy: the periodic full-state exchange, joining through seeds, partition healing.
+
+How it works: every push-pull interval (scaled up above 32 robots) a robot sends its whole member
+table, with record versions, to one peer in self-contained `Sync` chunks under the MTU; the peer
+merges them, pushes back the records we lack, and answers with its own table (at most once a
+second per robot). A remote "dead" is merged as a suspicion only, since it may be stale. One time
+in three the partner is the last address of a dead member or a seed instead: that is how two
+halves of a healed partition find each other again.
+"""
+
+from __future__ import annotations
+
+from sdrpeer.gossip.base import JOIN, SYNC, CoreState
+from sdrpeer.gossip.messages import (
+    ALIVE,
+    DEAD,
+    LEFT,
+    SUSPECT,
+    Addr,
+    Alive,
+    Dead,
+    Gossip,
+    Record,
+    Suspect,
+    Sync,
+    SyncEntry,
+    Update,
+)
+
+SYNC_REPLY_GAP = 1.0  # answer one robot's full-state exchange at most this often (seconds)
+SYNC_ENTRY_OVERHEAD = 16  # msgpack bytes of one sync entry besides its name and host
+
+
+class AntiEntropy(CoreState):
+    """Full-state exchange with one peer at a time, and joining."""
+
+    def _periodic_sync(self) -> None:
+        self._at(self._now + self._sync_interval() * self.rng.uniform(0.5, 1.5), SYNC, None)
+        if self.leaving:
+            return
+        target: Addr | None = None
+        horizon = self._now - self.config.reconnect_time
+        for name, (_, died) in list(self._dead_addrs.items()):
+            if died < horizon:
+                del self._dead_addrs[name]
+        lost = list(self._dead_addrs.values())
+        if (lost or self._seeds) and (not self._peers or self.rng.random() < 1 / 3):
+            pool = [a for a, _ in lost] + self._seeds
+            target = self.rng.choice(pool)
+        elif self._peers:
+            target = self._members[self._peers.sample(self.rng, 1)[0]].addr
+        if target is not None:
+            self._send_state(target, reply=True)
+
+    def _retry_join(self, delay: float) -> None:
+        if len(self._members) > 1 or not self._seeds:
+            return
+        for seed in self._seeds:
+            self._send_state(seed, reply=True)
+        delay = min(delay * 2, 5.0)
+        self._at(self._now + delay, JOIN, delay)
+
+    def _entries(self) -> list[SyncEntry]:
+        out: list[SyncEntry] = []
+        records = self._records
+        for m in self._members.values():
+            rec = records.get(m.name)
+            out.append((m.name, m.addr, m.incarnation, m.state, rec[0] if rec else 0))
+        return out
+
+    def _send_state(self, dest: Addr, *, reply: bool) -> None:
+        chunk: list[SyncEntry] = []
+        used = 0
+        for e in self._entries():
+            size = len(e[0]) + len(e[1][0]) + SYNC_ENTRY_OVERHEAD
+            if chunk and used + size > self._budget:
+                self._out.append((dest, Sync(self.name, reply, tuple(chunk))))
+                chunk, used = [], 0
+            chunk.append(e)
+            used += size
+        if chunk:
+            self._out.append((dest, Sync(self.name, reply, tuple(chunk))))
+
+    def _on_sync(self, src: Addr, sync: Sync) -> None:
+        push: list[Update] = []
+        for name, addr, inc, state, rec_version in sync.entries:
+            if state == ALIVE:
+                self._merge_alive(Alive(name, addr, inc))
+            elif state in (SUSPECT, DEAD):
+                # A remote death is only a suspicion here: it may be stale (memberlist does this).
+                if name not in self._members and name != self.name:
+                    continue
+                self._merge_suspect(Suspect(name, inc, sync.sender))
+            elif state == LEFT:
+                self._merge_dead(Dead(name, inc, name))
+            mine = self._records.get(name)
+            if mine is not None and mine[0] > rec_version:
+                push.append(Record(name, mine[0], mine[1]))
+            elif name == self.name and mine is not None and rec_version > mine[0]:
+                self._store_own_record(rec_version + 1, mine[1])
+                push.append(Record(name, rec_version + 1, mine[1]))
+        self._push_records(src, push)
+        if sync.reply:
+            last = self._sync_replied.get(sync.sender)
+            if last is None or self._now - last >= SYNC_REPLY_GAP:
+                self._sync_replied[sync.sender] = self._now
+                self._send_state(src, reply=False)
+
+    def _push_records(self, dest: Addr, records: list[Update]) -> None:
+        batch: list[Update] = []
+        used = 0
+        for r in records:
+            size = self._size(r)
+            if batch and used + size > self._budget:
+                self._out.append((dest, Gossip(self.name, tuple(batch))))
+                batch, used = [], 0
+            batch.append(r)
+            used += size
+        if batch:
+            self._out.append((dest, Gossip(self.name, tuple(batch))))
