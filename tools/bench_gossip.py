@@ -75,13 +75,23 @@ QUICK = Plan(
 )
 
 
+_STARTED = time.perf_counter()
+
+
+def progress(message: str) -> None:
+    """One line of progress on stderr, with the wall seconds since the start."""
+    print(f"[{time.perf_counter() - _STARTED:6.0f} s] {message}", file=sys.stderr, flush=True)
+
+
 def booted(n: int, seed: int, *, count_bytes: bool = False) -> tuple[Cluster, float]:
     """A converged cluster of `n` robots on the lan() preset, and the wall seconds it took."""
     began = time.perf_counter()
     cluster = Cluster(n, lan(), seed=seed, count_bytes=count_bytes)
     cluster.start(spread=1.0)
-    cluster.converge(timeout=120.0)
-    return cluster, time.perf_counter() - began
+    took = cluster.converge(timeout=120.0)
+    wall = time.perf_counter() - began
+    progress(f"N = {n} converged in {took:.2f} virtual s, {wall:.1f} wall s")
+    return cluster, wall
 
 
 def convergence(plan: Plan, seed: int) -> list[dict[str, Any]]:
@@ -95,7 +105,9 @@ def convergence(plan: Plan, seed: int) -> list[dict[str, Any]]:
             for loss in plan.losses:
                 cluster.set_loss(loss)
                 cluster.run_for(2.0)
-                cells.setdefault((n, loss), []).append(spread_time(cluster, rng))
+                spread = spread_time(cluster, rng)
+                cells.setdefault((n, loss), []).append(spread)
+                progress(f"convergence N = {n}, loss {loss:.0%}, trial {trial}: {show(spread)}")
                 cluster.set_loss(0.0)
                 cluster.run_for(1.0)
     rows = []
@@ -139,6 +151,7 @@ def speed_and_bandwidth(plan: Plan, seed: int) -> tuple[dict[str, Any], dict[str
     cluster, boot_wall = booted(n, seed + 7)
     began = time.perf_counter()
     cluster.run_for(plan.steady)
+    progress(f"sim speed: {plan.steady} virtual s in {time.perf_counter() - began:.1f} wall s")
     speed = {
         "n": n,
         "virtual_s": plan.steady,
@@ -202,6 +215,7 @@ def failure_detection(plan: Plan, seed: int) -> list[dict[str, Any]]:
                     else:
                         times.append(agreed - killed)
                 false_deaths += len(cluster.trace.false_deaths(after=loss_began))
+            progress(f"failure detection N = {n}, loss {loss:.0%}: {times}")
             rows.append(
                 {
                     "n": n,
