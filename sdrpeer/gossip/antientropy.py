@@ -83,9 +83,12 @@ class AntiEntropy(CoreState):
 
     def _on_sync(self, src: Addr, sync: Sync) -> None:
         push: list[Update] = []
+        members = self._members
         for name, addr, inc, state, rec_version in sync.entries:
             if state == ALIVE:
-                self._merge_alive(Alive(name, addr, inc))
+                m = members.get(name)
+                if m is None or m is self._me or inc > m.incarnation:
+                    self._merge_alive(Alive(name, addr, inc))
             elif state in (SUSPECT, DEAD):
                 # A remote death is only a suspicion here: it may be stale (memberlist does this).
                 if name not in self._members and name != self.name:

@@ -198,9 +198,13 @@ class Membership(Probing, AntiEntropy):
     # ----------------------------------------------------------------- merging
     def _merge_updates(self, updates: tuple[Update, ...], src: Addr) -> None:
         corrections: list[Update] = []
+        members = self._members
         for u in updates:
             t = type(u)
             if t is Alive:
+                m = members.get(u.name)  # type: ignore[union-attr]
+                if m is not None and m is not self._me and u.incarnation <= m.incarnation:  # type: ignore[union-attr]
+                    continue  # already known: the common case, kept cheap
                 self._merge_alive(u)  # type: ignore[arg-type]
             elif t is Suspect or t is Dead:
                 stale = self._stale(u.name, u.incarnation)  # type: ignore[union-attr]

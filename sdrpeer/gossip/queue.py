@@ -14,6 +14,10 @@ from collections.abc import Hashable
 
 from sdrpeer.gossip.messages import Update
 
+_MAX_MISSES = 16
+"""Stop looking for an update small enough for the rest of a packet after this many misses
+(without it, a nearly full packet scans every queued update: 40 % of a 1,000-robot bootstrap)."""
+
 
 class _Item:
     __slots__ = ("key", "sent", "size", "update")
@@ -60,30 +64,36 @@ class BroadcastQueue:
         out: list[Update] = []
         if not self._by_key:
             return out
-        moved: list[_Item] = []
         buckets = self._buckets
-        for sent in range(len(buckets)):
-            bucket = buckets[sent]
-            if not bucket or budget <= 0:
+        moved: list[_Item] = []
+        for bucket in buckets:
+            if not bucket:
                 continue
-            taken: list[Hashable] = []
-            for key in reversed(bucket):  # newest first
-                item = bucket[key]
+            skipped: list[tuple[Hashable, _Item]] = []
+            while bucket:
+                key, item = bucket.popitem()  # newest first
                 if item.size <= budget:
                     budget -= item.size
                     out.append(item.update)
-                    taken.append(key)
+                    moved.append(item)
                     if budget < 8:
                         break
-            for key in taken:
-                item = bucket.pop(key)
-                item.sent += 1
-                moved.append(item)
+                else:
+                    skipped.append((key, item))
+                    if len(skipped) > _MAX_MISSES:  # as full as it will usefully get
+                        budget = 0
+                        break
+            for key, item in reversed(skipped):
+                bucket[key] = item
+            if budget < 8:
+                break
+        by_key = self._by_key
         for item in moved:
+            item.sent += 1
             if item.sent >= limit:
-                del self._by_key[item.key]
+                del by_key[item.key]
                 continue
-            while len(buckets) <= item.sent:
+            if item.sent == len(buckets):
                 buckets.append({})
             buckets[item.sent][item.key] = item
         return out
