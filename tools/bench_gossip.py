@@ -25,7 +25,7 @@ import random
 import statistics
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from sdrpeer.gossip.config import lan
@@ -248,48 +248,62 @@ def show(value: float | None, unit: str = "s") -> str:
 
 
 def report(results: dict[str, Any]) -> str:
-    """The human-readable table of every figure."""
+    """The human-readable table of every figure measured."""
     cfg = results["config"]
     out = [
         f"preset lan(): probe_interval {cfg['probe_interval']} s, gossip_interval "
         f"{cfg['gossip_interval']} s, fanout {cfg['gossip_fanout']}, "
         f"push_pull_interval {cfg['push_pull_interval']} s",
-        "",
-        "Convergence (record change reaching 99.99 % of robots; median)",
-        f"{'N':>6} {'loss':>5} {'trials':>6} {'median':>9} {'target':>8} {'serf':>8}",
     ]
-    for r in results["convergence"]:
-        out.append(
-            f"{r['n']:>6} {r['loss']:>5.0%} {r['trials']:>6} {show(r['median_s']):>9} "
-            f"{show(r['target_s']):>8} {show(r['serf_s']):>8}"
-        )
-    bw = results["bandwidth"]
-    out += [
-        "",
-        f"Bandwidth per robot at N = {bw['n']} ({bw['duration_s']:.0f} s, churn, "
-        f"{bw['churned']} churned robots left out)",
-        f"  mean {show(bw['mean_bytes_per_s'], 'B/s')}, max {show(bw['max_bytes_per_s'], 'B/s')}"
-        f" ({bw['mean_datagrams_per_s']:.1f} datagrams/s); target < "
-        f"{show(bw['target_bytes_per_s'], 'B/s')} (serf)",
-        "",
-        "Failure detection (death -> all others mark DEAD)",
-        f"{'N':>6} {'loss':>5} {'deaths':>6} {'mean':>8} {'p50':>8} {'p99':>8} "
-        f"{'missed':>6} {'false':>6}",
-    ]
-    for r in results["failure_detection"]:
-        out.append(
-            f"{r['n']:>6} {r['loss']:>5.0%} {r['deaths']:>6} {show(r['mean_s']):>8} "
-            f"{show(r['p50_s']):>8} {show(r['p99_s']):>8} {r['undetected']:>6} "
-            f"{r['false_deaths']:>6}"
-        )
-    out.append(f"  targets: mean <= {TARGET_DETECTION_MEAN:.1f} s, 0 false deaths")
-    sp = results["sim_speed"]
-    out += [
-        "",
-        f"Sim speed: {sp['virtual_s']:.0f} virtual s at N = {sp['n']} in {sp['wall_s']:.1f} wall s"
-        f" (target < {sp['target_wall_s']:.0f} s); bootstrap {sp['bootstrap_wall_s']:.1f} wall s",
-    ]
+    if "convergence" in results:
+        out += [
+            "",
+            "Convergence (record change reaching 99.99 % of robots; median)",
+            f"{'N':>6} {'loss':>5} {'trials':>6} {'median':>9} {'target':>8} {'serf':>8}",
+        ]
+        for r in results["convergence"]:
+            out.append(
+                f"{r['n']:>6} {r['loss']:>5.0%} {r['trials']:>6} {show(r['median_s']):>9} "
+                f"{show(r['target_s']):>8} {show(r['serf_s']):>8}"
+            )
+    if "bandwidth" in results:
+        bw = results["bandwidth"]
+        out += [
+            "",
+            f"Bandwidth per robot at N = {bw['n']} ({bw['duration_s']:.0f} s, churn, "
+            f"{bw['churned']} churned robots left out)",
+            f"  mean {show(bw['mean_bytes_per_s'], 'B/s')}, "
+            f"max {show(bw['max_bytes_per_s'], 'B/s')} "
+            f"({bw['mean_datagrams_per_s']:.1f} datagrams/s); "
+            f"target < {show(bw['target_bytes_per_s'], 'B/s')} (serf)",
+        ]
+    if "failure_detection" in results:
+        out += [
+            "",
+            "Failure detection (death -> all others mark DEAD)",
+            f"{'N':>6} {'loss':>5} {'deaths':>6} {'mean':>8} {'p50':>8} {'p99':>8} "
+            f"{'missed':>6} {'false':>6}",
+        ]
+        for r in results["failure_detection"]:
+            out.append(
+                f"{r['n']:>6} {r['loss']:>5.0%} {r['deaths']:>6} {show(r['mean_s']):>8} "
+                f"{show(r['p50_s']):>8} {show(r['p99_s']):>8} {r['undetected']:>6} "
+                f"{r['false_deaths']:>6}"
+            )
+        out.append(f"  targets: mean <= {TARGET_DETECTION_MEAN:.1f} s, 0 false deaths")
+    if "sim_speed" in results:
+        sp = results["sim_speed"]
+        out += [
+            "",
+            f"Sim speed: {sp['virtual_s']:.0f} virtual s at N = {sp['n']} in "
+            f"{sp['wall_s']:.1f} wall s (target < {sp['target_wall_s']:.0f} s); "
+            f"bootstrap {sp['bootstrap_wall_s']:.1f} wall s",
+        ]
     return "\n".join(out)
+
+
+SECTIONS = ("convergence", "bandwidth", "detection")
+"""What `--only` can pick; `bandwidth` also measures the sim speed (they share one cluster)."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -298,11 +312,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", metavar="PATH", help="also write every figure to this file")
     parser.add_argument("--quick", action="store_true", help="tiny sizes: a smoke test")
     parser.add_argument("--seed", type=int, default=1, help="base seed of every run")
+    parser.add_argument("--only", help=f"comma-separated subset of {', '.join(SECTIONS)}")
+    parser.add_argument("--sizes", help="convergence cluster sizes, comma-separated")
+    parser.add_argument("--trials", type=int, help="trials per convergence cell and detection runs")
     args = parser.parse_args(argv)
     plan = QUICK if args.quick else FULL
+    if args.sizes:
+        plan = replace(plan, sizes=tuple(int(x) for x in args.sizes.split(",")))
+    if args.trials:
+        plan = replace(plan, trials_small=args.trials, trials_large=args.trials)
+        plan = replace(plan, fd_runs=args.trials)
+    only = set(args.only.split(",")) if args.only else set(SECTIONS)
+    if only - set(SECTIONS):
+        parser.error(f"--only: unknown section(s) {', '.join(sorted(only - set(SECTIONS)))}")
     cfg = lan()
     began = time.perf_counter()
-    speed, bandwidth = speed_and_bandwidth(plan, args.seed)
     results: dict[str, Any] = {
         "quick": args.quick,
         "seed": args.seed,
@@ -313,11 +337,13 @@ def main(argv: list[str] | None = None) -> int:
             "gossip_fanout": cfg.gossip_fanout,
             "push_pull_interval": cfg.push_pull_interval,
         },
-        "convergence": convergence(plan, args.seed),
-        "bandwidth": bandwidth,
-        "failure_detection": failure_detection(plan, args.seed),
-        "sim_speed": speed,
     }
+    if "bandwidth" in only:
+        results["sim_speed"], results["bandwidth"] = speed_and_bandwidth(plan, args.seed)
+    if "convergence" in only:
+        results["convergence"] = convergence(plan, args.seed)
+    if "detection" in only:
+        results["failure_detection"] = failure_detection(plan, args.seed)
     results["wall_s"] = time.perf_counter() - began
     print(report(results))
     print(f"\n(benchmark took {results['wall_s']:.0f} wall s)")
