@@ -303,3 +303,40 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
         ],
         "ts": r.ts,
     }
+
+
+PAPER_COMPONENTS = (
+    "OmnidirectionalCameraRTC",
+    "AnomalyDetectionRTC",
+    "CameraRTC",
+    "REDControllerRTC",
+    "PositionEstimationRTC",
+)
+
+
+def reference_record(peers: int = 10, instances: int = 10, ts: float = 0.0) -> RobotRecord:
+    """The record whose encoded size we quote: `peers` measured links and `instances` hosted
+    instances with the paper's component names (a realistic upper bound for one robot)."""
+    links = {
+        f"robot-{i}": LinkStats(rtt_ms=3.17 + i, jitter_ms=0.42 * i, loss=0.05 * (i % 3))
+        for i in range(2, 2 + peers)
+    }
+    hosted = tuple(
+        InstanceInfo(
+            name=f"{PAPER_COMPONENTS[i % 5]}{i + 1}",
+            component=PAPER_COMPONENTS[i % 5],
+            state="active" if i % 2 else "inactive",
+            role="primary" if i < 7 else "standby",
+            cpu_pct=12.3 + i,
+            rss=512_000_000 + i * 1_234_567,
+        )
+        for i in range(instances)
+    )
+    return RobotRecord(
+        metrics=Metrics(37.5, 4_000_000_000, 1_234_567_890, 87.26, -47.0, (12.346, -3.2)),
+        links=links,
+        api="http://192.168.10.11:8080",
+        priority=3,
+        instances=hosted,
+        ts=ts,
+    )

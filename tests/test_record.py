@@ -18,49 +18,13 @@ from sdrpeer.record import (
     decode_record,
     encode_record,
     record_to_json,
+    reference_record,
 )
-
-PAPER_COMPONENTS = [
-    "OmnidirectionalCameraRTC",
-    "AnomalyDetectionRTC",
-    "CameraRTC",
-    "REDControllerRTC",
-    "PositionEstimationRTC",
-]
 
 
 def big_record() -> RobotRecord:
     """A robot with 10 measured peers and 10 instances: a realistic upper bound."""
-    links = {
-        f"robot-{i}": LinkStats(rtt_ms=3.17 + i, jitter_ms=0.42 * i, loss=0.05 * (i % 3))
-        for i in range(2, 12)
-    }
-    instances = tuple(
-        InstanceInfo(
-            name=f"{PAPER_COMPONENTS[i % 5]}{i + 1}",
-            component=PAPER_COMPONENTS[i % 5],
-            state="active" if i % 2 else "inactive",
-            role="primary" if i < 7 else "standby",
-            cpu_pct=12.3 + i,
-            rss=512_000_000 + i * 1_234_567,
-        )
-        for i in range(10)
-    )
-    return RobotRecord(
-        metrics=Metrics(
-            cpu_pct=37.5,
-            mem_total=4_000_000_000,
-            mem_free=1_234_567_890,
-            battery_pct=87.26,
-            rssi_dbm=-47.0,
-            pos=(12.346, -3.2),
-        ),
-        links=links,
-        api="http://192.168.10.11:8080",
-        priority=3,
-        instances=instances,
-        ts=1_732_240_000.123,
-    )
+    return reference_record(ts=1_732_240_000.123)
 
 
 def test_round_trip_rounds_to_the_grid() -> None:

@@ -35,54 +35,20 @@ from sdrpeer.errors import SdrpeerError
 from sdrpeer.lab import default_robot_files
 from sdrpeer.lab_up import RunningLab, UpOptions, log_tail, start_lab
 from sdrpeer.record import (
-    InstanceInfo,
     LinkStats,
     Metrics,
     RobotRecord,
     encode_record,
+    reference_record,
 )
 
 MIB = 1024 * 1024
 TARGET_RSS_MB = 40.0  # MiB
 TARGET_CPU_PCT = 2.0  # % of one core
 SAMPLE_EVERY = 1.0
-COMPONENTS = [
-    "OmnidirectionalCameraRTC",
-    "AnomalyDetectionRTC",
-    "CameraRTC",
-    "REDControllerRTC",
-    "PositionEstimationRTC",
-]
 
 
 # --- record size ------------------------------------------------------------------------------
-
-
-def synthetic_record() -> RobotRecord:
-    """A robot with 10 measured peers and 10 hosted instances (the paper's component names)."""
-    links = {
-        f"robot-{i}": LinkStats(rtt_ms=3.17 + i, jitter_ms=0.42 * i, loss=0.05 * (i % 3))
-        for i in range(2, 12)
-    }
-    instances = tuple(
-        InstanceInfo(
-            name=f"{COMPONENTS[i % 5]}{i + 1}",
-            component=COMPONENTS[i % 5],
-            state="active" if i % 2 else "inactive",
-            role="primary" if i < 7 else "standby",
-            cpu_pct=12.3 + i,
-            rss=512_000_000 + i * 1_234_567,
-        )
-        for i in range(10)
-    )
-    return RobotRecord(
-        metrics=Metrics(37.5, 4_000_000_000, 1_234_567_890, 87.26, -47.0, (12.346, -3.2)),
-        links=links,
-        api="http://192.168.10.11:8080",
-        priority=3,
-        instances=instances,
-        ts=time.time(),
-    )
 
 
 def record_from_member(member: dict[str, Any]) -> RobotRecord | None:
@@ -243,7 +209,7 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
     finally:
         for line in running.stop():
             print(f"  {line}", flush=True)
-    synthetic = encode_record(synthetic_record())
+    synthetic = encode_record(reference_record(ts=time.time()))
     return {
         "preset": "lan",
         "robots": args.robots,
