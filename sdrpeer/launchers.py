@@ -1,0 +1,173 @@
+"""Launchers: how an agent turns an instance spec into the command that starts its host.
+
+How it works: a launcher is any object with a `name` and `command(target, params, *, python)`
+returning an argv (docs/protocol.md, section 3). Three are built in: `python` (`pkg.mod:Class`)
+and `script` (`path/to/file.py[:Class]`), both `python -m sdrpeer.host TARGET --param k=v ...`,
+and `exec` (an argv list run as is; it must speak the control channel itself, and gets its
+params as `SDRPEER_PARAMS`, a JSON map, in its environment). Plugins come from the entry point group
+`sdrpeer.launchers`; each entry point loads a launcher class (instantiated with no arguments) or
+instance. `get_launcher(name)` looks in the built-ins first, then the plugins, and fails with the
+list of known names. `host_env` builds the environment of docs/protocol.md for one host.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, runtime_checkable
+
+from sdrpeer.errors import ConfigError
+
+log = logging.getLogger("sdrpeer.launchers")
+
+ENTRY_POINT_GROUP = "sdrpeer.launchers"
+
+
+class LauncherError(ConfigError):
+    """An instance names an unknown launcher or gives it a target it cannot use."""
+
+
+@runtime_checkable
+class Launcher(Protocol):
+    """Turns a target and params into the argv that starts a host."""
+
+    name: str
+
+    def command(self, target: str | list[str], params: dict[str, Any], *, python: str) -> list[str]:
+        """The argv; `python` is the interpreter to run Python hosts with."""
+        ...
+
+
+def param_arg(value: Any) -> str:
+    """A param value as the host's `--param k=v` string (the SDK converts it back)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def param_args(params: Mapping[str, Any]) -> list[str]:
+    """`--param k=v` for every param, in name order."""
+    out: list[str] = []
+    for key in sorted(params):
+        out += ["--param", f"{key}={param_arg(params[key])}"]
+    return out
+
+
+def _str_target(launcher: str, target: str | list[str], what: str) -> str:
+    """`target` if it is a non-empty string, else LauncherError."""
+    if not isinstance(target, str) or not target:
+        raise LauncherError(f"launcher {launcher!r}: target must be {what}, got {target!r}")
+    return target
+
+
+class PythonLauncher:
+    """`python -m sdrpeer.host package.module:Class`."""
+
+    name = "python"
+
+    def command(self, target: str | list[str], params: dict[str, Any], *, python: str) -> list[str]:
+        """The host command for a module target."""
+        text = _str_target(self.name, target, "'package.module:Class'")
+        module, sep, cls = text.partition(":")
+        if not sep or not module or not cls.isidentifier() or module.endswith(".py"):
+            raise LauncherError(
+                f"launcher 'python': target must be 'package.module:Class', got {text!r}"
+            )
+        return [python, "-m", "sdrpeer.host", text, *param_args(params)]
+
+
+class ScriptLauncher:
+    """`python -m sdrpeer.host path/to/file.py[:Class]`."""
+
+    name = "script"
+
+    def command(self, target: str | list[str], params: dict[str, Any], *, python: str) -> list[str]:
+        """The host command for a file target."""
+        text = _str_target(self.name, target, "'path/to/file.py[:Class]'")
+        path = text.rpartition(":")[0] if text.rpartition(":")[2].isidentifier() else text
+        if not path.endswith(".py"):
+            raise LauncherError(
+                f"launcher 'script': target must be 'path/to/file.py[:Class]', got {text!r}"
+            )
+        return [python, "-m", "sdrpeer.host", text, *param_args(params)]
+
+
+class ExecLauncher:
+    """The executable itself; it speaks the control channel on its own."""
+
+    name = "exec"
+
+    def command(self, target: str | list[str], params: dict[str, Any], *, python: str) -> list[str]:
+        """`target` as given (params travel in the environment, see `host_env`)."""
+        if (
+            not isinstance(target, list)
+            or not target
+            or not all(isinstance(a, str) and a for a in target)
+        ):
+            raise LauncherError(
+                f"launcher 'exec': target must be a non-empty argv list, got {target!r}"
+            )
+        return list(target)
+
+
+BUILTIN: dict[str, Callable[[], Launcher]] = {
+    "python": PythonLauncher,
+    "script": ScriptLauncher,
+    "exec": ExecLauncher,
+}
+"""The built-in launchers by name (always win over a plugin of the same name)."""
+
+
+def _plugins() -> dict[str, Any]:
+    """Entry points of the `sdrpeer.launchers` group, by name."""
+    from importlib.metadata import entry_points  # noqa: PLC0415 - slow-ish, only when needed
+
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def known_launchers() -> list[str]:
+    """Every launcher name available: built-ins and plugins."""
+    return sorted(set(BUILTIN) | set(_plugins()))
+
+
+def get_launcher(name: str) -> Launcher:
+    """The launcher called `name`; LauncherError listing the known ones if there is none."""
+    factory = BUILTIN.get(name)
+    if factory is not None:
+        return factory()
+    plugins = _plugins()
+    ep = plugins.get(name)
+    if ep is None:
+        known = ", ".join(sorted(set(BUILTIN) | set(plugins)))
+        raise LauncherError(f"unknown launcher {name!r} (known: {known})")
+    try:
+        obj = ep.load()
+        launcher = obj() if isinstance(obj, type) else obj
+    except Exception as exc:
+        raise LauncherError(f"launcher {name!r} ({ep.value}) failed to load: {exc}") from exc
+    if not isinstance(launcher, Launcher):
+        raise LauncherError(f"launcher {name!r} ({ep.value}) has no name/command()")
+    return launcher
+
+
+def host_env(
+    *,
+    instance: str,
+    control_fd: int,
+    data_host: str,
+    run_dir: str,
+    params: Mapping[str, Any] | None = None,
+) -> dict[str, str]:
+    """The environment variables docs/protocol.md gives a host (merge into os.environ)."""
+    env = {
+        "SDRPEER_CONTROL_FD": str(control_fd),
+        "SDRPEER_INSTANCE": instance,
+        "SDRPEER_DATA_HOST": data_host,
+        "SDRPEER_RUN_DIR": run_dir,
+    }
+    if params:
+        env["SDRPEER_PARAMS"] = json.dumps(dict(params), sort_keys=True)
+    return env
