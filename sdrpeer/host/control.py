@@ -1,0 +1,294 @@
+"""The host side of the control channel (docs/protocol.md, section 1).
+
+How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CONTROL_FD`. Bytes read
+from it go through `ControlDecoder`, a pure core: it cuts the msgpack stream into values, enforces
+the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
+`ControlProtocolError`) and turns maps carrying an integer `"id"` into `Command`s. The report
+builders (`hello`, `state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs,
+`now` included. `ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a
+callback, writes reports at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once
+when the channel ends: the agent closed it (the agent died), a protocol error closed it, or the
+parent pid changed. A host must never outlive its agent, so `arm_parent_death_signal` also asks
+Linux to send SIGTERM when the parent goes away.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import signal
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+from sdrpeer.errors import SdrpeerError
+
+log = logging.getLogger("sdrpeer.host.control")
+
+PROTOCOL_VERSION = 1
+MAX_MESSAGE = 1 << 20
+"""Largest control message accepted, in bytes."""
+HEARTBEAT_INTERVAL = 0.5
+"""Seconds between two heartbeats."""
+_PIECE = 64 * 1024
+"""Incoming bytes are fed to the unpacker in pieces of at most this size (bounds its buffer)."""
+
+Message = dict[str, Any]
+
+
+class ControlProtocolError(SdrpeerError):
+    """The peer sent something the control channel contract forbids; the channel is closed."""
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """One agent -> host command."""
+
+    t: str
+    """Its type (`activate`, `connect`, ...)."""
+    id: int
+    """The id the reply carries back."""
+    msg: Message
+    """The whole map, for the command's own fields."""
+
+
+class ControlDecoder:
+    """Cuts a msgpack byte stream into checked messages (pure: no I/O, no clock)."""
+
+    def __init__(self, max_message: int = MAX_MESSAGE) -> None:
+        self.max_message = max_message
+        self._unpacker = msgpack.Unpacker(raw=False, max_buffer_size=max_message + _PIECE)
+        self._offset = 0
+        self.ignored = 0
+        """Maps that were well-formed but not commands (no integer id): logged and skipped."""
+
+    def feed(self, data: bytes) -> list[Command]:
+        """Consume `data`; return the complete commands in it; raise ControlProtocolError."""
+        out: list[Command] = []
+        view = memoryview(data)
+        for start in range(0, len(view), _PIECE):
+            try:
+                self._unpacker.feed(view[start : start + _PIECE])
+            except msgpack.BufferFull:
+                raise ControlProtocolError(f"message over {self.max_message} bytes") from None
+            self._drain(out)
+        return out
+
+    def _drain(self, out: list[Command]) -> None:
+        """Unpack every complete value in the buffer into `out`."""
+        while True:
+            try:
+                value = self._unpacker.unpack()
+            except msgpack.OutOfData:
+                return
+            except Exception as exc:
+                raise ControlProtocolError(f"undecodable msgpack: {type(exc).__name__}") from exc
+            end = self._unpacker.tell()
+            size, self._offset = end - self._offset, end
+            if size > self.max_message:
+                raise ControlProtocolError(f"message of {size} bytes (limit {self.max_message})")
+            command = self._check(value)
+            if command is not None:
+                out.append(command)
+
+    def _check(self, value: object) -> Command | None:
+        """Validate one value; a map without an integer id is counted and skipped."""
+        if not isinstance(value, dict):
+            raise ControlProtocolError(f"expected a map, got {type(value).__name__}")
+        t = value.get("t")
+        if not isinstance(t, str):
+            raise ControlProtocolError("map without a str 't'")
+        ident = value.get("id")
+        if type(ident) is not int:
+            self.ignored += 1
+            log.warning("control: %r without an integer id ignored", t)
+            return None
+        return Command(t=t, id=ident, msg=value)
+
+
+def encode(msg: Message) -> bytes:
+    """The bytes of one report."""
+    return msgpack.packb(msg, use_bin_type=True)  # type: ignore[no-any-return]
+
+
+def hello(
+    *,
+    pid: int,
+    component: str,
+    ports: dict[str, list[str]],
+    params: dict[str, Any],
+    data: dict[str, str],
+) -> Message:
+    """The first report: who we are and where our data server listens."""
+    return {
+        "t": "hello",
+        "protocol": PROTOCOL_VERSION,
+        "pid": pid,
+        "component": component,
+        "ports": ports,
+        "params": params,
+        "data": data,
+    }
+
+
+def state(name: str, now: float, error: str | None = None) -> Message:
+    """A lifecycle change."""
+    return {"t": "state", "state": name, "ts": now, "error": error}
+
+
+def reply(ident: int, ok: bool, error: str | None = None) -> Message:
+    """The answer to command `ident`."""
+    return {"t": "reply", "id": ident, "ok": ok, "error": error}
+
+
+def heartbeat(now: float, ports: dict[str, dict[str, int]]) -> Message:
+    """The periodic liveness report with per-port counters."""
+    return {"t": "heartbeat", "ts": now, "ports": ports}
+
+
+def fault(kind: str, detail: str) -> Message:
+    """A fault the component reported."""
+    return {"t": "fault", "kind": kind, "detail": detail}
+
+
+def arm_parent_death_signal(sig: int = signal.SIGTERM) -> bool:
+    """Ask Linux to send `sig` when our parent dies (PR_SET_PDEATHSIG); False if unavailable."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes  # noqa: PLC0415 - only on Linux, only here
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return int(libc.prctl(1, sig, 0, 0, 0)) == 0  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return False
+
+
+class ControlChannel(asyncio.Protocol):
+    """The asyncio shell: socket in, commands out; reports and heartbeats written at once."""
+
+    def __init__(
+        self,
+        on_command: Callable[[Command], None],
+        on_closed: Callable[[str], None],
+        counters: Callable[[], dict[str, dict[str, int]]],
+        *,
+        clock: Callable[[], float] = time.time,
+        heartbeat_interval: float = HEARTBEAT_INTERVAL,
+    ) -> None:
+        self._on_command = on_command
+        self._on_closed = on_closed
+        self._counters = counters
+        self._clock = clock
+        self._interval = heartbeat_interval
+        self._decoder = ControlDecoder()
+        self._transport: asyncio.Transport | None = None
+        self._lost: asyncio.Future[None] | None = None
+        self._beat: asyncio.TimerHandle | None = None
+        self._ppid = os.getppid()
+        self._closed_reason: str | None = None
+        self.protocol_errors = 0
+        """Protocol errors seen (each one closes the channel)."""
+
+    @classmethod
+    async def open(
+        cls, fd: int, *args: Any, **kwargs: Any
+    ) -> ControlChannel:  # pragma: no cover - thin
+        """Wrap the inherited socket `fd` in a running channel."""
+        sock = socket.socket(fileno=fd)
+        loop = asyncio.get_running_loop()
+        channel = cls(*args, **kwargs)
+        await loop.create_unix_connection(lambda: channel, sock=sock)
+        return channel
+
+    @property
+    def closed(self) -> bool:
+        """True once the channel has ended."""
+        return self._closed_reason is not None
+
+    def send(self, msg: Message) -> None:
+        """Write one report now (dropped if the channel has ended)."""
+        if self._transport is not None and self._closed_reason is None:
+            self._transport.write(encode(msg))
+
+    def send_heartbeat(self) -> None:
+        """Write a heartbeat with the current counters."""
+        self.send(heartbeat(self._clock(), self._counters()))
+
+    def close(self) -> None:
+        """End the channel from our side (after the reports already queued are written)."""
+        if self._closed_reason is None:
+            self._closed_reason = "closed by the host"
+            if self._beat is not None:
+                self._beat.cancel()
+            if self._transport is not None:
+                self._transport.close()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        """Start the heartbeat."""
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._lost = asyncio.get_running_loop().create_future()
+        self._schedule_beat()
+
+    def data_received(self, data: bytes) -> None:
+        """Decode and dispatch; a protocol error closes the channel."""
+        try:
+            commands = self._decoder.feed(data)
+        except ControlProtocolError as exc:
+            self.protocol_errors += 1
+            log.error("control: protocol error: %s; closing the channel", exc)
+            self._end(f"protocol error: {exc}")
+            return
+        for command in commands:
+            self._on_command(command)
+
+    def eof_received(self) -> bool:
+        """The agent closed its end: we end too."""
+        self._end("the agent closed the control channel")
+        return False
+
+    async def wait_closed(self) -> None:
+        """Return once the socket is closed (the reports queued before are written)."""
+        if self._lost is not None:
+            await asyncio.shield(self._lost)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        """The socket is gone."""
+        if self._lost is not None and not self._lost.done():
+            self._lost.set_result(None)
+        self._end(f"control channel lost: {exc}" if exc else "control channel closed")
+
+    def _schedule_beat(self) -> None:
+        """Arm the next heartbeat."""
+        loop = asyncio.get_running_loop()
+        self._beat = loop.call_later(self._interval, self._on_beat)
+
+    def _on_beat(self) -> None:
+        """Send a heartbeat, and check that our parent is still the agent that started us."""
+        if self._closed_reason is not None:
+            return
+        if os.getppid() != self._ppid:
+            self._end(f"parent {self._ppid} is gone")
+            return
+        try:
+            self.send_heartbeat()
+        finally:
+            self._schedule_beat()
+
+    def _end(self, reason: str) -> None:
+        """Close once and tell the owner why."""
+        if self._closed_reason is not None:
+            return
+        self._closed_reason = reason
+        if self._beat is not None:
+            self._beat.cancel()
+        if self._transport is not None:
+            self._transport.close()
+        self._on_closed(reason)
