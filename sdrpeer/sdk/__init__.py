@@ -1,0 +1,48 @@
+"""The component SDK: write an sdrpeer component the way you would an OpenRTM-aist RTC.
+
+How it works: subclass `Component`, declare `OutPort`/`InPort`/`Param` attributes and an
+execution context (`Periodic` or `OnInput`), override the `on_*` callbacks (sync or async).
+The host (`python -m sdrpeer.host`) wraps the instance in a `ComponentRunner`, which drives the
+lifecycle of sdrpeer.sdk.lifecycle and reports every state change at once; the data plane
+attaches sinks to OutPorts and delivers received frames to InPorts (docs/protocol.md).
+"""
+
+from sdrpeer.sdk.component import FAULT_KINDS, Component
+from sdrpeer.sdk.errors import (
+    CallbackError,
+    ComponentError,
+    LifecycleError,
+    NoData,
+    ParamError,
+    PortError,
+)
+from sdrpeer.sdk.execution import OnInput, Periodic
+from sdrpeer.sdk.lifecycle import LifecycleState
+from sdrpeer.sdk.params import Param, ParamInfo
+from sdrpeer.sdk.policy import ConnectorPolicy
+from sdrpeer.sdk.ports import FrameSink, InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
+from sdrpeer.sdk.runner import ComponentRunner
+
+__all__ = [
+    "FAULT_KINDS",
+    "CallbackError",
+    "Component",
+    "ComponentError",
+    "ComponentRunner",
+    "ConnectorPolicy",
+    "FrameSink",
+    "InPort",
+    "InPortRuntime",
+    "LifecycleError",
+    "LifecycleState",
+    "NoData",
+    "OnInput",
+    "OutPort",
+    "OutPortRuntime",
+    "Param",
+    "ParamError",
+    "ParamInfo",
+    "Periodic",
+    "PortError",
+    "PortInfo",
+]

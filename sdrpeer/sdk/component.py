@@ -1,0 +1,192 @@
+"""The `Component` base class: declared ports and params, lifecycle callbacks, fault reports.
+
+How it works: a subclass declares `OutPort`/`InPort`/`Param` class attributes and an
+`execution` context; `__init_subclass__` collects them (in declaration order, inherited ones
+first) and checks the declaration, so a mistake fails at import with the class and attribute
+named. Each instance gets its own runtime ports and param values. The callbacks below are no-ops
+to override, each either a plain method or `async def`; `ComponentRunner` (sdrpeer.sdk.runner)
+calls them around the lifecycle transitions of sdrpeer.sdk.lifecycle.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, Final
+
+from sdrpeer.sdk.errors import ComponentError, ParamError, PortError
+from sdrpeer.sdk.execution import ExecutionContext, OnInput, Periodic
+from sdrpeer.sdk.params import Param, ParamInfo
+from sdrpeer.sdk.ports import InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
+
+__all__ = ["FAULT_KINDS", "Component"]
+
+FAULT_KINDS: Final = ("hardware_failure", "abnormal_behavior", "emergency_stop")
+
+FaultHook = Callable[[str, str], None]
+_INSTANCE_ATTRS: Final = frozenset({"instance_name", "log", "last_error"})
+
+
+class Component:
+    """Base class of every sdrpeer component; override the `on_*` callbacks you need."""
+
+    execution: ClassVar[ExecutionContext] = Periodic(hz=10.0)
+    _sdk_ports: ClassVar[dict[str, InPort | OutPort]] = {}
+    _sdk_params: ClassVar[dict[str, Param[Any]]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        ports: dict[str, InPort | OutPort] = {}
+        params: dict[str, Param[Any]] = {}
+        for klass in reversed(cls.__mro__):
+            for name, value in vars(klass).items():
+                ports.pop(name, None)
+                params.pop(name, None)
+                if isinstance(value, InPort | OutPort):
+                    ports[name] = value
+                elif isinstance(value, Param):
+                    params[name] = value
+        for name in (*ports, *params):
+            if name.startswith("_") or name in vars(Component) or name in _INSTANCE_ATTRS:
+                raise ComponentError(f"{cls.__qualname__}.{name}: name reserved by Component")
+        for name, p in params.items():
+            hook = p.on_change
+            if isinstance(hook, str) and not callable(getattr(cls, hook, None)):
+                raise ComponentError(
+                    f"{cls.__qualname__}.{name}: on_change method {hook!r} is not defined"
+                )
+        cls._sdk_ports = ports
+        cls._sdk_params = params
+        cls._check_execution()
+
+    @classmethod
+    def _check_execution(cls) -> None:
+        ex = cls.execution
+        where = f"{cls.__qualname__}.execution"
+        if isinstance(ex, OnInput):
+            if not isinstance(cls._sdk_ports.get(ex.port), InPort):
+                raise ComponentError(f"{where}: OnInput({ex.port!r}) names no InPort of the class")
+        elif isinstance(ex, Periodic):
+            if ex.param is not None:
+                p = cls._sdk_params.get(ex.param)
+                if p is None or p.type not in (int, float):
+                    raise ComponentError(
+                        f"{where}: Periodic(param={ex.param!r}) names no int/float Param"
+                    )
+        else:
+            raise ComponentError(f"{where}: expected Periodic(...) or OnInput(...), got {ex!r}")
+
+    def __init__(self, name: str | None = None, params: Mapping[str, Any] | None = None) -> None:
+        cls = type(self)
+        self.instance_name: str = name or cls.__name__
+        """The instance name (SDRPEER_INSTANCE), e.g. `CameraRTC2`."""
+        self.log: logging.Logger = logging.getLogger(f"sdrpeer.component.{self.instance_name}")
+        """A logger named after the instance."""
+        self.last_error: str | None = None
+        """The text of the last callback failure (set by the runner), or None."""
+        self._param_values: dict[str, Any] = {n: p.default for n, p in cls._sdk_params.items()}
+        self._ports: dict[str, InPortRuntime | OutPortRuntime] = {
+            n: d.make() for n, d in cls._sdk_ports.items()
+        }
+        self._fault_hook: FaultHook | None = None
+        if params:
+            self._param_values.update(self.convert_params(params))
+
+    # -- metadata --------------------------------------------------------------------------
+
+    @classmethod
+    def ports(cls) -> dict[str, PortInfo]:
+        """The declared ports by name, in declaration order."""
+        return {n: d.info() for n, d in cls._sdk_ports.items()}
+
+    @classmethod
+    def params(cls) -> dict[str, ParamInfo]:
+        """The declared params by name, in declaration order."""
+        return {n: p.info() for n, p in cls._sdk_params.items()}
+
+    @classmethod
+    def port_names(cls) -> dict[str, list[str]]:
+        """`{"in": [...], "out": [...]}` as sent in the control channel's `hello`."""
+        ports = cls._sdk_ports.items()
+        return {
+            "in": [n for n, d in ports if isinstance(d, InPort)],
+            "out": [n for n, d in ports if isinstance(d, OutPort)],
+        }
+
+    # -- instance state --------------------------------------------------------------------
+
+    def param_values(self) -> dict[str, Any]:
+        """The current value of every param (a copy)."""
+        return dict(self._param_values)
+
+    def convert_params(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """Every value converted to its param's type; ParamError on the first bad name or value."""
+        known = type(self)._sdk_params
+        out: dict[str, Any] = {}
+        for name, value in values.items():
+            p = known.get(name)
+            if p is None:
+                names = ", ".join(known) or "none"
+                raise ParamError(name, "a declared param", detail=f"unknown param (known: {names})")
+            out[name] = p.convert(value)
+        return out
+
+    def inport(self, name: str) -> InPortRuntime:
+        """The runtime InPort called `name`; PortError if there is none."""
+        port = self._ports.get(name)
+        if not isinstance(port, InPortRuntime):
+            raise PortError(f"{self.instance_name}: no in-port {name!r} (in: {self._names('in')})")
+        return port
+
+    def outport(self, name: str) -> OutPortRuntime:
+        """The runtime OutPort called `name`; PortError if there is none."""
+        port = self._ports.get(name)
+        if not isinstance(port, OutPortRuntime):
+            raise PortError(
+                f"{self.instance_name}: no out-port {name!r} (out: {self._names('out')})"
+            )
+        return port
+
+    def port_counters(self) -> dict[str, dict[str, int]]:
+        """Port name -> counters, as sent in the control channel's `heartbeat`."""
+        return {n: p.counters() for n, p in self._ports.items()}
+
+    def report_fault(self, kind: str, detail: str = "") -> None:
+        """Tell the agent about a fault (kinds in FAULT_KINDS); logged if no runner listens."""
+        if kind not in FAULT_KINDS:
+            raise ValueError(f"report_fault: kind {kind!r} not in {', '.join(FAULT_KINDS)}")
+        self.log.warning("fault %s: %s", kind, detail)
+        if self._fault_hook is not None:
+            self._fault_hook(kind, detail)
+
+    def _names(self, kind: str) -> str:
+        return ", ".join(type(self).port_names()[kind]) or "none"
+
+    # -- callbacks to override (sync or async) ---------------------------------------------
+
+    def on_initialize(self) -> Any:
+        """CREATED -> INACTIVE: acquire resources (open devices, load models)."""
+
+    def on_activated(self) -> Any:
+        """INACTIVE -> ACTIVE: start working."""
+
+    def on_execute(self) -> Any:
+        """One period (or one input frame) of work, only while ACTIVE."""
+
+    def on_deactivated(self) -> Any:
+        """ACTIVE -> INACTIVE: stop working (resources stay)."""
+
+    def on_aborting(self) -> Any:
+        """ACTIVE -> ERROR: a callback failed; put the hardware in a safe state."""
+
+    def on_error(self) -> Any:
+        """Once per execution period while in ERROR; keep it cheap."""
+
+    def on_reset(self) -> Any:
+        """ERROR -> INACTIVE: recover from the error."""
+
+    def on_finalize(self) -> Any:
+        """-> FINALIZED: release everything; the host exits afterwards."""
+
+    def on_params_changed(self, changed: dict[str, Any]) -> Any:
+        """Params changed while running; `changed` maps each changed name to its new value."""

@@ -1,0 +1,218 @@
+"""The runtime side of an InPort: per-connection sequence tracking and policy, one queue.
+
+How it works: `deliver(value, seq, conn)` is called by the data plane for each received frame.
+It counts sequence gaps per connection as `lost` (a connection's first frame sets the baseline; a
+seq that goes back means the sender restarted), applies the connection's `ConnectorPolicy` (see
+sdrpeer.sdk.policy) to one shared arrival-ordered queue, remembers the newest value for `read()`,
+and wakes waiting readers and the OnInput execution context. It is synchronous, allocation-free
+on the common path, and never raises for a well-typed call. The component reads with `read()`
+(newest), `get_nowait()`/`get()`/`async for` (oldest first).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import deque
+from collections.abc import Callable
+from typing import Any, Final
+
+from sdrpeer.sdk.errors import NoData
+from sdrpeer.sdk.policy import ConnectorPolicy
+
+__all__ = ["InPortRuntime"]
+
+_NOTHING: Final = object()
+
+
+class _Conn:
+    """What an InPort tracks per incoming connection."""
+
+    __slots__ = ("arrivals", "last_seq", "policy")
+
+    def __init__(self, policy: ConnectorPolicy, last_seq: int) -> None:
+        self.policy = policy
+        self.last_seq = last_seq
+        self.arrivals = 0
+
+
+def _size(value: Any) -> int:
+    if isinstance(value, bytes | bytearray | str):
+        return len(value)
+    if isinstance(value, memoryview):
+        return value.nbytes
+    return 0
+
+
+class InPortRuntime:
+    """One component instance's input port: per-connection policy, one arrival-ordered queue."""
+
+    __slots__ = (
+        "_conns",
+        "_listener",
+        "_new",
+        "_newest",
+        "_queue",
+        "_space_waiter",
+        "_waiter",
+        "bytes_in",
+        "doc",
+        "dropped",
+        "frames_in",
+        "lost",
+        "name",
+        "policy",
+        "refused",
+        "skipped",
+    )
+
+    def __init__(self, name: str, policy: ConnectorPolicy | None = None, doc: str = "") -> None:
+        self.name = name
+        self.doc = doc
+        self.policy = policy or ConnectorPolicy()
+        """The default policy, for connections that were not registered with their own."""
+        self.frames_in = self.bytes_in = self.dropped = self.lost = self.refused = 0
+        self.skipped = 0
+        self._queue: deque[Any] = deque()
+        self._newest: Any = _NOTHING
+        self._new = False
+        self._conns: dict[str, _Conn] = {}
+        self._waiter: asyncio.Future[None] | None = None
+        self._space_waiter: asyncio.Future[None] | None = None
+        self._listener: Callable[[], None] | None = None
+
+    # -- the data plane's side -------------------------------------------------------------
+
+    def connect(self, conn: str, policy: ConnectorPolicy | None = None) -> None:
+        """Register connection `conn` with its policy (None: the port's default)."""
+        old = self._conns.get(conn)
+        self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
+
+    def disconnect(self, conn: str) -> None:
+        """Forget connection `conn` (frames already queued stay readable)."""
+        self._conns.pop(conn, None)
+
+    def deliver(self, value: Any, seq: int, conn: str) -> None:
+        """Accept one received frame `[seq, value]` of connection `conn` (never blocks)."""
+        c = self._conns.get(conn)
+        if c is None:
+            c = self._conns[conn] = _Conn(self.policy, -1)
+        last = c.last_seq
+        if last >= 0 and seq > last + 1:
+            self.lost += seq - last - 1
+        c.last_seq = seq
+        self.frames_in += 1
+        self.bytes_in += _size(value)
+        p = c.policy
+        q = self._queue
+        if p.push == "skip":
+            c.arrivals += 1
+            if (c.arrivals - 1) % (p.skip + 1):
+                self.skipped += 1
+                return
+        elif p.push == "new" and q:
+            self.dropped += len(q)
+            q.clear()
+        if len(q) >= p.buffer:
+            if p.full == "drop":
+                self.dropped += 1
+                return
+            if p.full == "overwrite":
+                q.popleft()
+                self.dropped += 1
+            # "block": never drop here; the data plane pauses reading (see wait_space).
+        q.append(value)
+        self._newest = value
+        self._new = True
+        w = self._waiter
+        if w is not None:
+            self._waiter = None
+            if not w.done():
+                w.set_result(None)
+        if self._listener is not None:
+            self._listener()
+
+    def refuse(self) -> None:
+        """Count a refused frame (oversized or malformed; the data plane closes the stream)."""
+        self.refused += 1
+
+    def has_space(self, conn: str) -> bool:
+        """Whether a frame of `conn` would fit in the buffer without evicting or dropping."""
+        c = self._conns.get(conn)
+        return len(self._queue) < (c.policy if c else self.policy).buffer
+
+    async def wait_space(self, conn: str) -> None:
+        """Wait until `has_space(conn)`: how the data plane applies `full="block"` backpressure."""
+        while not self.has_space(conn):
+            if self._space_waiter is None or self._space_waiter.done():
+                self._space_waiter = asyncio.get_running_loop().create_future()
+            await asyncio.shield(self._space_waiter)
+
+    # -- the component's side --------------------------------------------------------------
+
+    def read(self) -> Any:
+        """The newest value received; consumes everything queued. NoData if nothing ever came."""
+        if self._newest is _NOTHING:
+            raise NoData(f"in-port {self.name!r}: no data received yet")
+        self._new = False
+        if self._queue:
+            self._queue.clear()
+            self._space_freed()
+        return self._newest
+
+    def is_new(self) -> bool:
+        """Whether a frame arrived that read()/get_nowait()/iteration has not returned yet."""
+        return self._new
+
+    def get_nowait(self) -> Any:
+        """The oldest queued value; NoData if the queue is empty."""
+        q = self._queue
+        if not q:
+            raise NoData(f"in-port {self.name!r}: queue is empty")
+        value = q.popleft()
+        if not q:
+            self._new = False
+        self._space_freed()
+        return value
+
+    async def get(self) -> Any:
+        """The oldest queued value, waiting for one if the queue is empty."""
+        while not self._queue:
+            if self._waiter is None or self._waiter.done():
+                self._waiter = asyncio.get_running_loop().create_future()
+            await asyncio.shield(self._waiter)
+        return self.get_nowait()
+
+    def __aiter__(self) -> InPortRuntime:
+        return self
+
+    async def __anext__(self) -> Any:
+        return await self.get()
+
+    def qsize(self) -> int:
+        """How many values are queued."""
+        return len(self._queue)
+
+    def counters(self) -> dict[str, int]:
+        """The protocol's port counters, plus `skipped` (frames thinned by push="skip")."""
+        return {
+            "frames_in": self.frames_in,
+            "bytes_in": self.bytes_in,
+            "frames_out": 0,
+            "bytes_out": 0,
+            "dropped": self.dropped,
+            "lost": self.lost,
+            "refused": self.refused,
+            "skipped": self.skipped,
+        }
+
+    def policy_for(self, conn: str) -> ConnectorPolicy:
+        """The policy applied to frames of `conn`."""
+        c = self._conns.get(conn)
+        return c.policy if c else self.policy
+
+    def _space_freed(self) -> None:
+        w = self._space_waiter
+        if w is not None:
+            self._space_waiter = None
+            if not w.done():
+                w.set_result(None)

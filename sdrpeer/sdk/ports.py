@@ -1,0 +1,180 @@
+"""Data ports: `OutPort` and `InPort` declared on a Component class, one runtime port per instance.
+
+How it works: the class attributes are descriptors; `Component.__init__` asks each for a fresh
+runtime object (`OutPortRuntime` / `InPortRuntime`) and the descriptor returns it on attribute
+access, so `self.image.write(frame)` touches only that instance's port.
+
+- `OutPortRuntime.write(value)` hands the same object (never copied) to every attached sink's
+  `offer(value) -> bool` (False: the sink dropped it) and counts it. The data plane writes the
+  sinks (`FrameSink`); a sink may also have `bytes_out` (summed into the counters) and
+  `async drain()`, which `send()` awaits first: it returns once the sink can take a frame (a
+  `full="block"` sink that is full waits; others return at once).
+- `InPortRuntime` (sdrpeer.sdk.inport) is what the data plane delivers received frames to.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any, Final, Literal, Protocol, overload
+
+from sdrpeer.sdk.inport import InPortRuntime
+from sdrpeer.sdk.policy import ConnectorPolicy
+
+__all__ = ["FrameSink", "InPort", "InPortRuntime", "OutPort", "OutPortRuntime", "PortInfo"]
+
+
+class FrameSink(Protocol):
+    """Where an OutPort's frames go (a data-plane connection); see the module doc for extras."""
+
+    def offer(self, value: Any) -> bool:
+        """Take one frame (not copied); False if it was dropped."""
+
+
+@dataclass(frozen=True, slots=True)
+class PortInfo:
+    """What the host reports about one declared port."""
+
+    name: str
+    """The attribute name, used as the port's name in connections."""
+    kind: Literal["in", "out"]
+    """Direction."""
+    doc: str
+    """One line for people."""
+    policy: ConnectorPolicy | None
+    """An InPort's default policy (used for connections that bring none); None for OutPorts."""
+
+    def to_map(self) -> dict[str, Any]:
+        """A msgpack/JSON-friendly map."""
+        out: dict[str, Any] = {"name": self.name, "kind": self.kind, "doc": self.doc}
+        if self.policy is not None:
+            out["policy"] = self.policy.to_map()
+        return out
+
+
+class OutPortRuntime:
+    """One component instance's output port: fan-out to the attached sinks."""
+
+    __slots__ = ("_bytes_gone", "_drainers", "_sinks", "doc", "dropped", "frames_out", "name")
+
+    def __init__(self, name: str, doc: str = "") -> None:
+        self.name = name
+        self.doc = doc
+        self.frames_out = 0
+        self.dropped = 0
+        self._sinks: tuple[FrameSink, ...] = ()
+        self._drainers: tuple[Callable[[], Awaitable[Any]], ...] = ()
+        self._bytes_gone = 0  # bytes_out of sinks already detached
+
+    def write(self, value: Any) -> None:
+        """Hand `value` to every sink (hot path: no copy, no await)."""
+        self.frames_out += 1
+        for sink in self._sinks:
+            if not sink.offer(value):
+                self.dropped += 1
+
+    async def send(self, value: Any) -> None:
+        """Wait until every sink can take a frame (backpressure), then `write(value)`."""
+        for drain in self._drainers:
+            await drain()
+        self.write(value)
+
+    def attach(self, sink: FrameSink) -> None:
+        """Start handing frames to `sink` (attaching the same sink twice is a no-op)."""
+        if sink not in self._sinks:
+            self._sinks = (*self._sinks, sink)
+            self._rebuild()
+
+    def detach(self, sink: FrameSink) -> None:
+        """Stop handing frames to `sink`; its byte count stays in the port's counters."""
+        if sink in self._sinks:
+            self._sinks = tuple(s for s in self._sinks if s is not sink)
+            self._bytes_gone += int(getattr(sink, "bytes_out", 0))
+            self._rebuild()
+
+    @property
+    def sinks(self) -> tuple[FrameSink, ...]:
+        """The attached sinks."""
+        return self._sinks
+
+    def counters(self) -> dict[str, int]:
+        """The protocol's port counters (input-side ones are zero)."""
+        sent = self._bytes_gone + sum(int(getattr(s, "bytes_out", 0)) for s in self._sinks)
+        return {
+            "frames_in": 0,
+            "bytes_in": 0,
+            "frames_out": self.frames_out,
+            "bytes_out": sent,
+            "dropped": self.dropped,
+            "lost": 0,
+            "refused": 0,
+        }
+
+    def _rebuild(self) -> None:
+        drains = (getattr(s, "drain", None) for s in self._sinks)
+        self._drainers = tuple(d for d in drains if callable(d))
+
+
+class OutPort:
+    """Declare an output port on a Component class."""
+
+    kind: Final = "out"
+
+    def __init__(self, doc: str = "") -> None:
+        self.doc = doc
+        self.name = "<unbound>"
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, instance: None, owner: type | None = None) -> OutPort: ...
+    @overload
+    def __get__(self, instance: object, owner: type | None = None) -> OutPortRuntime: ...
+    def __get__(self, instance: object | None, owner: type | None = None) -> Any:
+        if instance is None:
+            return self
+        return instance._ports[self.name]  # type: ignore[attr-defined]
+
+    def make(self) -> OutPortRuntime:
+        """A fresh runtime port for one instance."""
+        return OutPortRuntime(self.name, self.doc)
+
+    def info(self) -> PortInfo:
+        """This port's metadata."""
+        return PortInfo(self.name, "out", self.doc, None)
+
+
+class InPort:
+    """Declare an input port on a Component class, with its default connector policy."""
+
+    kind: Final = "in"
+
+    def __init__(
+        self, doc: str = "", policy: ConnectorPolicy | dict[str, Any] | None = None
+    ) -> None:
+        self.doc = doc
+        self.name = "<unbound>"
+        if isinstance(policy, dict):
+            policy = ConnectorPolicy.from_map(policy)
+        self.policy = policy or ConnectorPolicy()
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, instance: None, owner: type | None = None) -> InPort: ...
+    @overload
+    def __get__(self, instance: object, owner: type | None = None) -> InPortRuntime: ...
+    def __get__(self, instance: object | None, owner: type | None = None) -> Any:
+        if instance is None:
+            return self
+        return instance._ports[self.name]  # type: ignore[attr-defined]
+
+    def make(self) -> InPortRuntime:
+        """A fresh runtime port for one instance."""
+        return InPortRuntime(self.name, self.policy, self.doc)
+
+    def info(self) -> PortInfo:
+        """This port's metadata."""
+        return PortInfo(self.name, "in", self.doc, self.policy)
