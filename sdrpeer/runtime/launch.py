@@ -1,0 +1,110 @@
+"""Starting one host process: its argv, its environment, its log file, and dying with the agent.
+
+How it works: `host_argv(spec)` asks the launcher plugins (`sdrpeer.launchers`) for the command
+and falls back to the built-in table of docs/protocol.md section 3 while that module is absent.
+`host_env` adds the four SDRPEER_* variables of the control channel to the agent's environment.
+`open_log` appends a start banner to `DATA_DIR/instances/NAME.log` and returns the file the host's
+stdout and stderr go to. `die_with_parent` runs in the child between fork and exec: on Linux it
+asks the kernel to SIGKILL the host when the agent dies (prctl PR_SET_PDEATHSIG), so a crashed
+or killed agent leaves no orphan hosts behind.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import importlib
+import os
+import shlex
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+from sdrpeer.runtime.spec import InstanceSpec
+
+_PR_SET_PDEATHSIG = 1
+_SIGKILL = 9
+
+
+def _builtin_argv(spec: InstanceSpec) -> list[str]:
+    if isinstance(spec.target, tuple):
+        return list(spec.target)
+    return [sys.executable, "-m", "sdrpeer.host", spec.target]
+
+
+def host_argv(spec: InstanceSpec) -> list[str]:
+    """The command that starts the host of `spec` (launcher plugins, else the built-in table)."""
+    try:
+        launchers: Any = importlib.import_module("sdrpeer.launchers")
+    except ImportError:
+        return _builtin_argv(spec)
+    build = getattr(launchers, "launch_argv", None)
+    if build is None:
+        return _builtin_argv(spec)
+    return [str(a) for a in build(spec.launcher, spec.target)]
+
+
+def host_env(
+    base: Mapping[str, str], *, fd: int, instance: str, data_host: str, run_dir: Path
+) -> dict[str, str]:
+    """The host's environment: the agent's plus the control channel variables."""
+    env = dict(base)
+    env.update(
+        SDRPEER_CONTROL_FD=str(fd),
+        SDRPEER_INSTANCE=instance,
+        SDRPEER_DATA_HOST=data_host,
+        SDRPEER_RUN_DIR=str(run_dir),
+    )
+    return env
+
+
+def log_path(data_dir: Path, name: str) -> Path:
+    """Where the host of instance `name` writes its output."""
+    return data_dir / "instances" / f"{name}.log"
+
+
+def open_log(data_dir: Path, name: str, argv: list[str]) -> IO[bytes]:
+    """Open the instance log for appending, after writing a start banner."""
+    path = log_path(data_dir, name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    f = path.open("ab")
+    stamp = time.strftime("%Y-%m-%d %H:%M:%S")
+    f.write(f"==== {stamp} sdrpeer: starting {name}: {shlex.join(argv)}\n".encode())
+    f.flush()
+    return f
+
+
+def _load_prctl() -> Callable[..., int] | None:
+    if not sys.platform.startswith("linux"):
+        return None
+    name = ctypes.util.find_library("c")
+    try:
+        fn: Callable[..., int] = ctypes.CDLL(name, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    return fn
+
+
+_PRCTL = _load_prctl()  # looked up in the parent: the child only calls it
+
+
+def die_with_parent() -> None:
+    """In the child before exec: be SIGKILLed when the agent (our parent thread) dies."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, _SIGKILL)
+
+
+def preexec() -> Callable[[], None] | None:
+    """The preexec_fn for hosts (None where there is no parent-death signal)."""
+    return die_with_parent if _PRCTL is not None else None
+
+
+def private_dir(prefix: str) -> Path:
+    """A fresh 0700 directory for a host's Unix socket, short enough for sun_path (108 bytes)."""
+    base = os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir()
+    if len(base) > 60:
+        base = tempfile.gettempdir()
+    return Path(tempfile.mkdtemp(prefix=f"sdrp-{prefix[:24]}-", dir=base))

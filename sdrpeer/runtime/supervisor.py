@@ -1,0 +1,388 @@
+"""One supervisor per instance: start its host, watch it, restart it, stop it, measure it.
+
+How it works: `start()` creates one life task. It spawns the host (argv from the launcher, the
+child's end of a socket pair passed as SDRPEER_CONTROL_FD, output appended to the instance log)
+and then *awaits the process*, so an exit is noticed the moment the kernel reports it. An exit
+nobody asked for goes to the `RestartPolicy`: wait the backoff delay (state BACKOFF) and spawn
+again, or give up (state FAILED). `stop()` is graceful: the `exit` command, then SIGTERM after
+`exit_timeout`, then SIGKILL after `term_timeout`. A host that sends no hello within
+`hello_timeout`, or breaks the control protocol, is killed and counts as a failure.
+States: STOPPED, STARTING (spawned, no INACTIVE yet), the host's own lifecycle states (CREATED,
+INACTIVE, ACTIVE, ERROR, FINALIZED), STOPPING, BACKOFF, FAILED; every change is timestamped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import signal
+import socket
+import subprocess
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
+from sdrpeer.runtime.control import CommandError, ControlChannel, Report
+from sdrpeer.runtime.launch import host_argv, host_env, log_path, open_log, preexec, private_dir
+from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
+
+log = logging.getLogger(__name__)
+_EOF_GRACE = 1.0  # seconds a host may live on after closing its control channel
+STOPPED, STARTING, STOPPING, BACKOFF, FAILED = (
+    "STOPPED",
+    "STARTING",
+    "STOPPING",
+    "BACKOFF",
+    "FAILED",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class SupervisorConfig:
+    """How a supervisor runs its host (seconds)."""
+
+    restart: RestartConfig = field(default_factory=RestartConfig)
+    """Restart backoff."""
+    command_timeout: float = 5.0
+    """How long a command waits for its reply."""
+    hello_timeout: float = 15.0
+    """A host that has not said hello this long after spawning is killed."""
+    exit_timeout: float = 5.0
+    """After the exit command, SIGTERM follows this much later."""
+    term_timeout: float = 3.0
+    """After SIGTERM, SIGKILL follows this much later."""
+    data_host: str = "127.0.0.1"
+    """SDRPEER_DATA_HOST: the address hosts bind their TCP data servers to."""
+
+    @classmethod
+    def fast_test(cls) -> SupervisorConfig:
+        """Short timeouts and backoff for tests."""
+        return cls(RestartConfig.fast_test(), 2.0, 5.0, 1.0, 1.0)
+
+
+def exit_text(rc: int | None) -> str:
+    """'exited with code 3' or 'killed by SIGKILL'."""
+    if rc is None:
+        return "did not start"
+    if rc < 0:
+        with contextlib.suppress(ValueError):
+            return f"killed by {signal.Signals(-rc).name}"
+    return f"exited with code {rc}"
+
+
+class Supervisor:
+    """Runs and watches the host of one instance."""
+
+    def __init__(
+        self,
+        spec: InstanceSpec,
+        data_dir: Path,
+        config: SupervisorConfig,
+        on_change: Callable[[Supervisor], None] = lambda s: None,
+    ) -> None:
+        self.spec = spec
+        self.data_dir = data_dir
+        self.config = config
+        self.on_change = on_change
+        self.policy = RestartPolicy(config.restart)
+        self.state = STOPPED
+        self.since = time.time()
+        self.history: deque[tuple[float, str]] = deque(maxlen=32)
+        self.pid: int | None = None
+        self.restarts = 0
+        self.last_error: str | None = None
+        self.exit_noticed: float | None = None
+        self.hello: Report = {}
+        self.ports: dict[str, Any] = {}
+        self.connections: dict[str, tuple[ConnectionSpec, str]] = {}
+        self.start_latency: float | None = None
+        self.cpu_pct = 0.0
+        self.rss = 0
+        self.protocol_errors = 0
+        self._proc: asyncio.subprocess.Process | None = None
+        self._channel: ControlChannel | None = None
+        self._ps: psutil.Process | None = None
+        self._life: asyncio.Task[None] | None = None
+        self._stopping = False
+        self._spawned = 0.0
+        self._run_dir: Path | None = None
+        self._watchdog: asyncio.TimerHandle | None = None
+        self._kill_reason: str | None = None
+
+    @property
+    def name(self) -> str:
+        """The instance name."""
+        return self.spec.name
+
+    @property
+    def alive(self) -> bool:
+        """Whether a host process is running right now."""
+        return self._proc is not None and self._proc.returncode is None
+
+    def stop_requested(self) -> bool:
+        """Whether stop() was called since the last start()."""
+        return self._stopping
+
+    def log_file(self) -> Path:
+        """The instance log."""
+        return log_path(self.data_dir, self.name)
+
+    def _set(self, state: str) -> None:
+        if state != self.state:
+            self.state = state
+            self.since = time.time()
+            self.history.append((self.since, state))
+            self.on_change(self)
+
+    # ----------------------------------------------------------------- life
+    def start(self) -> None:
+        """Start the host (no-op while one runs or is scheduled); a FAILED instance tries again."""
+        if self._life is not None and not self._life.done():
+            return
+        self._stopping = False
+        if self.state == FAILED:
+            self.policy.reset()
+        self._life = asyncio.create_task(self._run(), name=f"supervisor-{self.name}")
+
+    async def stop(self) -> None:
+        """Stop gracefully (exit, then SIGTERM, then SIGKILL) and do not restart."""
+        self._stopping = True
+        life = self._life
+        if life is None or life.done():
+            self._cleanup_dir()
+            return
+        if self.alive:
+            await self._terminate()
+        else:
+            life.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await life
+        self._cleanup_dir()
+
+    async def restart(self) -> None:
+        """Stop, forget past failures, start again."""
+        await self.stop()
+        self.policy.reset()
+        self.start()
+
+    async def command(self, t: str, **fields: Any) -> Report:
+        """Send a command to the host; CommandError if it is not running or refuses."""
+        if self._channel is None or self._channel.closed:
+            raise CommandError(t, "closed", f"{self.name} is {self.state}")
+        return await self._channel.command(t, **fields)
+
+    async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            while not self._stopping:
+                started = loop.time()
+                rc: int | None = None
+                try:
+                    proc = await self._spawn()
+                except OSError as e:
+                    self.last_error = f"cannot start: {e}"
+                    log.warning("%s: %s", self.name, self.last_error)
+                else:
+                    rc = await proc.wait()
+                    self.exit_noticed = loop.time()
+                    await self._after_exit(rc)
+                if self.stop_requested():
+                    break
+                if rc is not None:
+                    why = self._kill_reason
+                    self.last_error = f"{why}; {exit_text(rc)}" if why else exit_text(rc)
+                delay = self.policy.on_exit(started, loop.time())
+                if delay is None:
+                    log.error(
+                        "%s: giving up after %d fast failures", self.name, self.policy.failures
+                    )
+                    self._set(FAILED)
+                    return
+                log.warning("%s: %s; restarting in %.2fs", self.name, self.last_error, delay)
+                self._set(BACKOFF)
+                await asyncio.sleep(delay)
+                self.restarts += 1
+        finally:
+            if self.state != FAILED:
+                self._set(STOPPED)
+
+    async def _spawn(self) -> asyncio.subprocess.Process:
+        argv = host_argv(self.spec)
+        if self._run_dir is None:
+            self._run_dir = private_dir(self.name)
+        parent, child = socket.socketpair()
+        env = host_env(
+            os.environ,
+            fd=child.fileno(),
+            instance=self.name,
+            data_host=self.config.data_host,
+            run_dir=self._run_dir,
+        )
+        out = open_log(self.data_dir, self.name, argv)
+        self._spawned = asyncio.get_running_loop().time()
+        try:
+            proc = await asyncio.create_subprocess_exec(
+                *argv,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=out,
+                pass_fds=(child.fileno(),),
+                env=env,
+                preexec_fn=preexec(),
+                start_new_session=False,
+            )
+        except OSError:
+            parent.close()
+            raise
+        finally:
+            out.close()
+            child.close()
+        self._proc, self.pid, self._kill_reason = proc, proc.pid, None
+        self.hello, self.ports, self.connections, self.start_latency = {}, {}, {}, None
+        try:
+            self._ps = psutil.Process(proc.pid)
+            self._ps.cpu_percent(None)
+        except psutil.Error:
+            self._ps = None
+        self._set(STARTING)
+        handlers = {"hello": self._on_hello, "state": self._on_state}
+        handlers |= {"heartbeat": self._on_heartbeat, "fault": self._on_fault}
+        self._channel = ControlChannel(
+            parent,
+            handlers,
+            self._on_channel_closed,
+            name=self.name,
+            command_timeout=self.config.command_timeout,
+        )
+        await self._channel.open()
+        loop = asyncio.get_running_loop()
+        self._watchdog = loop.call_later(self.config.hello_timeout, self._hello_overdue, proc)
+        log.info("%s: started pid %d: %s", self.name, proc.pid, " ".join(argv))
+        return proc
+
+    async def _after_exit(self, rc: int) -> None:
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+        if self._channel is not None:
+            self.protocol_errors += self._channel.counters["protocol_errors"]
+            await self._channel.close()
+        self._channel, self._ps, self.pid = None, None, None
+        self.connections, self.ports, self.hello = {}, {}, {}
+        self.cpu_pct, self.rss = 0.0, 0
+        log.info("%s: host %s", self.name, exit_text(rc))
+
+    async def _terminate(self) -> None:
+        proc = self._proc
+        assert proc is not None
+        self._set(STOPPING)
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.config.exit_timeout
+        if self._channel is not None and not self._channel.closed:
+            with contextlib.suppress(CommandError):
+                timeout = self.config.exit_timeout
+                await self._channel.command("exit", wait=timeout, timeout=timeout)
+        if await _exited(proc, deadline - loop.time()):
+            return
+        log.warning("%s: no exit after %.1fs; SIGTERM", self.name, self.config.exit_timeout)
+        with contextlib.suppress(ProcessLookupError):
+            proc.terminate()
+        if await _exited(proc, self.config.term_timeout):
+            return
+        log.warning("%s: still alive after SIGTERM; SIGKILL", self.name)
+        with contextlib.suppress(ProcessLookupError):
+            proc.kill()
+        await proc.wait()
+
+    def _kill(self, proc: asyncio.subprocess.Process, why: str) -> None:
+        if proc is self._proc and proc.returncode is None and not self._stopping:
+            self._kill_reason = why
+            log.warning("%s: %s; killing the host", self.name, why)
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+
+    def _hello_overdue(self, proc: asyncio.subprocess.Process) -> None:
+        if proc is self._proc and not self.hello:
+            self._kill(proc, f"no hello within {self.config.hello_timeout}s")
+
+    def _on_channel_closed(self, reason: str | None) -> None:
+        proc = self._proc
+        if proc is None:
+            return
+        if reason is not None:  # a protocol error: the host is failed
+            self._kill(proc, reason)
+        else:  # EOF: the host is most likely exiting; kill it if it lingers
+            asyncio.get_running_loop().call_later(
+                _EOF_GRACE, self._kill, proc, "control channel closed by the host"
+            )
+
+    # ----------------------------------------------------------------- reports
+    def _on_hello(self, msg: Report) -> None:
+        self.hello = msg
+        self.on_change(self)
+
+    def _on_state(self, msg: Report) -> None:
+        state = str(msg["state"])
+        if state == "INACTIVE" and self.start_latency is None:
+            self.start_latency = asyncio.get_running_loop().time() - self._spawned
+        if msg.get("error"):
+            self.last_error = str(msg["error"])
+        if self.state != STOPPING:
+            self._set(state)
+
+    def _on_heartbeat(self, msg: Report) -> None:
+        ports = msg.get("ports")
+        if isinstance(ports, dict):
+            self.ports = ports
+
+    def _on_fault(self, msg: Report) -> None:
+        self.last_error = f"fault {msg.get('kind')}: {str(msg.get('detail'))[:500]}"
+        log.warning("%s: %s", self.name, self.last_error)
+        self.on_change(self)
+
+    # ----------------------------------------------------------------- metrics
+    def sample(self) -> tuple[float, int]:
+        """Measure the host's CPU % (since the last call) and RSS bytes now."""
+        ps = self._ps
+        if ps is None:
+            self.cpu_pct, self.rss = 0.0, 0
+        else:
+            try:
+                with ps.oneshot():
+                    self.cpu_pct, self.rss = ps.cpu_percent(None), ps.memory_info().rss
+            except psutil.Error:
+                self.cpu_pct, self.rss = 0.0, 0
+        return self.cpu_pct, self.rss
+
+    def data_address(self) -> str | None:
+        """Where senders on this robot reach this host: its Unix socket, else its TCP address."""
+        data = self.hello.get("data") or {}
+        if data.get("unix"):
+            return f"unix://{data['unix']}"
+        if data.get("tcp"):
+            return f"tcp://{data['tcp']}"
+        return None
+
+    def _cleanup_dir(self) -> None:
+        if self._run_dir is not None:
+            for child in self._run_dir.iterdir():
+                with contextlib.suppress(OSError):
+                    child.unlink()
+            with contextlib.suppress(OSError):
+                self._run_dir.rmdir()
+            self._run_dir = None
+
+
+async def _exited(proc: asyncio.subprocess.Process, seconds: float) -> bool:
+    try:
+        await asyncio.wait_for(proc.wait(), max(0.0, seconds))
+    except TimeoutError:
+        return False
+    return True
