@@ -1,0 +1,194 @@
+"""One hosted component instance: its runner, its runtime ports, its outgoing connections.
+
+How it works: `HostedInstance` turns control commands into calls on the SDK's `ComponentRunner`
+(lifecycle, parameters) and on the data plane (`Connection` objects attached to our OutPorts). It
+reports every lifecycle change and fault through the `report` callback the moment the runner
+announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for
+a heartbeat. `execute` raises `CommandError` (our peer's mistake: a bad field, an unknown port or
+connection) or whatever the runner raised (an illegal transition, a failing callback); the caller
+turns either into `reply ok=false`. The data server's `resolve` is `in_port`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from sdrpeer.dataplane import Connection
+from sdrpeer.errors import SdrpeerError
+from sdrpeer.host import control
+from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
+
+log = logging.getLogger("sdrpeer.host")
+
+Report = Callable[[control.Message], None]
+
+
+class CommandError(SdrpeerError):
+    """A command the agent sent cannot be carried out as given (the message names the field)."""
+
+
+async def _maybe_await(value: object) -> None:
+    """Await `value` if the API we called turned out to be async."""
+    if inspect.isawaitable(value):
+        await value
+
+
+def _state_name(value: object) -> str:
+    """`ACTIVE` from an enum member or a string."""
+    name = getattr(value, "name", None)
+    return name if isinstance(name, str) else str(value)
+
+
+def _field(msg: control.Message, key: str, kind: type, where: str = "") -> Any:
+    """`msg[key]` if it has type `kind`, else CommandError."""
+    value = msg.get(key)
+    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
+        raise CommandError(f"{where}{key!r} must be a {kind.__name__}, got {value!r}")
+    return value
+
+
+class HostedInstance:
+    """A component instance as the host drives it."""
+
+    def __init__(
+        self,
+        name: str,
+        component: Component,
+        runner: ComponentRunner,
+        report: Report,
+        *,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.name = name
+        self.component = component
+        self.runner = runner
+        self.report = report
+        self.clock = clock
+        names = type(component).port_names()
+        self.in_ports = {n: component.inport(n) for n in names["in"]}
+        self.out_ports = {n: component.outport(n) for n in names["out"]}
+        self.connections: dict[str, tuple[Connection, OutPortRuntime]] = {}
+        self.state = _state_name(runner.state)
+        self._handlers: dict[str, Callable[[control.Message], Awaitable[None]]] = {
+            "activate": lambda _m: self.runner.activate(),
+            "deactivate": lambda _m: self.runner.deactivate(),
+            "reset": lambda _m: self.runner.reset(),
+            "set_params": self._set_params,
+            "connect": self._connect,
+            "disconnect": self._disconnect,
+            "repoint": self._repoint,
+        }
+
+    def watch(self) -> None:
+        """Start reporting state changes and faults (after `hello` went out)."""
+        self.runner.on_state(self._on_state)
+        self.runner.on_fault(self._on_fault)
+
+    def _on_state(self, state: object, error: object) -> None:
+        """The runner changed state: report it now."""
+        name = _state_name(state)
+        if name == self.state and error is None:
+            return
+        self.state = name
+        text = None if error is None else (str(error) or type(error).__name__)
+        self.report(control.state(name, self.clock(), text))
+
+    def _on_fault(self, kind: str, detail: str) -> None:
+        """The component reported a fault: pass it on."""
+        self.report(control.fault(str(kind), str(detail)))
+
+    def ports(self) -> dict[str, list[str]]:
+        """Port names by direction, for `hello`."""
+        return type(self.component).port_names()
+
+    def params(self) -> dict[str, Any]:
+        """Current parameter values, for `hello`."""
+        return self.component.param_values()
+
+    def in_port(self, name: str) -> InPortRuntime | None:
+        """The runtime InPort called `name` (the data server's `resolve`)."""
+        return self.in_ports.get(name)
+
+    def counters(self) -> dict[str, dict[str, int]]:
+        """Per-port counters, for heartbeats."""
+        return self.component.port_counters()
+
+    def handles(self, t: str) -> bool:
+        """True if `t` is a command this instance carries out."""
+        return t in self._handlers
+
+    async def execute(self, t: str, msg: control.Message) -> None:
+        """Carry out command `t` (raises CommandError or what the runner raised)."""
+        await _maybe_await(self._handlers[t](msg))
+
+    async def _set_params(self, msg: control.Message) -> None:
+        """Change typed parameters."""
+        params = _field(msg, "params", dict)
+        await _maybe_await(self.runner.set_params(params))
+
+    async def _connect(self, msg: control.Message) -> None:
+        """Open a data stream from one of our OutPorts."""
+        conn = _field(msg, "conn", dict)
+        conn_id = _field(conn, "id", str, "conn ")
+        out = _field(conn, "out", str, "conn ")
+        to = _field(conn, "to", str, "conn ")
+        in_port = _field(conn, "in", str, "conn ")
+        policy_map = conn.get("policy") or {}
+        if not isinstance(policy_map, dict):
+            raise CommandError(f"conn 'policy' must be a map, got {policy_map!r}")
+        if conn_id in self.connections:
+            raise CommandError(f"connection {conn_id!r} already exists")
+        port = self.out_ports.get(out)
+        if port is None:
+            raise CommandError(f"no OutPort {out!r} (have: {', '.join(sorted(self.out_ports))})")
+        try:
+            policy = ConnectorPolicy.from_map(policy_map)
+        except (ValueError, TypeError, SdrpeerError) as exc:
+            raise CommandError(f"conn 'policy': {exc}") from None
+        try:
+            connection = Connection(conn_id, to, in_port, f"{self.name}.{out}", policy)
+        except ValueError as exc:
+            raise CommandError(f"conn 'to': {exc}") from None
+        connection.start()
+        port.attach(connection)
+        self.connections[conn_id] = (connection, port)
+        log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
+
+    def _lookup(self, msg: control.Message) -> tuple[str, Connection, OutPortRuntime]:
+        """The connection a command names."""
+        conn_id = _field(msg, "conn_id", str)
+        if conn_id not in self.connections:
+            raise CommandError(f"no connection {conn_id!r}")
+        return (conn_id, *self.connections[conn_id])
+
+    async def _disconnect(self, msg: control.Message) -> None:
+        """Close a data stream."""
+        conn_id, connection, port = self._lookup(msg)
+        del self.connections[conn_id]
+        port.detach(connection)
+        await _maybe_await(connection.close())
+        log.info("connection %s closed", conn_id)
+
+    async def _repoint(self, msg: control.Message) -> None:
+        """Send the next frames of a connection to a new address."""
+        conn_id, connection, _port = self._lookup(msg)
+        to = _field(msg, "to", str)
+        try:
+            connection.repoint(to)
+        except ValueError as exc:
+            raise CommandError(f"'to': {exc}") from None
+        log.info("connection %s repointed to %s", conn_id, to)
+
+    async def close_connections(self) -> None:
+        """Detach and close every outgoing connection."""
+        for conn_id, (connection, port) in list(self.connections.items()):
+            del self.connections[conn_id]
+            port.detach(connection)
+            try:
+                await _maybe_await(connection.close())
+            except Exception:
+                log.exception("closing connection %s", conn_id)

@@ -1,0 +1,207 @@
+"""The running host: data server, control channel (or standalone reporting), command loop, exit.
+
+How it works: `Host.run` creates the instance and its runner, starts the `DataServer` that resolves
+in-port names to our runtime InPorts, then either opens the control channel (sends `hello`, then
+initializes: the runner's state changes go out as `state` reports the moment they happen) or, when
+standalone, logs state changes and activates at once. Commands are queued by the channel and run
+one at a time, in order, by `_serve_commands`, each answered by exactly one `reply`. Whatever ends
+the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent dying) sets `stop`; then
+the runner finalizes (deactivating first if active) within the timeout, connections and the data
+server close, `exit` is answered, and the channel is closed after the last report is written.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import re
+import tempfile
+from typing import Any
+
+from sdrpeer.dataplane import DataServer
+from sdrpeer.host import control
+from sdrpeer.host.instance import HostedInstance, _maybe_await
+from sdrpeer.host.main import (
+    FINALIZE_TIMEOUT,
+    STANDALONE_REPORT_INTERVAL,
+    HostConfig,
+    install_signals,
+    now,
+)
+from sdrpeer.sdk import Component, ComponentRunner
+
+log = logging.getLogger("sdrpeer.host")
+
+
+class Host:
+    """One host process's asyncio side."""
+
+    def __init__(self, config: HostConfig, component: Component) -> None:
+        self.config = config
+        self.component = component
+        self.name = component.instance_name
+        self.tmp_dir: str | None = None
+        self.channel: control.ControlChannel | None = None
+        self.stop = asyncio.Event()
+        self.exit_command: control.Command | None = None
+        self._queue: asyncio.Queue[control.Command] = asyncio.Queue()
+        self._error = "finalize failed"
+
+    async def run(self) -> int:
+        """Start, serve until told to stop, finalize; returns the exit code."""
+        install_signals(asyncio.get_running_loop(), self.stop)
+        component = self.component
+        runner = ComponentRunner(component)
+        if self.config.control_fd is not None:
+            self.channel = await control.ControlChannel.open(
+                self.config.control_fd, self._on_command, self._on_closed, self._counters
+            )
+            report = self.channel.send
+        else:
+            report = self._log_report
+        self.inst = HostedInstance(self.name, component, runner, report, clock=now)
+        server = DataServer(
+            self.inst.in_port, tcp_host=self.config.data_host, unix_path=self._unix_path()
+        )
+        await _maybe_await(server.start())
+        data = dict(server.addresses)
+        if self.channel is not None:
+            self.channel.send(
+                control.hello(
+                    pid=os.getpid(),
+                    component=type(component).__name__,
+                    ports=self.inst.ports(),
+                    params=self.inst.params(),
+                    data=data,
+                )
+            )
+        else:
+            log.info("standalone %s: ports %s, data %s", self.name, self.inst.ports(), data)
+        self.inst.watch()
+        tasks = [asyncio.create_task(self._start(standalone=self.channel is None))]
+        if self.channel is not None:
+            tasks.append(asyncio.create_task(self._serve_commands()))
+        else:
+            tasks.append(asyncio.create_task(self._log_counters()))
+        await self.stop.wait()
+        for task in tasks:
+            task.cancel()
+        code = await self._finalize(runner)
+        await self.inst.close_connections()
+        await _maybe_await(server.close())
+        await self._goodbye(code)
+        return code
+
+    async def _start(self, *, standalone: bool) -> None:
+        """Initialize (and activate at once when standalone)."""
+        try:
+            await self.inst.runner.initialize()
+            if standalone and self.inst.state == "INACTIVE":
+                await self.inst.runner.activate()
+        except Exception as exc:
+            log.error("start failed: %s", exc)
+
+    def _on_command(self, command: control.Command) -> None:
+        """The channel decoded a command: queue it."""
+        self._queue.put_nowait(command)
+
+    def _on_closed(self, reason: str) -> None:
+        """The control channel ended: a host never outlives its agent."""
+        if not self.stop.is_set():
+            log.warning("%s: finalizing and exiting", reason)
+            self.stop.set()
+
+    def _counters(self) -> dict[str, dict[str, int]]:
+        """Per-port counters for heartbeats (empty before the instance exists)."""
+        inst = getattr(self, "inst", None)
+        return inst.counters() if inst is not None else {}
+
+    async def _serve_commands(self) -> None:
+        """Run queued commands in order, answering each one."""
+        assert self.channel is not None
+        while True:
+            command = await self._queue.get()
+            if command.t == "exit":
+                self.exit_command = command
+                self.stop.set()
+                return
+            if not self.inst.handles(command.t):
+                self.channel.send(
+                    control.reply(command.id, False, f"unknown command {command.t!r}")
+                )
+                continue
+            try:
+                await self.inst.execute(command.t, command.msg)
+            except Exception as exc:
+                log.warning("%s (id %d) failed: %s", command.t, command.id, exc)
+                self.channel.send(control.reply(command.id, False, str(exc) or repr(exc)))
+            else:
+                self.channel.send(control.reply(command.id, True))
+
+    def _exit_timeout(self) -> float:
+        """Seconds finalizing may take: the `exit` command's timeout, else the default."""
+        if self.exit_command is not None:
+            timeout = self.exit_command.msg.get("timeout")
+            if isinstance(timeout, int | float) and not isinstance(timeout, bool) and timeout > 0:
+                return float(timeout)
+        return FINALIZE_TIMEOUT
+
+    async def _finalize(self, runner: ComponentRunner) -> int:
+        """Finalize the runner within the timeout; 0 if it did, 1 otherwise."""
+        if self.inst.state == "FINALIZED":
+            return 0
+        try:
+            await asyncio.wait_for(runner.finalize(), self._exit_timeout())
+        except TimeoutError:
+            log.error("finalize did not finish within %.1f s", self._exit_timeout())
+            self._error = "finalize timed out"
+            return 1
+        except Exception as exc:
+            log.error("finalize failed: %s", exc)
+            self._error = str(exc)
+            return 1
+        return 0
+
+    async def _goodbye(self, code: int) -> None:
+        """Answer `exit` and close the channel once the last report is written."""
+        if self.channel is None:
+            return
+        if self.exit_command is not None:
+            error = None if code == 0 else self._error
+            self.channel.send(control.reply(self.exit_command.id, code == 0, error))
+        self.channel.close()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self.channel.wait_closed(), 1.0)
+
+    def _unix_path(self) -> str:
+        """Where the Unix data socket goes."""
+        run_dir = self.config.run_dir
+        if run_dir is None:
+            run_dir = self.tmp_dir = tempfile.mkdtemp(prefix="sdrpeer-host-")
+        safe = re.sub(r"[^A-Za-z0-9_.-]", "_", self.name)[:40] or "host"
+        return os.path.join(run_dir, f"{safe}.sock")
+
+    def _log_report(self, msg: control.Message) -> None:
+        """Standalone: show state changes and faults on stderr."""
+        if msg["t"] == "state":
+            error = f" ({msg['error']})" if msg.get("error") else ""
+            log.info("state %s%s", msg["state"], error)
+        elif msg["t"] == "fault":
+            log.warning("fault %s: %s", msg["kind"], msg["detail"])
+
+    async def _log_counters(self) -> None:
+        """Standalone: port counters once a second."""
+        while True:
+            await asyncio.sleep(STANDALONE_REPORT_INTERVAL)
+            log.info("ports %s", _compact(self.inst.counters()))
+
+
+def _compact(counters: dict[str, dict[str, Any]]) -> str:
+    """`out: frames_out=10 bytes_out=80; ...` with zero counters left out."""
+    parts = []
+    for port, values in sorted(counters.items()):
+        shown = " ".join(f"{k}={v}" for k, v in values.items() if v)
+        parts.append(f"{port}: {shown or '-'}")
+    return "; ".join(parts) or "(no ports)"

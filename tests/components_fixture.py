@@ -1,0 +1,91 @@
+"""Small components the host tests run: a publisher, a recorder, a crasher, one with params."""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Any
+
+from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Periodic
+
+
+class Counter(Component):
+    """Publishes 1, 2, 3, ... on `out` at `rate` Hz."""
+
+    execution = Periodic(param="rate")
+    rate = Param(float, 100.0, "frames per second")
+    out = OutPort("the count")
+
+    def on_initialize(self) -> None:
+        """Start from zero."""
+        self.n = 0
+
+    def on_execute(self) -> None:
+        """Publish the next number."""
+        self.n += 1
+        self.out.write(self.n)
+
+
+class Recorder(Component):
+    """Records every value arriving on `inp`; logs how many it has at deactivation."""
+
+    execution = OnInput("inp")
+    inp = InPort("anything")
+
+    def on_initialize(self) -> None:
+        """Start with nothing."""
+        self.values: list[Any] = []
+
+    def on_execute(self) -> None:
+        """Keep what arrived."""
+        while self.inp.qsize():
+            self.values.append(self.inp.get_nowait())
+
+    def on_deactivated(self) -> None:
+        """Say what arrived."""
+        self.log.info("recorded %d values, last %r", len(self.values), self.values[-1:])
+
+
+class Crasher(Component):
+    """Raises in `on_execute` after `after` periods, writing the time of the raise to `stamp`."""
+
+    execution = Periodic(hz=200.0)
+    after = Param(int, 5, "periods before the raise")
+    stamp = Param(str, "", "file that gets time.time() just before the raise")
+
+    def on_activated(self) -> None:
+        """Count from zero."""
+        self.count = 0
+
+    def on_execute(self) -> None:
+        """Raise on the `after`-th period."""
+        self.count += 1
+        if self.count == self.after:
+            if self.stamp:
+                with open(self.stamp + ".tmp", "w") as f:
+                    f.write(repr(time.time()))
+                os.replace(self.stamp + ".tmp", self.stamp)
+            raise RuntimeError(f"crash after {self.after} periods")
+
+
+class Tunable(Component):
+    """Params of every type; logs each change so a test can see it."""
+
+    gain = Param(float, 1.0, "a number", min=0.0, max=10.0)
+    mode = Param(str, "fast", "a choice", choices=["fast", "slow"])
+    enabled = Param(bool, True, "a switch")
+    count = Param(int, 3, "a whole number")
+    out = OutPort("the gain")
+
+    def on_params_changed(self, changed: dict[str, Any]) -> None:
+        """Log the change and publish the gain."""
+        self.log.info("params changed: %s", sorted(changed.items()))
+        self.out.write(self.gain)
+
+
+class Faulty(Component):
+    """Reports a fault when activated."""
+
+    def on_activated(self) -> None:
+        """Report overheating."""
+        self.report_fault("hardware_failure", "motor 2 overheated")
