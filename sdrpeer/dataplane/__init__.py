@@ -1,0 +1,21 @@
+"""The data plane: msgpack streams from OutPorts to InPorts (docs/protocol.md section 2).
+
+`Connection` is the sending side (an OutPort's sink), `DataServer` the receiving side (one per
+host), `frames` the codec both share, `pending` the sender's policy queue.
+"""
+
+from sdrpeer.dataplane.connection import Connection
+from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, FrameDecoder, FrameError
+from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
+from sdrpeer.dataplane.server import DataServer, InPortLike
+
+__all__ = [
+    "DEFAULT_MAX_FRAME",
+    "Connection",
+    "DataServer",
+    "FrameDecoder",
+    "FrameError",
+    "InPortLike",
+    "PendingQueue",
+    "PolicyLike",
+]

@@ -1,0 +1,325 @@
+"""The sending side of one data stream: an OutPort's sink that writes frames to a receiver.
+
+How it works: `offer(value)` packs the value at once (so an oversized or unencodable value is
+refused right there, with an error naming the connection) and queues the bytes in a
+`PendingQueue` that applies the connector policy. Writing is not a task per frame: the first
+offer in a loop iteration writes its frame immediately when the link is idle (low latency), and
+schedules one `call_soon` flush that numbers and joins everything offered meanwhile into a
+single `transport.write` (high throughput). When the transport's buffer is over its high-water
+mark the flush waits for `resume_writing`; values pile up in the queue and the policy decides.
+
+A supervisor task owns the socket: it dials `to`, writes the hello, waits for the ok, then sleeps
+until the link drops, `repoint` changes the address, or `close` is called. A drop is redialed
+with exponential backoff (pending values stay queued, up to the buffer; frames lost inside the
+dead socket show up as a gap in seq at the receiver). `repoint` detaches the link at once, so
+later frames wait for the new peer, and closes the old transport, which still flushes what it
+was handed. seq counts frames written to this connection, starting at 1, across redials.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+from typing import Final
+
+from sdrpeer.dataplane.address import parse_address
+from sdrpeer.dataplane.frames import (
+    DEFAULT_MAX_FRAME,
+    FRAME_OVERHEAD,
+    FrameDecoder,
+    FrameError,
+    Hello,
+    encode_hello,
+    encode_value,
+    frame_header,
+    parse_reply,
+)
+from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
+
+log = logging.getLogger("sdrpeer.dataplane")
+_SNDBUF: Final = 4 * 1024 * 1024
+_HIGH_WATER: Final = 1024 * 1024
+_BIG: Final = 64 * 1024  # values at least this large are written without joining (no copy)
+
+
+def next_backoff(delay: float, initial: float, cap: float) -> float:
+    """The redial delay after `delay` failed: doubled, at least `initial`, at most `cap`."""
+    return min(cap, max(initial, delay * 2))
+
+
+class Connection:
+    """A FrameSink that sends an OutPort's values to one InPort, per a connector policy."""
+
+    def __init__(
+        self,
+        conn_id: str,
+        to: str,
+        in_port: str,
+        from_: str,
+        policy: PolicyLike,
+        *,
+        max_frame: int = DEFAULT_MAX_FRAME,
+        backoff: tuple[float, float] = (0.05, 2.0),
+        hello_timeout: float = 5.0,
+    ) -> None:
+        parse_address(to)
+        self.conn_id = conn_id
+        self.to = to
+        self.in_port = in_port
+        self.from_ = from_
+        self.policy = policy
+        self.max_frame = max_frame
+        self.backoff = backoff
+        self.hello_timeout = hello_timeout
+        self.frames_out = 0
+        """Frames handed to a socket."""
+        self.bytes_out = 0
+        """Bytes of those frames."""
+        self.reconnects = 0
+        """Successful redials after a dropped link."""
+        self.refused = 0
+        """Values refused at `offer` because they were oversized or unencodable."""
+        self.seq = 0
+        """The seq of the last frame written."""
+        self.last_error: str | None = None
+        """Why the last dial or link failed."""
+        self._queue = PendingQueue(policy)
+        self._link: _Link | None = None
+        self._scheduled = False
+        self._closing = False
+        self._wake = asyncio.Event()
+        self._room = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+
+    @property
+    def dropped(self) -> int:
+        """Values discarded by the policy."""
+        return self._queue.dropped
+
+    @property
+    def pending(self) -> int:
+        """Values waiting for the socket."""
+        return len(self._queue)
+
+    @property
+    def connected(self) -> bool:
+        """True while a link has said ok and not dropped."""
+        return self._link is not None
+
+    def start(self) -> None:
+        """Start dialing (needs a running event loop); `offer` may be called before or after."""
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run(), name=self.conn_id)
+
+    def offer(self, value: object) -> bool:
+        """Queue a value per the policy; False when dropped or (full=block) not queued yet."""
+        if self._closing:
+            return False
+        try:
+            packed = encode_value(value)
+        except FrameError as exc:
+            self.refused += 1
+            raise FrameError(exc.reason, f"connection {self.conn_id}: {exc.detail}") from None
+        if len(packed) + FRAME_OVERHEAD > self.max_frame:
+            self.refused += 1
+            raise FrameError(
+                "oversized",
+                f"connection {self.conn_id} ({self.from_} -> {self.in_port}): a frame of "
+                f"{len(packed) + FRAME_OVERHEAD} bytes exceeds the maximum {self.max_frame}",
+            )
+        if not self._queue.offer(packed):
+            return False
+        if not self._scheduled and self._link is not None:
+            self._scheduled = True
+            asyncio.get_running_loop().call_soon(self._flush_soon)
+            self._flush()  # idle link: this frame goes out now
+        return True
+
+    async def drain(self) -> None:
+        """Wait until the queue has room (returns at once when it has, or when closing)."""
+        while not self._queue.has_room and not self._closing:
+            self._room.clear()
+            await self._room.wait()
+
+    def repoint(self, to: str) -> None:
+        """Send later frames to `to`; frames already written still reach the old receiver."""
+        parse_address(to)
+        self.to = to
+        link, self._link = self._link, None
+        if link is not None:
+            link.transport.close()
+        self._wake.set()
+
+    async def wait_connected(self) -> None:
+        """Wait until a link is up (bound it with `asyncio.timeout`)."""
+        while self._link is None:
+            self._wake.clear()
+            await self._wake.wait()
+
+    async def flushed(self) -> None:
+        """Wait until nothing is pending (everything was handed to a socket)."""
+        while len(self._queue) and not self._closing:
+            self._room.clear()
+            await self._room.wait()
+
+    async def close(self, linger: float = 1.0) -> None:
+        """Flush what is pending (for up to `linger` seconds if connected) and close the link."""
+        if self._link is not None and len(self._queue):
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(linger):
+                    await self.flushed()
+        self._closing = True
+        self._room.set()
+        self._wake.set()
+        link, self._link = self._link, None
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+        if link is not None:
+            link.transport.close()
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(linger):
+                    await link.closed
+
+    def _flush_soon(self) -> None:
+        self._scheduled = False
+        self._flush()
+
+    def _flush(self) -> None:
+        link = self._link
+        if link is None or link.paused or not len(self._queue):
+            return
+        items = self._queue.take()
+        seq = self.seq
+        write = link.transport.write
+        parts: list[bytes] = []
+        size = 0
+        for packed in items:
+            seq += 1
+            header = frame_header(seq)
+            size += len(header) + len(packed)
+            if len(packed) >= _BIG:
+                parts.append(header)
+                write(b"".join(parts))
+                write(packed)
+                parts = []
+            else:
+                parts.append(header)
+                parts.append(packed)
+        if parts:
+            write(b"".join(parts))
+        self.seq = seq
+        self.frames_out += len(items)
+        self.bytes_out += size
+        self._room.set()
+
+    def _resume(self, link: _Link) -> None:
+        if link is self._link:
+            self._flush()
+
+    def _lost(self, link: _Link) -> None:
+        if link is self._link:
+            self._link = None
+            self._wake.set()
+
+    async def _run(self) -> None:
+        initial, cap = self.backoff
+        delay = initial
+        dropped = False
+        while not self._closing:
+            to = self.to
+            try:
+                link = await self._dial(to)
+            except (OSError, TimeoutError, FrameError, ValueError) as exc:
+                self.last_error = f"{to}: {exc}"
+                log.debug("data connection %s: dial failed: %s", self.conn_id, self.last_error)
+                self._wake.clear()
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(delay):
+                        await self._wake.wait()  # a repoint or close cuts the wait short
+                delay = next_backoff(delay, initial, cap)
+                continue
+            if self.to != to or self._closing:  # repointed while dialing
+                link.transport.close()
+                continue
+            delay = initial
+            if dropped:
+                self.reconnects += 1
+            self._link = link
+            self._wake.set()
+            self._flush()
+            while self._link is link:
+                self._wake.clear()
+                await self._wake.wait()
+            dropped = self.to == to
+
+    async def _dial(self, to: str) -> _Link:
+        kind, host, port = parse_address(to)
+        loop = asyncio.get_running_loop()
+        async with asyncio.timeout(self.hello_timeout):
+            if kind == "tcp":
+                _, link = await loop.create_connection(lambda: _Link(self), host, port)
+            else:
+                _, link = await loop.create_unix_connection(lambda: _Link(self), host)
+                sock = link.transport.get_extra_info("socket")
+                with contextlib.suppress(OSError):
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, _SNDBUF)
+            hello = Hello(self.conn_id, self.in_port, self.from_, self.policy.to_map())
+            link.transport.write(encode_hello(hello))
+            try:
+                error = await link.reply
+            except BaseException:
+                link.transport.abort()
+                raise
+        if error is not None:
+            link.transport.close()
+            raise FrameError("refused", error)
+        return link
+
+
+class _Link(asyncio.Protocol):
+    """One socket of a Connection."""
+
+    def __init__(self, owner: Connection) -> None:
+        self.owner = owner
+        loop = asyncio.get_running_loop()
+        self.reply: asyncio.Future[str | None] = loop.create_future()
+        self.closed: asyncio.Future[None] = loop.create_future()
+        self.paused = False
+        self.transport: asyncio.Transport
+        self._decoder: FrameDecoder | None = FrameDecoder(4096)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        transport.set_write_buffer_limits(high=_HIGH_WATER)
+
+    def data_received(self, data: bytes) -> None:
+        if self._decoder is None:
+            return  # nothing is expected after the reply
+        try:
+            self._decoder.feed(data)
+            obj = self._decoder.next_map()
+            if obj is None:
+                return
+            self.reply.set_result(parse_reply(obj))
+        except FrameError as exc:
+            self.reply.set_exception(exc)
+        self._decoder = None
+
+    def pause_writing(self) -> None:
+        self.paused = True
+
+    def resume_writing(self) -> None:
+        self.paused = False
+        self.owner._resume(self)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if not self.reply.done():
+            self.reply.set_exception(exc or ConnectionError("closed before the reply"))
+        if not self.closed.done():
+            self.closed.set_result(None)
+        self.owner._lost(self)

@@ -1,0 +1,198 @@
+"""The data stream's codec (docs/protocol.md section 2): hello, reply, `[seq, value]` frames.
+
+How it works: the stream is plain msgpack values, back to back. The sender writes one hello map,
+the receiver answers one reply map, then the sender writes frames, each a two-element array
+``[seq, value]``. Encoding a frame is a fixed header (array of 2, seq as a msgpack uint32 or
+uint64) followed by the msgpack encoding of the value, so the sender packs a value once, when it
+is offered, and numbers it only when it is written.
+
+`FrameDecoder` wraps a `msgpack.Unpacker` with strict limits: the unpacker's buffer is capped
+(a frame cannot grow it past `max_frame` plus one read), every frame's encoded size is checked
+against `max_frame` (a frame still arriving too: the unpacker parses incrementally and `tell()`
+counts what it consumed), and every frame must be ``[uint, value]``. Whatever goes wrong raises
+`FrameError("oversized" | "malformed")`; no other exception escapes the decoder.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Any, Final, cast
+
+import msgpack
+
+from sdrpeer.errors import WireError
+
+PROTOCOL_VERSION: Final = 1
+DEFAULT_MAX_FRAME: Final = 16 * 1024 * 1024
+HELLO_MAX: Final = 64 * 1024
+"""The largest hello or reply map accepted (bytes)."""
+FRAME_OVERHEAD: Final = 10
+"""The most bytes a frame adds to its value's encoding (array header, uint64 seq)."""
+READ_SLACK: Final = 1024 * 1024
+"""Bytes the decoder accepts in one `feed` beyond `max_frame` (larger inputs are split)."""
+
+_U32: Final = struct.Struct(">BBI").pack
+_U64: Final = struct.Struct(">BBQ").pack
+
+
+def _packb(value: object) -> bytes:
+    return cast(bytes, msgpack.packb(value))
+
+
+class FrameError(WireError):
+    """A hello, reply or frame could not be accepted; `reason` is oversized or malformed."""
+
+
+@dataclass(frozen=True, slots=True)
+class Hello:
+    """The sender's first message on a data connection."""
+
+    conn: str
+    """The connection id (chosen by whoever asked for the connection)."""
+    in_port: str
+    """The name of the receiving InPort."""
+    from_: str
+    """The sending `instance.port`."""
+    policy: dict[str, Any]
+    """The connector policy map, for the receiver's information."""
+    version: int = PROTOCOL_VERSION
+    """The data stream protocol version."""
+
+
+def encode_hello(hello: Hello) -> bytes:
+    """The hello map's encoding."""
+    return _packb(
+        {
+            "v": hello.version,
+            "conn": hello.conn,
+            "in": hello.in_port,
+            "from": hello.from_,
+            "policy": hello.policy,
+        }
+    )
+
+
+def parse_hello(obj: object) -> Hello:
+    """A decoded hello map as a `Hello`; FrameError("malformed") when a field is wrong."""
+    if not isinstance(obj, dict):
+        raise FrameError("malformed", f"hello: expected a map, got {type(obj).__name__}")
+    for key in ("conn", "in", "from"):
+        if not isinstance(obj.get(key), str):
+            raise FrameError("malformed", f"hello: {key!r} must be a string")
+    version = obj.get("v")
+    if type(version) is not int:
+        raise FrameError("malformed", "hello: 'v' must be an integer")
+    policy = obj.get("policy", {})
+    if not isinstance(policy, dict):
+        raise FrameError("malformed", "hello: 'policy' must be a map")
+    return Hello(obj["conn"], obj["in"], obj["from"], policy, version)
+
+
+def encode_reply(error: str | None) -> bytes:
+    """The receiver's answer to a hello: ok, or the error that closes the connection."""
+    return _packb({"ok": True} if error is None else {"ok": False, "error": error})
+
+
+def parse_reply(obj: object) -> str | None:
+    """None for ``{"ok": true}``, else the receiver's error; FrameError when not a reply map."""
+    if not isinstance(obj, dict) or type(obj.get("ok")) is not bool:
+        raise FrameError("malformed", "reply: expected a map with a boolean 'ok'")
+    if obj["ok"]:
+        return None
+    return str(obj.get("error") or "refused without a reason")
+
+
+def frame_header(seq: int) -> bytes:
+    """The bytes before a frame's value: a 2-array header and seq (uint32, or uint64 if larger)."""
+    return _U32(0x92, 0xCE, seq) if seq < 0x1_0000_0000 else _U64(0x92, 0xCF, seq)
+
+
+def encode_value(value: object) -> bytes:
+    """A value's msgpack encoding; FrameError("unencodable") for a type msgpack cannot carry."""
+    try:
+        return _packb(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise FrameError("unencodable", f"{type(value).__name__}: {exc}") from None
+
+
+def encode_frame(seq: int, value: object) -> bytes:
+    """One whole frame ``[seq, value]``."""
+    return frame_header(seq) + encode_value(value)
+
+
+class FrameDecoder:
+    """Decodes one connection's byte stream: optionally a first map, then frames."""
+
+    __slots__ = ("_end", "_fed", "_unpacker", "max_frame")
+
+    def __init__(self, max_frame: int = DEFAULT_MAX_FRAME) -> None:
+        self.max_frame = max_frame
+        self._unpacker = msgpack.Unpacker(
+            raw=False,
+            strict_map_key=False,
+            max_buffer_size=max_frame + READ_SLACK,
+        )
+        self._fed = 0  # bytes fed so far
+        self._end = 0  # stream offset where the last complete object ended
+
+    def feed(self, data: bytes) -> None:
+        """Add received bytes; FrameError("oversized") if they overflow the read buffer."""
+        if len(data) > READ_SLACK:
+            view = memoryview(data)
+            for start in range(0, len(view), READ_SLACK):
+                self.feed(view[start : start + READ_SLACK])  # type: ignore[arg-type]
+            return
+        try:
+            self._unpacker.feed(data)
+        except msgpack.BufferFull:
+            raise FrameError("oversized", f"more than {self.max_frame} bytes pending") from None
+        self._fed += len(data)
+
+    def next_map(self) -> object | None:
+        """The next complete object (a hello or reply), or None while it is still arriving."""
+        try:
+            obj: object = self._unpacker.unpack()
+        except msgpack.OutOfData:
+            if self._unpacker.tell() - self._end > HELLO_MAX:
+                raise FrameError("oversized", f"hello over {HELLO_MAX} bytes") from None
+            return None
+        except Exception as exc:
+            raise FrameError("malformed", f"{type(exc).__name__}: {exc}") from None
+        self._check_size(self._unpacker.tell(), HELLO_MAX)
+        return obj
+
+    def frames(self) -> list[list[Any]]:
+        """Every complete frame fed so far, each a ``[seq, value]`` list, oldest first."""
+        unpacker = self._unpacker
+        tell = unpacker.tell
+        limit = self.max_frame
+        end = self._end
+        out: list[list[Any]] = []
+        try:
+            for obj in unpacker:
+                if type(obj) is not list or len(obj) != 2 or type(obj[0]) is not int or obj[0] < 0:
+                    raise FrameError("malformed", f"frame is not [uint, value]: {_brief(obj)}")
+                start, end = end, tell()
+                if end - start > limit:
+                    raise FrameError("oversized", f"frame of {end - start} bytes, max {limit}")
+                out.append(obj)
+        except FrameError:
+            raise
+        except Exception as exc:
+            raise FrameError("malformed", f"{type(exc).__name__}: {exc}") from None
+        finally:
+            self._end = end
+        if tell() - end > limit:
+            raise FrameError("oversized", f"frame over {limit} bytes (still arriving)")
+        return out
+
+    def _check_size(self, end: int, limit: int) -> None:
+        size, self._end = end - self._end, end
+        if size > limit:
+            raise FrameError("oversized", f"frame of {size} bytes, the maximum is {limit}")
+
+
+def _brief(obj: object) -> str:
+    text = repr(obj)
+    return text if len(text) <= 60 else text[:57] + "..."

@@ -1,0 +1,231 @@
+"""The receiving side of data streams: one listener per host, many connections, many InPorts.
+
+How it works: `DataServer` listens on TCP (and optionally a Unix socket, faster on the same
+robot). Each accepted connection is a `_Receiver` protocol with its own `FrameDecoder`. The first
+message must be a hello naming an InPort that `resolve` knows and protocol version 1; it is
+answered ``{"ok": true}``, or ``{"ok": false, "error": ...}`` and the connection is closed. Then
+every received chunk is decoded and each frame goes to ``port.deliver(value, seq, conn_id)``
+straight from `data_received`: no queue or task per frame. A bad frame (oversized, malformed)
+calls ``port.refuse()``, is counted by reason, logged (first time per reason, then at most every
+ten seconds) and closes that connection only. Connections beyond `max_connections` are answered
+with an error and closed; a hello must arrive within `hello_timeout` seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import socket
+from collections import Counter
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from sdrpeer.dataplane.address import format_tcp
+from sdrpeer.dataplane.frames import (
+    DEFAULT_MAX_FRAME,
+    PROTOCOL_VERSION,
+    FrameDecoder,
+    FrameError,
+    encode_reply,
+    parse_hello,
+)
+
+log = logging.getLogger("sdrpeer.dataplane")
+_LOG_EVERY = 10.0
+_RCVBUF = 4 * 1024 * 1024
+
+
+class InPortLike(Protocol):
+    """What the data server needs from an InPort."""
+
+    def deliver(self, value: Any, seq: int, conn: str) -> None:
+        """Accept one received frame."""
+
+    def refuse(self) -> None:
+        """Count one refused (oversized or malformed) frame."""
+
+
+class DataServer:
+    """Accepts data connections and delivers their frames to InPorts."""
+
+    def __init__(
+        self,
+        resolve: Callable[[str], InPortLike | None],
+        *,
+        tcp_host: str = "127.0.0.1",
+        tcp_port: int = 0,
+        unix_path: str | None = None,
+        max_frame: int = DEFAULT_MAX_FRAME,
+        max_connections: int = 256,
+        hello_timeout: float = 10.0,
+    ) -> None:
+        self.resolve = resolve
+        self.tcp_host = tcp_host
+        self.tcp_port = tcp_port
+        self.unix_path = unix_path
+        self.max_frame = max_frame
+        self.max_connections = max_connections
+        self.hello_timeout = hello_timeout
+        self.counters: Counter[str] = Counter()
+        """accepted, rejected (hello refused or over the limit), refused_<reason>, deliver_error."""
+        self._servers: list[asyncio.Server] = []
+        self._receivers: set[_Receiver] = set()
+        self._addresses: dict[str, str] = {}
+        self._last_log: dict[str, float] = {}
+
+    async def start(self) -> None:
+        """Listen on TCP (port 0: a free port) and, if configured, on the Unix socket."""
+        loop = asyncio.get_running_loop()
+        tcp = await loop.create_server(
+            lambda: _Receiver(self), self.tcp_host, self.tcp_port, reuse_address=True
+        )
+        self._servers.append(tcp)
+        port = tcp.sockets[0].getsockname()[1]
+        self._addresses["tcp"] = format_tcp(self.tcp_host, port)
+        if self.unix_path is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.unix_path)
+            unix = await loop.create_unix_server(lambda: _Receiver(self), self.unix_path)
+            self._servers.append(unix)
+            self._addresses["unix"] = self.unix_path
+
+    @property
+    def addresses(self) -> dict[str, str]:
+        """Where we listen: {"tcp": "HOST:PORT", "unix": "/path"} (unix only when configured)."""
+        return dict(self._addresses)
+
+    @property
+    def connections(self) -> int:
+        """Connections currently open."""
+        return len(self._receivers)
+
+    async def close(self) -> None:
+        """Stop listening and close every connection."""
+        for server in self._servers:
+            server.close()
+        for receiver in list(self._receivers):
+            receiver.abort()
+        for server in self._servers:
+            await server.wait_closed()
+        self._servers.clear()
+        if self.unix_path is not None and "unix" in self._addresses:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.unix_path)
+
+    def _report(self, reason: str, conn: str, detail: str) -> None:
+        now = asyncio.get_running_loop().time()
+        last = self._last_log.get(reason)
+        if last is None or now - last >= _LOG_EVERY:
+            self._last_log[reason] = now
+            count = self.counters[reason]
+            log.warning("data connection %s: %s (%s; %d so far)", conn, reason, detail, count)
+
+
+class _Receiver(asyncio.Protocol):
+    """One accepted data connection."""
+
+    def __init__(self, server: DataServer) -> None:
+        self.server = server
+        self.decoder = FrameDecoder(server.max_frame)
+        self.transport: asyncio.Transport | None = None
+        self.port: InPortLike | None = None
+        self.conn = "?"
+        self._timer: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        server = self.server
+        if len(server._receivers) >= server.max_connections:
+            server.counters["rejected"] += 1
+            server._report("rejected", "?", f"over {server.max_connections} connections")
+            transport.write(encode_reply(f"too many connections (max {server.max_connections})"))
+            transport.close()
+            return
+        server._receivers.add(self)
+        server.counters["accepted"] += 1
+        sock = transport.get_extra_info("socket")
+        if sock is not None and sock.family == socket.AF_UNIX:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF)
+        loop = asyncio.get_running_loop()
+        self._timer = loop.call_later(server.hello_timeout, self._hello_timeout)
+
+    def data_received(self, data: bytes) -> None:
+        try:
+            self.decoder.feed(data)
+            if self.port is None and not self._hello():
+                return
+            frames = self.decoder.frames()
+        except FrameError as exc:
+            self._bad(exc)
+            return
+        deliver = self.port.deliver  # type: ignore[union-attr]
+        conn = self.conn
+        for seq, value in frames:
+            try:
+                deliver(value, seq, conn)
+            except Exception as exc:
+                self.server.counters["deliver_error"] += 1
+                self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+
+    def _hello(self) -> bool:
+        """Handle the hello if it has arrived; True when frames may follow."""
+        obj = self.decoder.next_map()
+        if obj is None:
+            return False
+        if self._timer is not None:
+            self._timer.cancel()
+        hello = parse_hello(obj)
+        self.conn = hello.conn
+        error = None
+        port = None
+        if hello.version != PROTOCOL_VERSION:
+            error = f"protocol version {hello.version} not supported (this is {PROTOCOL_VERSION})"
+        else:
+            port = self.server.resolve(hello.in_port)
+            if port is None:
+                error = f"unknown in-port {hello.in_port!r}"
+        assert self.transport is not None
+        self.transport.write(encode_reply(error))
+        if error is not None or port is None:
+            self.server.counters["rejected"] += 1
+            self.server._report("rejected", hello.conn, error or "")
+            self.transport.close()
+            return False
+        self.port = port
+        return True
+
+    def _bad(self, exc: FrameError) -> None:
+        server = self.server
+        reason = f"refused_{exc.reason}"
+        server.counters[reason] += 1
+        if self.port is not None:
+            self.port.refuse()
+        else:  # a bad hello: tell the sender why before closing
+            assert self.transport is not None
+            self.transport.write(encode_reply(f"bad hello: {exc}"))
+        server._report(reason, self.conn, str(exc))
+        self.abort(graceful=self.port is None)
+
+    def _hello_timeout(self) -> None:
+        self.server.counters["rejected"] += 1
+        self.server._report("rejected", self.conn, "no hello in time")
+        self.abort()
+
+    def abort(self, *, graceful: bool = False) -> None:
+        """Close this connection now (graceful: after the reply written, if any)."""
+        self.port = None
+        if self.transport is not None:
+            if graceful:
+                self.transport.close()
+            else:
+                self.transport.abort()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+        self.port = None
+        self.server._receivers.discard(self)
