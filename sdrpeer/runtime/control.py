@@ -68,17 +68,29 @@ class ControlDecoder:
     """Turns the byte stream from a host into validated messages (pure)."""
 
     def __init__(self, max_message: int = MAX_MESSAGE) -> None:
-        self._unpacker = msgpack.Unpacker(raw=False, max_buffer_size=max_message)
+        self.max_message = max_message
+        self._unpacker = msgpack.Unpacker(raw=False, max_buffer_size=2 * max_message)
+        self._fed = 0
+        self._used = 0
 
     def feed(self, data: bytes) -> list[Report]:
         """Every complete message in the stream so far; ProtocolError on a bad one."""
+        self._fed += len(data)
+        items = []
         try:
             self._unpacker.feed(data)
-            items = list(self._unpacker)
+            for item in self._unpacker:
+                used = self._unpacker.tell()
+                if used - self._used > self.max_message:
+                    raise ProtocolError("message over the size limit")
+                self._used = used
+                items.append(item)
         except msgpack.BufferFull:
             raise ProtocolError("message over the size limit") from None
         except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as e:
             raise ProtocolError(f"not msgpack: {e}") from None
+        if self._fed - self._used > self.max_message:
+            raise ProtocolError("message over the size limit")
         for item in items:
             if not isinstance(item, dict) or not isinstance(item.get("t"), str):
                 raise ProtocolError(f"not a map with a string 't': {str(item)[:80]}")

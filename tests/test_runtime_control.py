@@ -1,0 +1,187 @@
+"""Control channel: the pure decoder, and the asyncio channel against the fake host process."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import sys
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import pytest
+
+from sdrpeer.runtime.control import (
+    MAX_MESSAGE,
+    CommandError,
+    ControlChannel,
+    ControlDecoder,
+    ProtocolError,
+)
+
+FAKE_HOST = Path(__file__).with_name("fake_host.py")
+WAIT = 5.0
+
+
+def pack(msg: Any) -> bytes:
+    return bytes(msgpack.packb(msg))
+
+
+def test_decoder_reassembles_split_messages():
+    d = ControlDecoder()
+    data = pack({"t": "state", "state": "INACTIVE", "ts": 1.0}) + pack({"t": "heartbeat", "x": 1})
+    assert d.feed(data[:5]) == []
+    out = d.feed(data[5:])
+    assert [m["t"] for m in out] == ["state", "heartbeat"]
+
+
+@pytest.mark.parametrize(
+    ("message", "why"),
+    [
+        ([1, 2], "not a map"),
+        ({"x": 1}, "not a map"),
+        ({"t": 5}, "not a map"),
+        ({"t": "hello", "protocol": 2, "pid": 1}, "protocol 2"),
+        ({"t": "state", "state": "RUNNING"}, "unknown state"),
+        ({"t": "reply", "id": "1", "ok": True}, "reply"),
+    ],
+)
+def test_decoder_refuses(message, why):
+    with pytest.raises(ProtocolError, match=why):
+        ControlDecoder().feed(pack(message))
+
+
+def test_decoder_refuses_oversized_messages():
+    with pytest.raises(ProtocolError, match="size limit"):
+        ControlDecoder().feed(pack({"t": "fault", "detail": "x" * MAX_MESSAGE}))
+
+
+def test_decoder_refuses_bytes_that_are_not_msgpack():
+    with pytest.raises(ProtocolError):
+        ControlDecoder().feed(b"\xc1")
+
+
+@dataclass
+class Link:
+    """A channel to a running fake host, with what it reported."""
+
+    channel: ControlChannel
+    proc: asyncio.subprocess.Process
+    reports: list[dict[str, Any]]
+    closed: asyncio.Future[str | None]
+
+    async def report(self, t: str, **match: Any) -> dict[str, Any]:
+        """The first report of type t with the given fields (bounded wait)."""
+        async with asyncio.timeout(WAIT):
+            while True:
+                for r in self.reports:
+                    if r["t"] == t and all(r.get(k) == v for k, v in match.items()):
+                        return r
+                await asyncio.sleep(0.01)
+
+
+async def open_link(mode: str = "", reply_wait: float = 1.0) -> Link:
+    parent, child = socket.socketpair()
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        str(FAKE_HOST),
+        "--mode",
+        mode,
+        "--heartbeat",
+        "0.1",
+        pass_fds=(child.fileno(),),
+        env={**os.environ, "SDRPEER_CONTROL_FD": str(child.fileno()), "SDRPEER_INSTANCE": "T"},
+        stderr=asyncio.subprocess.DEVNULL,
+    )
+    child.close()
+    reports: list[dict[str, Any]] = []
+    closed: asyncio.Future[str | None] = asyncio.get_running_loop().create_future()
+
+    def on_close(reason: str | None) -> None:
+        if not closed.done():
+            closed.set_result(reason)
+
+    handlers = dict.fromkeys(("hello", "state", "heartbeat"), reports.append)
+    channel = ControlChannel(parent, handlers, on_close, name="T", command_timeout=reply_wait)
+    link = Link(channel, proc, reports, closed)
+    await channel.open()
+    return link
+
+
+@pytest.fixture
+async def links() -> AsyncIterator[list[Link]]:
+    opened: list[Link] = []
+    yield opened
+    for link in opened:
+        await link.channel.close()
+        if link.proc.returncode is None:
+            link.proc.kill()
+        await link.proc.wait()
+
+
+async def test_hello_state_heartbeat_and_command_replies(links):
+    link = await open_link()
+    links.append(link)
+    hello = await link.report("hello")
+    assert hello["protocol"] == 1
+    assert hello["pid"] == link.proc.pid
+    assert hello["data"]["tcp"].startswith("127.0.0.1:")
+    await link.report("state", state="INACTIVE")
+    reply = await link.channel.command("activate")
+    assert reply["ok"] is True
+    await link.report("state", state="ACTIVE")
+    await link.report("heartbeat")
+    conn = {"id": "c1", "out": "out", "to": "tcp://127.0.0.1:9", "in": "inp", "policy": {}}
+    await link.channel.command("connect", conn=conn)
+    with pytest.raises(CommandError) as info:
+        await link.channel.command("disconnect", conn_id="nope")
+    assert info.value.reason == "refused"
+    await link.channel.command("exit")
+    assert await asyncio.wait_for(link.proc.wait(), WAIT) == 0
+    assert await asyncio.wait_for(link.closed, WAIT) is None  # EOF, not an error
+
+
+async def test_unknown_command_is_refused(links):
+    link = await open_link()
+    links.append(link)
+    with pytest.raises(CommandError, match="refused"):
+        await link.channel.command("dance")
+
+
+async def test_command_timeout(links):
+    link = await open_link("no_reply", reply_wait=0.2)
+    links.append(link)
+    with pytest.raises(CommandError) as info:
+        await link.channel.command("activate")
+    assert info.value.reason == "timeout"
+    assert not link.channel.closed  # a slow host is not a protocol error
+
+
+@pytest.mark.parametrize("mode", ["garbage", "oversize"])
+async def test_protocol_error_closes_and_counts(links, mode):
+    link = await open_link(mode)
+    links.append(link)
+    reason = await asyncio.wait_for(link.closed, WAIT)
+    assert reason is not None
+    assert reason.startswith("protocol error")
+    assert link.channel.counters["protocol_errors"] == 1
+    assert link.channel.closed
+    with pytest.raises(CommandError, match="closed"):
+        await link.channel.command("activate")
+    # the host sees EOF (or a broken pipe mid-send) and exits by itself
+    await asyncio.wait_for(link.proc.wait(), WAIT)
+
+
+async def test_pending_command_fails_when_the_host_dies(links):
+    link = await open_link("no_reply", reply_wait=WAIT)
+    links.append(link)
+    await link.report("hello")
+    task = asyncio.create_task(link.channel.command("activate"))
+    await asyncio.sleep(0.05)
+    link.proc.kill()
+    with pytest.raises(CommandError) as info:
+        await asyncio.wait_for(task, WAIT)
+    assert info.value.reason == "closed"
