@@ -50,6 +50,7 @@ class Component:
             if name.startswith("_") or name in vars(Component) or name in _INSTANCE_ATTRS:
                 raise ComponentError(f"{cls.__qualname__}.{name}: name reserved by Component")
         for name, p in params.items():
+            p.check()
             hook = p.on_change
             if isinstance(hook, str) and not callable(getattr(cls, hook, None)):
                 raise ComponentError(

@@ -84,16 +84,20 @@ class Param(Generic[T]):
         self.doc = doc
         self.min = min
         self.max = max
-        self.choices: tuple[T, ...] | None = None
-        if choices is not None:
-            self.choices = tuple(self._convert_type(c) for c in choices)
+        self.choices: tuple[T, ...] | None = tuple(choices) if choices is not None else None
         self.on_change: str | Callable[[Any, T], Any] | None = on_change
         """A method name or a function `(component, new_value)`, sync or async, or None."""
-        self.default: T = self.convert(default)
+        self.default: T = default
+        """Converted and checked by `check()` when the Component class is created."""
 
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
-        self.default = self.convert(self.default)  # re-check, now with the name in messages
+
+    def check(self) -> None:
+        """Convert and check the declared choices and default (ParamError if they do not fit)."""
+        if self.choices is not None:
+            self.choices = tuple(self._convert_type(c) for c in self.choices)
+        self.default = self.convert(self.default)
 
     @overload
     def __get__(self, instance: None, owner: type | None = None) -> Param[T]: ...

@@ -2,11 +2,13 @@
 
 How it works: `ConnectorPolicy` is a frozen, validated dataclass; `from_map` reads the policy map
 of a `connect` command or a data-stream hello (every key optional) and `to_map` writes it back.
-Who applies what: the receiving `InPort` applies `push` (all/fifo queue every frame, `skip`
-keeps one frame of every `skip + 1`, `new` keeps only the newest), `buffer` and `full`
-(overwrite evicts the oldest, drop refuses the newest, block never drops and lets the data
-plane pause reading). The sending side applies only `full="block"` backpressure through its
-sink's `drain()`; it does not skip or drop by policy, so frames are not thinned twice.
+Who applies what: the sending data plane applies a connection's policy to its send queue
+(sdrpeer.dataplane.pending: skip, new, buffer, full, block backpressure through `drain()`). The
+receiving `InPortRuntime` applies the policy the InPort declares (or one registered for a
+connection with `InPortRuntime.connect(conn, policy)`) to its read queue: all/fifo queue every
+frame, skip keeps one of every `skip + 1`, new keeps only the newest; when `buffer` frames wait,
+overwrite evicts the oldest, drop refuses the newest, block keeps it (`wait_space` lets the
+reader pause).
 """
 
 from __future__ import annotations
