@@ -95,6 +95,7 @@ class HostedInstance:
             return
         self.state = name
         text = None if error is None else (str(error) or type(error).__name__)
+        log.info("state %s%s", name, f" ({text})" if text else "")
         self.report(control.state(name, self.clock(), text))
 
     def _on_fault(self, kind: str, detail: str) -> None:

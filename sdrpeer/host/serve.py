@@ -1,13 +1,14 @@
 """The running host: data server, control channel (or standalone reporting), command loop, exit.
 
-How it works: `Host.run` creates the instance and its runner, starts the `DataServer` that resolves
+How it works: `Host.run` wraps the instance in its runner, starts the `DataServer` that resolves
 in-port names to our runtime InPorts, then either opens the control channel (sends `hello`, then
-initializes: the runner's state changes go out as `state` reports the moment they happen) or, when
-standalone, logs state changes and activates at once. Commands are queued by the channel and run
-one at a time, in order, by `_serve_commands`, each answered by exactly one `reply`. Whatever ends
-the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent dying) sets `stop`; then
-the runner finalizes (deactivating first if active) within the timeout, connections and the data
-server close, `exit` is answered, and the channel is closed after the last report is written.
+initializes: the runner's state changes go out as `state` reports the moment they happen) or,
+when standalone, activates at once and logs the port counters once a second. Commands are queued
+by the channel and run one at a time, in order, by `_serve_commands`, each answered by exactly one
+`reply`. Whatever ends the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent
+dying) sets `stop`; then the runner finalizes (deactivating first if active) within the timeout,
+connections and the data server close, `exit` is answered, and the channel is closed after the
+last report is written.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ import contextlib
 import logging
 import os
 import re
-import tempfile
 from typing import Any
 
 from sdrpeer.dataplane import DataServer
@@ -60,7 +60,7 @@ class Host:
             )
             report = self.channel.send
         else:
-            report = self._log_report
+            report = _no_report  # standalone: state changes are logged by the instance
         self.inst = HostedInstance(self.name, component, runner, report, clock=now)
         server = DataServer(
             self.inst.in_port, tcp_host=self.config.data_host, unix_path=self._unix_path()
@@ -179,23 +179,21 @@ class Host:
         """Where the Unix data socket goes."""
         run_dir = self.config.run_dir
         if run_dir is None:
+            import tempfile  # noqa: PLC0415 - standalone only; keeps the agent's hosts lighter
+
             run_dir = self.tmp_dir = tempfile.mkdtemp(prefix="sdrpeer-host-")
         safe = re.sub(r"[^A-Za-z0-9_.-]", "_", self.name)[:40] or "host"
         return os.path.join(run_dir, f"{safe}.sock")
-
-    def _log_report(self, msg: control.Message) -> None:
-        """Standalone: show state changes and faults on stderr."""
-        if msg["t"] == "state":
-            error = f" ({msg['error']})" if msg.get("error") else ""
-            log.info("state %s%s", msg["state"], error)
-        elif msg["t"] == "fault":
-            log.warning("fault %s: %s", msg["kind"], msg["detail"])
 
     async def _log_counters(self) -> None:
         """Standalone: port counters once a second."""
         while True:
             await asyncio.sleep(STANDALONE_REPORT_INTERVAL)
             log.info("ports %s", _compact(self.inst.counters()))
+
+
+def _no_report(msg: control.Message) -> None:
+    """Standalone: nobody to report to (the instance and the component log what matters)."""
 
 
 def _compact(counters: dict[str, dict[str, Any]]) -> str:
