@@ -504,3 +504,70 @@ def test_bad_execution_declarations_fail_at_class_creation() -> None:
         Periodic()
     with pytest.raises(ValueError, match="positive"):
         Periodic(hz=0)
+
+
+class Fragile(Component):
+    execution = OnInput("inp")
+    inp = InPort()
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.errors = 0
+
+    def on_execute(self) -> None:
+        raise RuntimeError(f"bad frame {self.inp.get_nowait()}")
+
+    def on_error(self) -> None:
+        self.errors += 1
+        self.inp.get_nowait()
+
+
+async def test_on_input_calls_on_error_per_frame_while_in_error() -> None:
+    comp = Fragile()
+    runner = ComponentRunner(comp)
+    await runner.initialize()
+    await runner.activate()
+    comp.inp.deliver(1, 1, "c")
+    await until(lambda: state_of(runner) is S.ERROR)
+    assert runner.last_error == "on_execute: RuntimeError: bad frame 1"
+    comp.inp.deliver(2, 2, "c")
+    comp.inp.deliver(3, 3, "c")
+    await until(lambda: comp.errors == 2)
+    await asyncio.sleep(0.02)
+    assert comp.errors == 2
+    await runner.finalize()
+
+
+class Slow(Component):
+    execution = Periodic(hz=1000.0)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.inside = False
+        self.overlapped = False
+        self.release = asyncio.Event()
+
+    async def on_execute(self) -> None:
+        self.inside = True
+        await self.release.wait()
+        self.inside = False
+
+    async def on_deactivated(self) -> None:
+        self.overlapped = self.inside
+
+
+async def test_deactivate_waits_for_a_running_async_on_execute() -> None:
+    comp = Slow()
+    runner = ComponentRunner(comp)
+    await runner.initialize()
+    await runner.activate()
+    await until(lambda: comp.inside)
+    stopping = asyncio.ensure_future(runner.deactivate())
+    await asyncio.sleep(0.02)
+    assert not stopping.done()
+    assert state_of(runner) is S.ACTIVE
+    comp.release.set()
+    await asyncio.wait_for(stopping, 1.0)
+    assert not comp.overlapped
+    assert state_of(runner) is S.INACTIVE
+    await runner.finalize()
