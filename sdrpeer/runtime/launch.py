@@ -1,8 +1,8 @@
 """Starting one host process: its argv, its environment, its log file, and dying with the agent.
 
-How it works: `host_argv(spec)` asks the launcher plugins (`sdrpeer.launchers`) for the command
-and falls back to the built-in table of docs/protocol.md section 3 while that module is absent.
-`host_env` adds the four SDRPEER_* variables of the control channel to the agent's environment.
+How it works: `host_argv(spec)` asks the spec's launcher (`sdrpeer.launchers`: python, script,
+exec, or a plugin) for the command; `host_env` adds the SDRPEER_* variables of docs/protocol.md
+(and SDRPEER_PARAMS for exec hosts) to the agent's environment.
 `open_log` appends a start banner to `DATA_DIR/instances/NAME.log` and returns the file the host's
 stdout and stderr go to. `die_with_parent` runs in the child between fork and exec: on Linux it
 asks the kernel to SIGKILL the host when the agent dies (prctl PR_SET_PDEATHSIG), so a crashed
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
-import importlib
 import os
 import shlex
 import sys
@@ -21,42 +20,37 @@ import tempfile
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
+from sdrpeer import launchers
+from sdrpeer.launchers import get_launcher
 from sdrpeer.runtime.spec import InstanceSpec
 
 _PR_SET_PDEATHSIG = 1
 _SIGKILL = 9
 
 
-def _builtin_argv(spec: InstanceSpec) -> list[str]:
-    if isinstance(spec.target, tuple):
-        return list(spec.target)
-    return [sys.executable, "-m", "sdrpeer.host", spec.target]
-
-
 def host_argv(spec: InstanceSpec) -> list[str]:
-    """The command that starts the host of `spec` (launcher plugins, else the built-in table)."""
-    try:
-        launchers: Any = importlib.import_module("sdrpeer.launchers")
-    except ImportError:
-        return _builtin_argv(spec)
-    build = getattr(launchers, "launch_argv", None)
-    if build is None:
-        return _builtin_argv(spec)
-    return [str(a) for a in build(spec.launcher, spec.target)]
+    """The command that starts the host of `spec` (launcher plugins: sdrpeer.launchers)."""
+    target = list(spec.target) if isinstance(spec.target, tuple) else spec.target
+    launcher = get_launcher(spec.launcher)
+    return launcher.command(target, spec.params_map(), python=sys.executable)
 
 
 def host_env(
-    base: Mapping[str, str], *, fd: int, instance: str, data_host: str, run_dir: Path
+    base: Mapping[str, str], spec: InstanceSpec, *, fd: int, data_host: str, run_dir: Path
 ) -> dict[str, str]:
-    """The host's environment: the agent's plus the control channel variables."""
+    """The host's environment: the agent's plus the control channel variables (and params)."""
     env = dict(base)
+    env.pop("SDRPEER_PARAMS", None)
     env.update(
-        SDRPEER_CONTROL_FD=str(fd),
-        SDRPEER_INSTANCE=instance,
-        SDRPEER_DATA_HOST=data_host,
-        SDRPEER_RUN_DIR=str(run_dir),
+        launchers.host_env(
+            instance=spec.name,
+            control_fd=fd,
+            data_host=data_host,
+            run_dir=str(run_dir),
+            params=spec.params_map(),
+        )
     )
     return env
 

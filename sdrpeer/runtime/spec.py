@@ -17,6 +17,7 @@ from pathlib import PurePath
 from typing import Any
 
 from sdrpeer.errors import ConfigError
+from sdrpeer.launchers import known_launchers
 
 LAUNCHERS = ("python", "script", "exec")
 DESIRED = ("active", "inactive")
@@ -72,7 +73,7 @@ class InstanceSpec:
     component: str
     """Logical component name (e.g. CameraRTC)."""
     launcher: str
-    """How the host starts: python (module:Class), script (file.py[:Class]) or exec (argv)."""
+    """How the host starts: python (module:Class), script (file.py[:Class]), exec (argv), plugin."""
     target: str | tuple[str, ...]
     """What the launcher runs: a string, or an argv tuple for exec."""
     params: tuple[tuple[str, Any], ...] = ()
@@ -108,7 +109,7 @@ class InstanceSpec:
             raise SpecError(where, "expected an object")
         _no_unknown(doc, _INSTANCE_KEYS, where)
         name = _name(doc.get("name"), f"{where}.name")
-        launcher = _choice(doc.get("launcher", "python"), LAUNCHERS, f"{where}.launcher")
+        launcher = _launcher(doc.get("launcher", "python"), f"{where}.launcher")
         target = _target(launcher, doc.get("target"), f"{where}.target")
         component = _name(
             doc.get("component", _default_component(name, target)), f"{where}.component"
@@ -229,6 +230,15 @@ def _port(value: Any, where: str) -> str:
     if not isinstance(value, str) or not _PORT.match(value):
         raise SpecError(where, f"expected a port name (an identifier), got {value!r}")
     return value
+
+
+def _launcher(value: Any, where: str) -> str:
+    if value in LAUNCHERS:
+        return str(value)
+    known = known_launchers()
+    if value not in known:
+        raise SpecError(where, f"expected one of {', '.join(known)}, got {value!r}")
+    return str(value)
 
 
 def _choice(value: Any, choices: tuple[str, ...], where: str) -> str:

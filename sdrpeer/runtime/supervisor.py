@@ -29,6 +29,7 @@ from typing import Any
 
 import psutil
 
+from sdrpeer.errors import ConfigError
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
 from sdrpeer.runtime.control import CommandError, ControlChannel, Report
 from sdrpeer.runtime.launch import host_argv, host_env, log_path, open_log, preexec, private_dir
@@ -100,6 +101,7 @@ class Supervisor:
         self.restarts = 0
         self.last_error: str | None = None
         self.exit_noticed: float | None = None
+        self.last_exit: int | None = None
         self.hello: Report = {}
         self.ports: dict[str, Any] = {}
         self.connections: dict[str, tuple[ConnectionSpec, str]] = {}
@@ -215,14 +217,17 @@ class Supervisor:
                 self._set(STOPPED)
 
     async def _spawn(self) -> asyncio.subprocess.Process:
-        argv = host_argv(self.spec)
+        try:
+            argv = host_argv(self.spec)
+        except ConfigError as e:
+            raise OSError(str(e)) from None
         if self._run_dir is None:
             self._run_dir = private_dir(self.name)
         parent, child = socket.socketpair()
         env = host_env(
             os.environ,
+            self.spec,
             fd=child.fileno(),
-            instance=self.name,
             data_host=self.config.data_host,
             run_dir=self._run_dir,
         )
@@ -269,6 +274,7 @@ class Supervisor:
         return proc
 
     async def _after_exit(self, rc: int) -> None:
+        self.last_exit = rc
         if self._watchdog is not None:
             self._watchdog.cancel()
         if self._channel is not None:

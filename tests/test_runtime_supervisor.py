@@ -1,0 +1,164 @@
+"""Supervisor against the fake host: start, states, crash -> noticed at once -> backoff, stop."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import sys
+from collections.abc import AsyncIterator, Callable
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from sdrpeer.runtime.backoff import RestartConfig
+from sdrpeer.runtime.control import CommandError
+from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+
+FAKE_HOST = str(Path(__file__).with_name("fake_host.py"))
+WAIT = 10.0
+
+
+def fake(name: str = "A", mode: str = "") -> InstanceSpec:
+    argv = [sys.executable, FAKE_HOST, f"--mode={mode}"]
+    return InstanceSpec.from_json({"name": name, "launcher": "exec", "target": argv})
+
+
+async def until(what: str, cond: Callable[[], object], wait: float = WAIT) -> None:
+    try:
+        async with asyncio.timeout(wait):
+            while not cond():  # noqa: ASYNC110 (polls plain attributes)
+                await asyncio.sleep(0.005)
+    except TimeoutError:
+        raise AssertionError(f"waited {wait}s for {what}") from None
+
+
+@pytest.fixture
+async def sups(tmp_path: Path) -> AsyncIterator[Callable[..., Supervisor]]:
+    made: list[Supervisor] = []
+
+    def make(spec: InstanceSpec, config: SupervisorConfig | None = None) -> Supervisor:
+        sup = Supervisor(spec, tmp_path, config or SupervisorConfig.fast_test())
+        made.append(sup)
+        return sup
+
+    yield make
+    for sup in made:
+        pid = sup.pid
+        try:
+            await asyncio.wait_for(sup.stop(), 5.0)
+        finally:
+            if pid is not None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+
+
+async def test_start_states_commands_and_log(sups, tmp_path):
+    sup = sups(fake())
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    assert sup.pid is not None
+    assert sup.hello["pid"] == sup.pid
+    assert sup.data_address() is not None
+    assert sup.start_latency is not None
+    assert 0 < sup.start_latency < 5
+    await sup.command("activate")
+    await until("ACTIVE", lambda: sup.state == "ACTIVE")
+    assert [s for _, s in sup.history] == ["STARTING", "CREATED", "INACTIVE", "ACTIVE"]
+    assert all(a <= b for (a, _), (b, _) in zip(sup.history, list(sup.history)[1:], strict=False))
+    await until("a heartbeat", lambda: sup.ports)
+    cpu, rss = sup.sample()
+    assert rss > 1_000_000
+    assert cpu >= 0
+    log = (tmp_path / "instances" / "A.log").read_text()
+    assert "sdrpeer: starting A:" in log
+    assert "fake-host: got activate" in log
+    await sup.stop()
+    assert sup.state == "STOPPED"
+    assert sup.last_exit == 0
+    assert sup.pid is None
+
+
+async def test_sigkill_is_noticed_at_once_and_restarted_with_backoff(sups):
+    sup = sups(fake())
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    old = sup.pid
+    loop = asyncio.get_running_loop()
+    killed = loop.time()
+    os.kill(old, signal.SIGKILL)
+    await until("the exit", lambda: sup.exit_noticed is not None, wait=1.0)
+    assert sup.exit_noticed - killed < 0.2
+    assert sup.last_error == "killed by SIGKILL"
+    await until("the restart", lambda: sup.state == "INACTIVE" and sup.pid != old)
+    assert sup.restarts == 1
+    states = [s for _, s in sup.history]
+    assert states[states.index("BACKOFF") + 1] == "STARTING"
+
+
+async def test_fast_failures_give_up_then_restart_tries_again(sups):
+    spec = InstanceSpec.from_json(
+        {"name": "Bad", "launcher": "exec", "target": [sys.executable, "-c", "exit(3)"]}
+    )
+    config = replace(SupervisorConfig.fast_test(), restart=RestartConfig(0.01, 2, 0.05, 5, 3))
+    sup = sups(spec, config)
+    sup.start()
+    await until("FAILED", lambda: sup.state == "FAILED")
+    assert sup.restarts == 2
+    assert sup.last_error == "exited with code 3"
+    await sup.restart()
+    await until("FAILED again", lambda: sup.state == "FAILED" and sup.restarts == 4)
+
+
+async def test_missing_executable_fails(sups):
+    spec = InstanceSpec.from_json({"name": "X", "launcher": "exec", "target": ["/nonexistent/x"]})
+    config = replace(SupervisorConfig.fast_test(), restart=RestartConfig(0.01, 2, 0.05, 5, 2))
+    sup = sups(spec, config)
+    sup.start()
+    await until("FAILED", lambda: sup.state == "FAILED")
+    assert "cannot start" in (sup.last_error or "")
+
+
+@pytest.mark.parametrize(
+    ("mode", "code"), [("", 0), ("ignore_exit", -signal.SIGTERM), ("ignore_exit,ignore_term", -9)]
+)
+async def test_graceful_stop_escalates(sups, mode, code):
+    sup = sups(fake(mode=mode))  # exit_timeout 1 s, term_timeout 1 s
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    await sup.stop()
+    took = loop.time() - t0
+    assert sup.last_exit == code
+    assert sup.state == "STOPPED"
+    assert took < {0: 0.9, -signal.SIGTERM: 1.9, -9: 2.9}[code]
+    await asyncio.sleep(0.2)
+    assert sup.state == "STOPPED"  # a stop is not a failure: no restart
+    assert sup.restarts == 0
+
+
+async def test_protocol_error_kills_and_restarts(sups):
+    sup = sups(fake(mode="garbage"))
+    sup.start()
+    await until("a restart", lambda: sup.restarts >= 1)
+    assert sup.protocol_errors >= 1
+    assert "protocol error" in (sup.last_error or "")
+
+
+async def test_no_hello_is_killed(sups):
+    config = replace(SupervisorConfig.fast_test(), hello_timeout=0.3)
+    sup = sups(fake(mode="no_hello"), config)
+    sup.start()
+    await until("a kill", lambda: sup.last_exit is not None)
+    assert sup.last_exit == -9
+    assert "no hello within 0.3s" in (sup.last_error or "")
+
+
+async def test_commands_fail_cleanly_when_not_running(sups):
+    sup = sups(fake())
+    with pytest.raises(CommandError, match="closed"):
+        await sup.command("activate")
