@@ -90,9 +90,13 @@ def test_non_frame_shapes_are_malformed(obj: object) -> None:
 def test_complete_frame_over_the_maximum_is_oversized() -> None:
     decoder = FrameDecoder(max_frame=1000)
     decoder.feed(encode_frame(1, b"a" * 10) + encode_frame(2, b"b" * 2000))
+    assert decoder.frames() == [[1, b"a" * 10]]  # the good frame before the bad one
+    assert decoder.failed
     with pytest.raises(FrameError) as info:
         decoder.frames()
     assert info.value.reason == "oversized"
+    with pytest.raises(FrameError):
+        decoder.frames()  # the stream stays broken
 
 
 def test_frame_still_arriving_over_the_maximum_is_oversized() -> None:

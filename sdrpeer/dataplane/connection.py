@@ -320,6 +320,7 @@ class _Link(asyncio.Protocol):
     def connection_lost(self, exc: Exception | None) -> None:
         if not self.reply.done():
             self.reply.set_exception(exc or ConnectionError("closed before the reply"))
+            self.reply.exception()  # retrieved: nobody may be waiting any more
         if not self.closed.done():
             self.closed.set_result(None)
         self.owner._lost(self)

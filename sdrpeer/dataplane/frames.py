@@ -124,7 +124,7 @@ def encode_frame(seq: int, value: object) -> bytes:
 class FrameDecoder:
     """Decodes one connection's byte stream: optionally a first map, then frames."""
 
-    __slots__ = ("_end", "_fed", "_unpacker", "max_frame")
+    __slots__ = ("_end", "_error", "_fed", "_unpacker", "max_frame")
 
     def __init__(self, max_frame: int = DEFAULT_MAX_FRAME) -> None:
         self.max_frame = max_frame
@@ -135,6 +135,7 @@ class FrameDecoder:
         )
         self._fed = 0  # bytes fed so far
         self._end = 0  # stream offset where the last complete object ended
+        self._error: FrameError | None = None
 
     def feed(self, data: bytes) -> None:
         """Add received bytes; FrameError("oversized") if they overflow the read buffer."""
@@ -162,8 +163,19 @@ class FrameDecoder:
         self._check_size(self._unpacker.tell(), HELLO_MAX)
         return obj
 
+    @property
+    def failed(self) -> bool:
+        """True when the stream is broken: the next `frames()` raises the FrameError."""
+        return self._error is not None
+
     def frames(self) -> list[list[Any]]:
-        """Every complete frame fed so far, each a ``[seq, value]`` list, oldest first."""
+        """Every complete frame fed so far, each a ``[seq, value]`` list, oldest first.
+
+        A bad frame raises FrameError, but only once the good frames before it were returned:
+        a call that meets one returns those, sets `failed`, and the next call raises.
+        """
+        if self._error is not None:
+            raise self._error
         unpacker = self._unpacker
         tell = unpacker.tell
         limit = self.max_frame
@@ -177,14 +189,15 @@ class FrameDecoder:
                 if end - start > limit:
                     raise FrameError("oversized", f"frame of {end - start} bytes, max {limit}")
                 out.append(obj)
-        except FrameError:
-            raise
+            if tell() - end > limit:
+                raise FrameError("oversized", f"frame over {limit} bytes (still arriving)")
+        except FrameError as exc:
+            self._error = exc
         except Exception as exc:
-            raise FrameError("malformed", f"{type(exc).__name__}: {exc}") from None
-        finally:
-            self._end = end
-        if tell() - end > limit:
-            raise FrameError("oversized", f"frame over {limit} bytes (still arriving)")
+            self._error = FrameError("malformed", f"{type(exc).__name__}: {exc}")
+        self._end = end
+        if self._error is not None and not out:
+            raise self._error
         return out
 
     def _check_size(self, end: int, limit: int) -> None:

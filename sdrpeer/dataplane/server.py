@@ -170,6 +170,11 @@ class _Receiver(asyncio.Protocol):
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
                 self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+        if self.decoder.failed:
+            try:
+                self.decoder.frames()
+            except FrameError as exc:
+                self._bad(exc)
 
     def _hello(self) -> bool:
         """Handle the hello if it has arrived; True when frames may follow."""

@@ -59,6 +59,7 @@ class StalledReceiver(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
         self._decoder = FrameDecoder()
         self._hello_seen = False
+        self._released = False
         self._server: asyncio.Server | None = None
 
     async def start(self, path: str) -> str:
@@ -79,14 +80,16 @@ class StalledReceiver(asyncio.Protocol):
             self._hello_seen = True
             assert self.transport is not None
             self.transport.write(encode_reply(None))
-            self.transport.pause_reading()
+            if not self._released:
+                self.transport.pause_reading()
         for seq, value in self._decoder.frames():
             self.port.deliver(value, seq, "stalled")
 
     def release(self) -> None:
-        """Start reading (and recording frames)."""
-        assert self.transport is not None
-        self.transport.resume_reading()
+        """Start reading (and recording frames), now or as soon as the sender is connected."""
+        self._released = True
+        if self.transport is not None:
+            self.transport.resume_reading()
 
     async def close(self) -> None:
         """Stop listening and drop the connection."""
