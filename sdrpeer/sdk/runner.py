@@ -11,6 +11,8 @@ One background task is the execution context: `Periodic` keeps a grid of deadlin
 ahead when it falls a whole period behind) and sleeps on a future that state and params changes
 wake early; `OnInput` runs once per frame accepted by the port and not yet consumed. While
 ACTIVE it calls `on_execute`; while in ERROR `on_error` (a failure there is logged once).
+Because a transition waits for a running `on_execute`, an async `on_execute` must return
+(read with `read()`/`get_nowait()`, not an endless `async for`).
 """
 
 from __future__ import annotations
