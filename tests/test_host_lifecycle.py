@@ -166,3 +166,13 @@ def test_oversized_message_closes_the_channel(hosts: HostPool) -> None:
         host.send({"t": "set_params", "id": 1, "params": {"rate": blob}})
     assert host.wait_exit(5.0) == 0
     assert "protocol error" in host.log_text()
+
+
+def test_commands_queued_behind_exit_are_still_answered(hosts: HostPool) -> None:
+    host, _ = hosts.ready(f"{FX}:Counter")
+    host.send({"t": "exit", "id": 100})
+    host.send({"t": "activate", "id": 101})
+    late = host.wait_for(lambda m: m["t"] == "reply" and m["id"] == 101, what="reply 101")
+    assert (late["ok"], late["error"]) == (False, "the host is exiting")
+    assert [m["id"] for m in host.seen if m["t"] == "reply"] == [100, 101]
+    assert host.wait_exit() == 0

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import subprocess
 import sys
 import textwrap
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -206,3 +207,33 @@ def test_footprint(tmp_path: Path) -> None:
     rss_mib = max(r for _, r in runs) / 1024
     assert startup <= 0.3, f"median spawn to INACTIVE {startup * 1000:.0f} ms"
     assert rss_mib <= 25.0, f"idle RSS {rss_mib:.1f} MiB"
+
+
+_GET_PDEATHSIG = """
+import ctypes, sys
+sys.path.insert(0, sys.argv[1])
+from sdrpeer.host.control import arm_parent_death_signal
+assert arm_parent_death_signal()
+value = ctypes.c_int(0)
+ctypes.CDLL(None).prctl(2, ctypes.byref(value), 0, 0, 0)
+print(value.value)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl is Linux-only")
+def test_parent_death_signal_is_sigterm_unless_the_agent_armed_one() -> None:
+    def run(preexec: Callable[[], None] | None = None) -> int:
+        out = subprocess.run(
+            [sys.executable, "-c", _GET_PDEATHSIG, str(ROOT)],
+            capture_output=True,
+            check=True,
+            timeout=10,
+            preexec_fn=preexec,
+        )
+        return int(out.stdout)
+
+    def agent_arms_sigkill() -> None:
+        ctypes.CDLL(None).prctl(1, signal.SIGKILL, 0, 0, 0)
+
+    assert run() == signal.SIGTERM
+    assert run(agent_arms_sigkill) == signal.SIGKILL

@@ -9,7 +9,8 @@ builders (`hello`, `state`, `reply`, `heartbeat`, `fault`) are pure functions of
 callback, writes reports at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once
 when the channel ends: the agent closed it (the agent died), a protocol error closed it, or the
 parent pid changed. A host must never outlive its agent, so `arm_parent_death_signal` also asks
-Linux to send SIGTERM when the parent goes away.
+Linux to send SIGTERM when the parent goes away (unless the agent armed a signal of its own, e.g.
+SIGKILL in its pre-exec hook: that one is kept).
 """
 
 from __future__ import annotations
@@ -158,13 +159,16 @@ def fault(kind: str, detail: str) -> Message:
 
 
 def arm_parent_death_signal(sig: int = signal.SIGTERM) -> bool:
-    """Ask Linux to send `sig` when our parent dies (PR_SET_PDEATHSIG); False if unavailable."""
+    """Have Linux send `sig` when our parent dies, unless the agent already armed one (it wins)."""
     if not sys.platform.startswith("linux"):
         return False
     import ctypes  # noqa: PLC0415 - only on Linux, only here
 
     try:
         libc = ctypes.CDLL(None, use_errno=True)
+        current = ctypes.c_int(0)
+        if libc.prctl(2, ctypes.byref(current), 0, 0, 0) == 0 and current.value:  # GET
+            return True
         return int(libc.prctl(1, sig, 0, 0, 0)) == 0  # 1 = PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         return False

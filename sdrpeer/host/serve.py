@@ -171,6 +171,9 @@ class Host:
         if self.exit_command is not None:
             error = None if code == 0 else self._error
             self.channel.send(control.reply(self.exit_command.id, code == 0, error))
+        while not self._queue.empty():  # every command gets exactly one reply
+            late = self._queue.get_nowait()
+            self.channel.send(control.reply(late.id, False, "the host is exiting"))
         self.channel.close()
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self.channel.wait_closed(), 1.0)
