@@ -31,7 +31,7 @@ class CommandError(SdrpeerError):
     """A command the agent sent cannot be carried out as given (the message names the field)."""
 
 
-async def _maybe_await(value: object) -> None:
+async def maybe_await(value: object) -> None:
     """Await `value` if the API we called turned out to be async."""
     if inspect.isawaitable(value):
         await value
@@ -124,12 +124,12 @@ class HostedInstance:
 
     async def execute(self, t: str, msg: control.Message) -> None:
         """Carry out command `t` (raises CommandError or what the runner raised)."""
-        await _maybe_await(self._handlers[t](msg))
+        await maybe_await(self._handlers[t](msg))
 
     async def _set_params(self, msg: control.Message) -> None:
         """Change typed parameters."""
         params = _field(msg, "params", dict)
-        await _maybe_await(self.runner.set_params(params))
+        await maybe_await(self.runner.set_params(params))
 
     async def _connect(self, msg: control.Message) -> None:
         """Open a data stream from one of our OutPorts."""
@@ -171,7 +171,7 @@ class HostedInstance:
         conn_id, connection, port = self._lookup(msg)
         del self.connections[conn_id]
         port.detach(connection)
-        await _maybe_await(connection.close())
+        await maybe_await(connection.close())
         log.info("connection %s closed", conn_id)
 
     async def _repoint(self, msg: control.Message) -> None:
@@ -190,6 +190,6 @@ class HostedInstance:
             del self.connections[conn_id]
             port.detach(connection)
             try:
-                await _maybe_await(connection.close())
+                await maybe_await(connection.close())
             except Exception:
                 log.exception("closing connection %s", conn_id)

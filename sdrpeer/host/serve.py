@@ -22,7 +22,7 @@ from typing import Any
 
 from sdrpeer.dataplane import DataServer
 from sdrpeer.host import control
-from sdrpeer.host.instance import HostedInstance, _maybe_await
+from sdrpeer.host.instance import HostedInstance, maybe_await
 from sdrpeer.host.main import (
     FINALIZE_TIMEOUT,
     STANDALONE_REPORT_INTERVAL,
@@ -65,7 +65,7 @@ class Host:
         server = DataServer(
             self.inst.in_port, tcp_host=self.config.data_host, unix_path=self._unix_path()
         )
-        await _maybe_await(server.start())
+        await maybe_await(server.start())
         data = dict(server.addresses)
         if self.channel is not None:
             self.channel.send(
@@ -90,7 +90,7 @@ class Host:
             task.cancel()
         code = await self._finalize(runner)
         await self.inst.close_connections()
-        await _maybe_await(server.close())
+        await maybe_await(server.close())
         await self._goodbye(code)
         return code
 
