@@ -54,6 +54,8 @@ from sdrpeer.record import (
     metrics_to_json,
     record_to_json,
 )
+from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.runtime.supervisor import SupervisorConfig
 from sdrpeer.wire import REASONS, Codec, Keyring
 
 if TYPE_CHECKING:
@@ -88,6 +90,7 @@ class Agent:
         self._last_publish = -1e9
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
+        self.instances = self._make_instances()
 
     @property
     def name(self) -> str:
@@ -127,6 +130,7 @@ class Agent:
         self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
         self.shell.attach(self.core)
         await self._start_api(token)
+        await self.instances.start()
         self._publish(force=True)
         self._write_agent_json(addr)
         self.events.add(
@@ -150,6 +154,7 @@ class Agent:
         """Leave the cluster gracefully, then close the API and the socket."""
         for task in self._tasks:
             task.cancel()
+        await self.instances.stop()
         if self.shell is not None and self.core is not None and leave:
             self.shell.leave()
             await asyncio.sleep(max(0.3, 3 * self.core.config.gossip_interval))
@@ -207,6 +212,7 @@ class Agent:
                 if changes:
                     self.robot.set(now, changes)
                     self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
+            self.instances.sample()
             self._publish()
 
     def _sample(self, now: float) -> Metrics:
@@ -227,7 +233,8 @@ class Agent:
             force = True
         self._update_rates(now)
         links = self.links.snapshot(now)
-        record = RobotRecord(metrics, links, self.api_url, self.config.priority, (), time.time())
+        infos = self.instances.infos()
+        record = RobotRecord(metrics, links, self.api_url, self.config.priority, infos, time.time())
         if (
             force
             or worth_publishing(self._published, record)
@@ -245,6 +252,12 @@ class Agent:
             r["in_s"] = (c["bytes_in"] - r["in"]) / dt
             r["out_s"] = (c["bytes_out"] - r["out"]) / dt
         r["t"], r["in"], r["out"] = now, c["bytes_in"], c["bytes_out"]
+
+    # ----------------------------------------------------------------- component instances
+    def _make_instances(self) -> InstanceManager:
+        """The instance manager: hosts bind data servers on this robot's gossip address."""
+        config = SupervisorConfig(data_host=parse_hostport(self.config.bind)[0])
+        return InstanceManager(self.config.data_dir, config, lambda: self._publish(force=True))
 
     # ----------------------------------------------------------------- core events
     def _on_core_event(self, event: CoreEvent) -> None:

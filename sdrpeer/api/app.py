@@ -10,6 +10,7 @@ How it works:
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import json
 import logging
@@ -20,8 +21,12 @@ from aiohttp import web
 from prometheus_client import CollectorRegistry
 
 from sdrpeer.api import metrics
-from sdrpeer.api.view import AgentView
+from sdrpeer.api.view import AgentView, InstancesView
 from sdrpeer.errors import ConfigError
+from sdrpeer.runtime import logfile
+from sdrpeer.runtime.control import CommandError
+from sdrpeer.runtime.manager import ACTIONS as INSTANCE_ACTIONS
+from sdrpeer.runtime.spec import InstanceSpec
 
 log = logging.getLogger(__name__)
 
@@ -155,6 +160,111 @@ async def post_robot(request: web.Request) -> web.Response:
     return web.json_response({"name": view.name, "metrics": new_metrics})
 
 
+# --- component instances (sdrpeer.runtime) ----------------------------------------------------
+LOG_FOLLOW_POLL = 0.2
+LOG_FOLLOW_MAX_S = 3600
+
+
+def instances_of(request: web.Request) -> InstancesView:
+    """The agent's instance manager; 404 on an agent that hosts no instances."""
+    manager = getattr(view_of(request), "instances", None)
+    if not isinstance(manager, InstancesView):
+        raise web.HTTPNotFound(reason="this agent does not host component instances")
+    return manager
+
+
+def _known(request: web.Request) -> tuple[InstancesView, str]:
+    manager, name = instances_of(request), request.match_info["name"]
+    if manager.log_file(name) is None:
+        raise web.HTTPNotFound(reason=f"no instance {name!r} on {view_of(request).name}")
+    return manager, name
+
+
+async def get_instances(request: web.Request) -> web.Response:
+    """GET /v1/instances: every desired or running instance with its status."""
+    return web.json_response(instances_of(request).status())
+
+
+async def post_instances(request: web.Request) -> web.Response:
+    """POST /v1/instances {"instances": [...], "replace": bool}: merge or set the desired set."""
+    manager = instances_of(request)
+    try:
+        body = await request.json()
+    except json.JSONDecodeError as exc:
+        return json_error(400, f"body is not JSON: {exc}")
+    if not isinstance(body, dict) or not isinstance(body.get("instances"), list):
+        return json_error(400, 'body must be {"instances": [...], "replace": false}')
+    replace_all = body.get("replace", False)
+    if not isinstance(replace_all, bool):
+        return json_error(400, "field 'replace': expected true or false")
+    try:
+        specs = [
+            InstanceSpec.from_json(d, f"instances[{i}]") for i, d in enumerate(body["instances"])
+        ]
+    except ConfigError as exc:
+        return json_error(400, str(exc))
+    names = [s.name for s in specs]
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            return json_error(400, f"field 'instances[{i}].name': {name!r} given twice")
+    desired = manager.set_desired(specs, replace_all=replace_all)
+    return web.json_response({"desired": desired})
+
+
+async def delete_instance(request: web.Request) -> web.Response:
+    """DELETE /v1/instances/{name}: stop the instance and forget it."""
+    manager, name = instances_of(request), request.match_info["name"]
+    if not manager.remove(name):
+        return json_error(404, f"no instance {name!r} in the desired set")
+    return web.json_response({"removed": name})
+
+
+async def post_instance_action(request: web.Request) -> web.Response:
+    """POST /v1/instances/{name}/{action}: activate, deactivate, reset or restart."""
+    manager, name = instances_of(request), request.match_info["name"]
+    action = request.match_info["action"]
+    if action not in INSTANCE_ACTIONS:
+        return json_error(400, f"unknown action {action!r} (known: {', '.join(INSTANCE_ACTIONS)})")
+    try:
+        return web.json_response(await manager.act(name, action))
+    except KeyError:
+        return json_error(404, f"no instance {name!r} in the desired set")
+    except CommandError as exc:
+        return json_error(409, f"{name}: {exc}")
+
+
+async def get_instance_logs(request: web.Request) -> web.StreamResponse:
+    """GET /v1/instances/{name}/logs?tail=N[&follow=1]: the log as text; follow streams it."""
+    manager, name = _known(request)
+    path = manager.log_file(name)
+    assert path is not None
+    lines = _int_param(request, "tail", 100, 0, logfile.MAX_TAIL_LINES)
+    if request.query.get("follow", "0") in ("0", "false", ""):
+        return web.Response(body=logfile.tail(path, lines), content_type="text/plain")
+    max_s = _int_param(request, "max_s", LOG_FOLLOW_MAX_S, 1, LOG_FOLLOW_MAX_S)
+    response = web.StreamResponse(headers={"Content-Type": "text/plain; charset=utf-8"})
+    response.enable_chunked_encoding()
+    await response.prepare(request)
+    follower = logfile.Follower(path)
+    await response.write(logfile.tail(path, lines))
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + max_s
+    try:
+        while loop.time() < deadline:
+            transport = request.transport
+            if transport is None or transport.is_closing():
+                break
+            data = follower.read_new()
+            if data:
+                await response.write(data)
+            else:
+                await asyncio.sleep(LOG_FOLLOW_POLL)
+        await response.write_eof()
+    except (ConnectionResetError, ConnectionError):
+        pass
+    return response
+
+
 ROUTES: list[Route] = [
     Route("GET", "/healthz", get_healthz),
     Route("GET", "/metrics", get_metrics),
@@ -162,6 +272,11 @@ ROUTES: list[Route] = [
     Route("GET", "/v1/agent", get_agent),
     Route("GET", "/v1/events", get_events),
     Route("POST", "/v1/robot", post_robot),
+    Route("GET", "/v1/instances", get_instances),
+    Route("POST", "/v1/instances", post_instances),
+    Route("DELETE", "/v1/instances/{name}", delete_instance),
+    Route("POST", "/v1/instances/{name}/{action}", post_instance_action),
+    Route("GET", "/v1/instances/{name}/logs", get_instance_logs),
 ]
 
 

@@ -5,7 +5,9 @@ The agent implements this protocol; the API and its tests depend only on it.
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
 
 
 class AgentView(Protocol):
@@ -49,4 +51,42 @@ class AgentView(Protocol):
 
         Returns the new metrics dict. Raises sdrpeer.errors.ConfigError on a bad field.
         """
+        ...
+
+
+@runtime_checkable
+class InstancesView(Protocol):
+    """The component instances an agent hosts (`sdrpeer.runtime.manager.InstanceManager`).
+
+    An agent that hosts instances has it as its `instances` attribute; the /v1/instances routes
+    answer 404 on an agent without one.
+    """
+
+    def status(self) -> list[dict[str, Any]]:
+        """Every desired or running instance: name, component, state, desired, role, pid,
+        cpu_pct, rss, restarts, since, connections, data, last_error, ports, start_latency_s."""
+        ...
+
+    def status_of(self, name: str) -> dict[str, Any]:
+        """One instance's status dict."""
+        ...
+
+    def desired(self) -> dict[str, Any]:
+        """The desired set: name -> InstanceSpec."""
+        ...
+
+    def set_desired(self, specs: Iterable[Any], *, replace_all: bool = False) -> list[str]:
+        """Merge InstanceSpecs into the desired set (or replace it); the names now desired."""
+        ...
+
+    def remove(self, name: str) -> bool:
+        """Take an instance out of the desired set; False if it was not there."""
+        ...
+
+    async def act(self, name: str, action: str) -> dict[str, Any]:
+        """activate | deactivate | reset | restart; KeyError for an unknown instance."""
+        ...
+
+    def log_file(self, name: str) -> Path | None:
+        """The instance's log file, None for an instance the agent does not know."""
         ...

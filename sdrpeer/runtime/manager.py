@@ -1,0 +1,283 @@
+"""The agent's instance manager: the desired set, one supervisor per instance, the reconcile loop.
+
+How it works: `set_desired` / `remove` change the desired set and wake the loop. The loop runs on
+every change (a supervisor's state, a hello, a finished action) and at least every `interval`
+seconds: it turns each supervisor into an `Observed`, asks the pure `Reconciler` for actions at
+`loop.time()`, and runs each action as its own task (start/stop through the supervisor, the rest
+as control commands). When an action finishes the reconciler hears `done`; a failed one only
+after `retry_after` seconds, so a refusing host is not hammered. `status()` and `infos()` are what
+the API and the gossip record show; `on_change` tells the agent to publish at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable, Iterable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from sdrpeer.record import InstanceInfo
+from sdrpeer.runtime.control import CommandError
+from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
+from sdrpeer.runtime.spec import InstanceSpec, connection_to_json
+from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+
+log = logging.getLogger(__name__)
+ACTIONS = ("activate", "deactivate", "reset", "restart")
+_OBSERVED = {
+    "STOPPED": "stopped",
+    "STARTING": "starting",
+    "BACKOFF": "starting",
+    "CREATED": "starting",
+    "STOPPING": "stopping",
+    "FINALIZED": "stopping",
+}
+_RECORD_ROLE = {"active": "primary", "standby": "standby"}  # sdrpeer.record.ROLES
+
+
+class InstanceManager:
+    """Owns the desired set and the supervisors of one agent."""
+
+    def __init__(
+        self,
+        data_dir: Path,
+        config: SupervisorConfig,
+        on_change: Callable[[], None] = lambda: None,
+        *,
+        interval: float = 0.5,
+        retry_after: float = 1.0,
+    ) -> None:
+        self.data_dir = data_dir
+        self.config = config
+        self.on_change = on_change
+        self.interval = interval
+        self.retry_after = retry_after
+        self.reconciler = Reconciler()
+        self._desired: dict[str, InstanceSpec] = {}
+        self._sups: dict[str, Supervisor] = {}
+        self._wake = asyncio.Event()
+        self._loop_task: asyncio.Task[None] | None = None
+        self._actions: set[asyncio.Task[None]] = set()
+
+    # ----------------------------------------------------------------- desired set
+    def desired(self) -> dict[str, InstanceSpec]:
+        """The desired set, by name."""
+        return dict(self._desired)
+
+    def set_desired(self, specs: Iterable[InstanceSpec], *, replace_all: bool = False) -> list[str]:
+        """Merge specs into the desired set (or replace it); returns the names now desired."""
+        new = {} if replace_all else dict(self._desired)
+        new.update({s.name: s for s in specs})
+        self._desired = new
+        self.wake()
+        return sorted(new)
+
+    def remove(self, name: str) -> bool:
+        """Take an instance out of the desired set (it is stopped); False if it was not there."""
+        found = self._desired.pop(name, None) is not None
+        self.wake()
+        return found
+
+    async def act(self, name: str, action: str) -> dict[str, Any]:
+        """activate/deactivate (changes `desired`), reset (the command), restart (the host)."""
+        spec = self._desired.get(name)
+        if spec is None:
+            raise KeyError(name)
+        if action in ("activate", "deactivate"):
+            new = "active" if action == "activate" else "inactive"
+            self._desired[name] = replace(spec, desired=new)
+        elif action == "reset":
+            sup = self._sups.get(name)
+            if sup is None:
+                raise CommandError("reset", "closed", f"{name} is not running")
+            await sup.command("reset")
+        elif action == "restart":
+            sup = self._sups.get(name)
+            if sup is not None:
+                await sup.restart()
+        else:
+            raise ValueError(f"unknown action {action!r} (known: {', '.join(ACTIONS)})")
+        self.wake()
+        return self.status_of(name)
+
+    # ----------------------------------------------------------------- loop
+    def wake(self) -> None:
+        """Reconcile soon."""
+        self._wake.set()
+
+    async def start(self) -> None:
+        """Start the reconcile loop."""
+        self._loop_task = asyncio.create_task(self._loop(), name="instance-manager")
+
+    async def stop(self) -> None:
+        """Stop the loop and every host, gracefully and in parallel."""
+        if self._loop_task is not None:
+            self._loop_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._loop_task
+        for task in list(self._actions):
+            task.cancel()
+        await asyncio.gather(*self._actions, return_exceptions=True)
+        await asyncio.gather(*(s.stop() for s in self._sups.values()), return_exceptions=True)
+
+    async def _loop(self) -> None:
+        while True:
+            self._wake.clear()
+            try:
+                self.reconcile_once()
+            except Exception:
+                log.exception("reconcile failed")
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(self.interval):
+                    await self._wake.wait()
+
+    def reconcile_once(self) -> list[Action]:
+        """One reconcile pass: plan and launch the actions."""
+        for name, sup in list(self._sups.items()):
+            spec = self._desired.get(name)
+            if spec is None and sup.state == "STOPPED":
+                del self._sups[name]
+            elif spec is not None and spec.same_process(sup.spec):
+                sup.spec = spec  # lifecycle or links changed: the running host stays
+        observed = {name: observe(sup) for name, sup in self._sups.items()}
+        now = asyncio.get_running_loop().time()
+        actions = self.reconciler.plan(now, self._desired, observed)
+        for action in actions:
+            task = asyncio.create_task(self._execute(action))
+            self._actions.add(task)
+            task.add_done_callback(self._actions.discard)
+        return actions
+
+    async def _execute(self, a: Action) -> None:
+        ok = False
+        try:
+            await self._perform(a)
+            ok = True
+        except CommandError as e:
+            log.warning("%s: %s failed: %s", a.instance, a.kind, e)
+            sup = self._sups.get(a.instance)
+            if sup is not None:
+                sup.last_error = f"{a.kind}: {e}"
+        except Exception:
+            log.exception("%s: %s failed", a.instance, a.kind)
+        finally:
+            if ok:
+                self.reconciler.done(a.instance)
+                self.wake()
+            else:
+                loop = asyncio.get_running_loop()
+                loop.call_later(self.retry_after, self._retry, a.instance)
+
+    def _retry(self, name: str) -> None:
+        self.reconciler.done(name)
+        self.wake()
+
+    async def _perform(self, a: Action) -> None:
+        if a.kind == "start":
+            spec = self._desired[a.instance]
+            sup = self._sups.get(a.instance)
+            if sup is None:
+                sup = Supervisor(spec, self.data_dir, self.config, self._changed)
+                self._sups[a.instance] = sup
+            sup.spec = spec
+            sup.start()
+            return
+        sup = self._sups[a.instance]
+        if a.kind == "stop":
+            await sup.stop()
+            if a.instance not in self._desired:
+                self._sups.pop(a.instance, None)
+            return
+        conn = a.conn
+        if a.kind in ("activate", "deactivate"):
+            await sup.command(a.kind)
+        elif a.kind == "connect" and conn is not None and a.to is not None:
+            wire = {"id": conn.id, "out": conn.out_port, "to": a.to, "in": conn.in_port}
+            await sup.command("connect", conn={**wire, "policy": conn.policy_map()})
+            sup.connections[conn.id] = (conn, a.to)
+        elif a.kind == "repoint" and conn is not None and a.to is not None:
+            await sup.command("repoint", conn_id=conn.id, to=a.to)
+            sup.connections[conn.id] = (conn, a.to)
+        elif a.kind == "disconnect" and conn is not None:
+            sup.connections.pop(conn.id, None)
+            await sup.command("disconnect", conn_id=conn.id)
+
+    def _changed(self, sup: Supervisor) -> None:
+        self.wake()
+        self.on_change()
+
+    # ----------------------------------------------------------------- views
+    def sample(self) -> None:
+        """Measure every host's CPU % and RSS (call once per metrics tick)."""
+        for sup in self._sups.values():
+            sup.sample()
+
+    def log_file(self, name: str) -> Path | None:
+        """The log file of an instance this agent knows, else None."""
+        sup = self._sups.get(name)
+        if sup is not None:
+            return sup.log_file()
+        return self.data_dir / "instances" / f"{name}.log" if name in self._desired else None
+
+    def status_of(self, name: str) -> dict[str, Any]:
+        """One instance's status dict (see `status`)."""
+        spec = self._desired.get(name)
+        sup = self._sups.get(name)
+        if sup is None:
+            assert spec is not None
+            sup = Supervisor(spec, self.data_dir, self.config)
+        return status_dict(sup, spec)
+
+    def status(self) -> list[dict[str, Any]]:
+        """Every desired or running instance, sorted by name."""
+        return [self.status_of(n) for n in sorted(set(self._desired) | set(self._sups))]
+
+    def infos(self) -> tuple[InstanceInfo, ...]:
+        """What the robot's gossip record says about its instances."""
+        return tuple(
+            InstanceInfo(
+                name=sup.name,
+                component=sup.spec.component,
+                state=sup.state.lower(),
+                role=_RECORD_ROLE.get(sup.spec.role, sup.spec.role),
+                cpu_pct=round(sup.cpu_pct, 1),
+                rss=sup.rss,
+            )
+            for _, sup in sorted(self._sups.items())
+        )
+
+
+def observe(sup: Supervisor) -> Observed:
+    """What the reconciler needs to know of one supervisor."""
+    status = _OBSERVED.get(sup.state, sup.state)
+    return Observed(status, sup.spec, sup.data_address(), dict(sup.connections))
+
+
+def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
+    """The JSON status of one instance (GET /v1/instances)."""
+    desired = spec.desired if spec is not None else "removed"
+    conns = []
+    for cid, (conn, addr) in sorted(sup.connections.items()):
+        conns.append({**connection_to_json(conn), "id": cid, "addr": addr})
+    return {
+        "name": sup.name,
+        "component": sup.spec.component,
+        "state": sup.state,
+        "desired": desired,
+        "role": sup.spec.role,
+        "pid": sup.pid,
+        "cpu_pct": round(sup.cpu_pct, 1),
+        "rss": sup.rss,
+        "restarts": sup.restarts,
+        "since": round(sup.since, 3),
+        "connections": conns,
+        "data": dict(sup.hello.get("data") or {}),
+        "last_error": sup.last_error,
+        "ports": sup.ports,
+        "start_latency_s": None if sup.start_latency is None else round(sup.start_latency, 4),
+        "protocol_errors": sup.protocol_errors,
+        "log": str(sup.log_file()),
+    }
