@@ -339,6 +339,7 @@ class Agent:
                     "record_version": version,
                     "metrics": doc["metrics"],
                     "links": doc["links"],
+                    "instances": doc.get("instances", []),
                 }
             )
         return out

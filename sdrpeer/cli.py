@@ -194,6 +194,7 @@ def cmd_robot_set(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The whole `sdrpeer` argument parser."""
     from sdrpeer.cli_lab import add_lab_parsers  # noqa: PLC0415 - cli_lab imports this module
+    from sdrpeer.runtime.commands import add_instance_parsers  # noqa: PLC0415 - same
 
     parser = argparse.ArgumentParser(prog="sdrpeer", description="A leaderless robot platform.")
     parser.add_argument("--version", action="version", version=f"sdrpeer {__version__}")
@@ -216,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot_set.add_argument("robot", help="robot name, e.g. robot-1")
     robot_set.add_argument("assignments", nargs="+", metavar="KEY=VALUE", help="e.g. battery=30%%")
     robot_set.set_defaults(func=cmd_robot_set)
+    add_instance_parsers(sub, client, as_json)
     add_lab_parsers(sub)
     return parser
 

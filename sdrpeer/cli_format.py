@@ -230,3 +230,31 @@ def format_event(event: Mapping[str, Any], *, color: bool = False, tz: tzinfo | 
         f"{event.get('robot', MISSING)!s:<9} {detail_text}"
     )
     return line.rstrip()
+
+
+INSTANCE_COLUMNS = ("NAME", "COMPONENT", "STATE", "ROLE", "PID", "CPU", "RSS", "RESTARTS", "SINCE")
+INSTANCE_COLORS = {"ACTIVE": "32", "INACTIVE": "36", "ERROR": "31", "FAILED": "31", "BACKOFF": "33"}
+
+
+def format_instances(
+    instances: Sequence[Mapping[str, Any]], *, now: float, color: bool = False
+) -> str:
+    """The `sdrpeer instances` table; SINCE is how long ago the state last changed."""
+    rows = []
+    for i in instances:
+        state = str(i.get("state", MISSING))
+        since = _num(i.get("since"))
+        rows.append(
+            [
+                str(i.get("name", MISSING)),
+                str(i.get("component", MISSING)),
+                paint(state, INSTANCE_COLORS.get(state, ""), color),
+                str(i.get("role", MISSING)),
+                str(i.get("pid") or MISSING),
+                human_percent(i.get("cpu_pct")),
+                human_bytes(i.get("rss")),
+                str(i.get("restarts", MISSING)),
+                MISSING if since is None else human_seconds(max(0.0, now - since)),
+            ]
+        )
+    return render_table(INSTANCE_COLUMNS, rows)
