@@ -107,3 +107,20 @@ def test_two_real_instances_connected_reach_active_and_frames_flow(
     procs = [psutil.Process(p) for p in pids if psutil.pid_exists(p)]
     _, alive = psutil.wait_procs(procs, timeout=5)
     assert alive == [], f"hosts outlived the agent: {alive}"
+
+
+def test_agent_stop_stops_hosts_gracefully(cluster: RealCluster) -> None:
+    agent = cluster.start("robot-1")
+    spec = {"name": "Rec", "target": "tests.components_fixture:Recorder"}
+    status, body = http("POST", agent.api + "/v1/instances", {"instances": [spec]}, agent.token)
+    assert status == 200, body
+    pid = cluster.wait_until(
+        lambda: instances(agent)["Rec"],
+        lambda i: i["state"] == "ACTIVE",
+        "Rec ACTIVE",
+    )["pid"]
+    assert cluster.terminate(agent, timeout=10) == 0
+    assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    log = agent.log.read_text()
+    assert "SIGTERM" not in log  # the host left on the exit command
+    assert "SIGKILL" not in log

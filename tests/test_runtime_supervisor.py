@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from sdrpeer.procstats import ProcessTreeMeter
 from sdrpeer.runtime.backoff import RestartConfig
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.spec import InstanceSpec
@@ -162,3 +163,12 @@ async def test_commands_fail_cleanly_when_not_running(sups):
     sup = sups(fake())
     with pytest.raises(CommandError, match="closed"):
         await sup.command("activate")
+
+
+async def test_the_agents_process_tree_meter_counts_hosts(sups):
+    sup = sups(fake())
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    _, host_rss = sup.sample()
+    _, tree_rss = ProcessTreeMeter(os.getpid(), include_root=False).measure()
+    assert tree_rss >= host_rss > 0
