@@ -1,0 +1,457 @@
+"""`sdrpeer profile pkg.mod:Class`: measure what one component costs, in a real host process.
+
+How it works: `run_profile` starts the component the way an agent does: the `python` launcher
+(sdrpeer.launchers) builds the `python -m sdrpeer.host` command, the host inherits one end of a
+socket pair as its control channel (sdrpeer.runtime.control.ControlChannel on our end) and
+reports `hello` and `state INACTIVE`. Every OutPort is then connected (a `connect` command) to
+an in-process `DataServer` that counts and discards, so frames really cross a socket; every
+InPort is fed by an in-process data-plane `Connection` at `input_rate` Hz with values from an
+input source (`make_source`: synthetic images for `image`, plausible maps for `alarm`, `pose`
+and `odometry`, a generic map otherwise, or `--input port=FILE`: a recorded file of concatenated
+msgpack values, replayed in a loop). The host is
+activated and, for `seconds`, its CPU % (of one core) and RSS are sampled with psutil every
+`sample_interval` seconds, while its heartbeats (every 0.5 s) give the port counters. Rates are
+counter differences between the first and the last heartbeat of the window over the host's
+own heartbeat timestamps. Finally the host is deactivated and told to exit.
+
+Output (YAML, written by `write_profile`; the system files of the allocation issue read it):
+
+    component: Camera                      # the class name from the host's hello
+    target: components.camera:Camera       # what was launched (python launcher)
+    params: {rate: 10.0, ...}              # every param's value in the run (from hello)
+    seconds: 10.0                          # the measured window, ACTIVE throughout
+    cpu: {mean_pct: 4.2, peak_pct: 10.0, samples: 100}   # % of one core, psutil samples
+    memory: {peak_rss: 31457280, peak_rss_human: 31.46MB, mean_rss: ...}  # bytes; MB = 10^6
+    ports:
+      image: {direction: out, frames_per_s: 10.0, bytes_per_s: 192370.0}
+    inputs: {}                             # in-port -> input source used (e.g. image:160x120)
+    input_rate: 10.0                       # Hz at which each in-port was fed
+    measured_at: '2025-01-01T12:00:00+00:00'
+    host: {hostname, platform, machine, python, cpus, memory_total}
+
+`bytes_per_s` counts wire bytes (msgpack frames, overhead included): for an OutPort the host's
+`bytes_out` counter, for an InPort the bytes our feeding connection wrote to it (the host's
+`bytes_in` counts raw bytes values only). `frames_per_s` of an InPort counts frames the host
+received. The human size uses sdrpeer.units (powers of 1000), so `parse_size` reads it back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import datetime as dt
+import math
+import os
+import platform
+import shutil
+import socket
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import psutil
+import yaml
+
+from sdrpeer.dataplane import Connection, DataServer
+from sdrpeer.errors import ConfigError, SdrpeerError
+from sdrpeer.launchers import get_launcher, host_env
+from sdrpeer.procstats import ProcessTreeMeter
+from sdrpeer.runtime.control import ControlChannel, Report
+from sdrpeer.runtime.launch import private_dir
+from sdrpeer.sdk.policy import ConnectorPolicy
+from sdrpeer.units import format_size
+
+__all__ = [
+    "GENERATORS",
+    "ProfileError",
+    "ProfileRequest",
+    "add_profile_parser",
+    "make_source",
+    "run_profile",
+    "write_profile",
+]
+
+HEARTBEAT = 0.5
+Source = Callable[[int, float], Any]
+"""An input source: (seq from 1, time in seconds) -> the value to send."""
+
+
+class ProfileError(SdrpeerError):
+    """The component could not be profiled (did not start, went to ERROR, ...)."""
+
+
+@dataclass(frozen=True)
+class ProfileRequest:
+    """What to profile and how."""
+
+    target: str
+    """`package.module:Class`."""
+    seconds: float = 10.0
+    """Length of the measured window (>= 1: rates need two heartbeats)."""
+    params: dict[str, str] = field(default_factory=dict)
+    """Params as `--param k=v` strings."""
+    inputs: dict[str, str] = field(default_factory=dict)
+    """InPort -> input source (a generator name or a msgpack file); others get the default."""
+    input_rate: float = 10.0
+    """Frames per second fed to each InPort."""
+    sample_interval: float = 0.1
+    """Seconds between two CPU/RSS samples."""
+    start_timeout: float = 15.0
+    """Seconds the host may take to report INACTIVE."""
+
+
+class _Sink:
+    """An InPort stand-in on our data server: counts and discards."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+
+    def deliver(self, value: Any, seq: int, conn: str) -> None:
+        self.frames += 1
+
+    def refuse(self) -> None:
+        """Nothing to do: the server logs it."""
+
+
+@dataclass
+class _Run:
+    """State of one profiling run, filled by the control channel's report handlers."""
+
+    hello: asyncio.Future[Report]
+    inactive: asyncio.Future[Report]
+    feeders: dict[str, Connection] = field(default_factory=dict)
+    beats: list[tuple[float, dict[str, dict[str, int]], dict[str, int]]] = field(
+        default_factory=list
+    )
+    recording: bool = False
+    error: str | None = None
+
+    def on_state(self, msg: Report) -> None:
+        state = msg.get("state")
+        if state == "ERROR":
+            self.error = str(msg.get("error"))
+        if state in ("INACTIVE", "ERROR") and not self.inactive.done():
+            self.inactive.set_result(msg)
+
+    def on_heartbeat(self, msg: Report) -> None:
+        if self.recording:
+            sent = {name: c.bytes_out for name, c in self.feeders.items()}
+            self.beats.append((float(msg["ts"]), msg.get("ports", {}), sent))
+
+
+def image_source(w: int = 160, h: int = 120) -> Source:
+    """Grayscale frames: a scrolling gradient, and a bright disc for 2 s of every 4."""
+    ramp = bytes(40 + (x * 70 // w) for x in range(w)) * 2
+    r = max(2, h // 12)
+
+    def frame(seq: int, t: float) -> dict[str, Any]:
+        off = seq % w
+        buf = bytearray(ramp[off : off + w] * h)
+        if t % 4.0 < 2.0:
+            cx, cy = int(w / 2 + w / 4 * math.sin(t)), h // 2
+            for dy in range(-r, r + 1):
+                half = math.isqrt(r * r - dy * dy)
+                row = (cy + dy) * w
+                buf[row + cx - half : row + cx + half + 1] = b"\xfa" * (2 * half + 1)
+        return {"w": w, "h": h, "seq": seq, "ts": time.time(), "pixels": bytes(buf)}
+
+    return frame
+
+
+def file_source(path: Path) -> Source:
+    """The msgpack values recorded in `path`, replayed in a loop."""
+    with path.open("rb") as f:
+        values = list(msgpack.Unpacker(f, raw=False))
+    if not values:
+        raise ProfileError(f"{path}: no msgpack values in the file")
+    return lambda seq, t: values[(seq - 1) % len(values)]
+
+
+GENERATORS: dict[str, Callable[[], Source]] = {
+    "image": image_source,
+    "alarm": lambda: (
+        lambda seq, t: {"alarm": t % 5.0 < 1.0, "ts": time.time(), "where": None, "source": seq}
+    ),
+    "pose": lambda: (
+        lambda seq, t: {
+            "x": 0.1 * math.cos(t),
+            "y": 0.1 * math.sin(t),
+            "theta": t,
+            "inside": True,
+            "ts": time.time(),
+        }
+    ),
+    "odometry": lambda: (
+        lambda seq, t: {
+            "x": 0.5 * math.sin(0.3 * t),
+            "y": 0.5 - 0.5 * math.cos(0.3 * t),
+            "theta": 0.3 * t,
+            "ts": time.time(),
+        }
+    ),
+    "map": lambda: lambda seq, t: {"seq": seq, "ts": time.time(), "value": math.sin(t)},
+}
+"""Input generators by name; an InPort without `--input` uses the one named like it, or `map`."""
+
+
+def make_source(port: str, spec: str = "") -> tuple[Source, str]:
+    """The source for `port` from `--input port=SPEC` (empty: by port name) and its label."""
+    name = spec or (port if port in GENERATORS else "map")
+    if name.startswith("image:"):
+        try:
+            w, h = (int(v) for v in name[6:].lower().split("x"))
+        except ValueError:
+            raise ProfileError(f"--input {port}={spec}: expected image:WIDTHxHEIGHT") from None
+        return image_source(w, h), name
+    factory = GENERATORS.get(name)
+    if factory is not None:
+        return factory(), name
+    path = Path(name)
+    if not path.is_file():
+        known = ", ".join(GENERATORS)
+        raise ProfileError(f"--input {port}={spec}: no such generator ({known}) or file")
+    return file_source(path), str(path)
+
+
+def port_rates(
+    beats: list[tuple[float, dict[str, dict[str, int]], dict[str, int]]],
+    directions: Mapping[str, str],
+) -> dict[str, dict[str, Any]]:
+    """Per-port frames/s and bytes/s between the first and the last heartbeat."""
+    if len(beats) < 2:
+        raise ProfileError(f"only {len(beats)} heartbeat(s) in the window: measure longer")
+    (t0, c0, s0), (t1, c1, s1) = beats[0], beats[-1]
+    span = t1 - t0
+    out: dict[str, dict[str, Any]] = {}
+    for name, direction in directions.items():
+        a, b = c0.get(name, {}), c1.get(name, {})
+        key = "frames_in" if direction == "in" else "frames_out"
+        frames = b.get(key, 0) - a.get(key, 0)
+        if direction == "in":
+            sent = s1.get(name, 0) - s0.get(name, 0)
+        else:
+            sent = b.get("bytes_out", 0) - a.get("bytes_out", 0)
+        out[name] = {
+            "direction": direction,
+            "frames_per_s": round(frames / span, 2),
+            "bytes_per_s": round(sent / span, 1),
+        }
+    return out
+
+
+def host_info() -> dict[str, Any]:
+    """Where the measurement was taken."""
+    return {
+        "hostname": socket.gethostname(),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "python": platform.python_version(),
+        "cpus": os.cpu_count(),
+        "memory_total": psutil.virtual_memory().total,
+    }
+
+
+async def _feed(conn: Connection, source: Source, rate: float) -> None:
+    """Offer one value per period to `conn` (a grid of deadlines, never drifting)."""
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    seq = 0
+    while True:
+        seq += 1
+        conn.offer(source(seq, (seq - 1) / rate))
+        await asyncio.sleep(max(0.0, start + seq / rate - loop.time()))
+
+
+async def run_profile(req: ProfileRequest) -> dict[str, Any]:
+    """Run the component in a host, measure it for `req.seconds`, return the profile map."""
+    if req.seconds < 1.0:
+        raise ProfileError(f"--seconds {req.seconds}: at least 1 s (heartbeats come every 0.5 s)")
+    loop = asyncio.get_running_loop()
+    run = _Run(loop.create_future(), loop.create_future())
+    run_dir = private_dir("profile")
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    argv = get_launcher("python").command(req.target, dict(req.params), python=sys.executable)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SDRPEER_")}
+    env.update(
+        host_env(
+            instance="profile",
+            control_fd=theirs.fileno(),
+            data_host="127.0.0.1",
+            run_dir=str(run_dir),
+        )
+    )
+    log_path = run_dir / "host.log"
+    with log_path.open("wb") as log:
+        proc = await asyncio.create_subprocess_exec(
+            *argv,
+            pass_fds=(theirs.fileno(),),
+            env=env,
+            stdin=asyncio.subprocess.DEVNULL,
+            stdout=log,
+            stderr=log,
+        )
+    theirs.close()
+
+    def closed(reason: str | None) -> None:
+        for fut in (run.hello, run.inactive):
+            if not fut.done():
+                fut.set_exception(ProfileError(f"host closed its control channel ({reason})"))
+
+    channel = ControlChannel(
+        ours,
+        {"hello": run.hello.set_result, "state": run.on_state, "heartbeat": run.on_heartbeat},
+        closed,
+        name="profile",
+    )
+    server = DataServer(lambda name: _Sink(), unix_path=str(run_dir / "sink.sock"))
+    feeds: list[asyncio.Task[None]] = []
+    try:
+        await channel.open()
+        await server.start()
+        async with asyncio.timeout(req.start_timeout):
+            hello = await run.hello
+            await run.inactive
+        if run.error is not None:
+            raise ProfileError(f"{req.target} failed to initialize: {run.error}")
+        ports: dict[str, list[str]] = hello["ports"]
+        directions = {**dict.fromkeys(ports["out"], "out"), **dict.fromkeys(ports["in"], "in")}
+        sink = f"unix://{server.addresses['unix']}"
+        for port in ports["out"]:
+            conn = {"id": f"profile-{port}", "out": port, "to": sink, "in": port, "policy": {}}
+            await channel.command("connect", conn=conn)
+        inputs: dict[str, str] = {}
+        for port in ports["in"]:
+            spec = req.inputs.get(port, "")
+            source, inputs[port] = make_source(port, spec)
+            feeder = Connection(
+                f"profile-{port}",
+                f"unix://{hello['data']['unix']}",
+                port,
+                f"profile.{port}",
+                ConnectorPolicy(),
+            )
+            feeder.start()
+            run.feeders[port] = feeder
+            feeds.append(asyncio.create_task(_feed(feeder, source, req.input_rate)))
+        meter = ProcessTreeMeter(proc.pid)
+        meter.measure()  # psutil's cpu_percent measures from the previous call
+        await channel.command("activate")
+        run.recording = True
+        cpu: list[float] = []
+        rss: list[int] = []
+        end = loop.time() + req.seconds
+        while (left := end - loop.time()) > 0:
+            await asyncio.sleep(min(req.sample_interval, left))
+            c, r = meter.measure()
+            cpu.append(c)
+            rss.append(r)
+        await asyncio.sleep(HEARTBEAT * 0.2)  # a heartbeat landing just at the end still counts
+        run.recording = False
+        if run.error is not None:
+            raise ProfileError(f"{req.target} went to ERROR while measured: {run.error}")
+        with contextlib.suppress(SdrpeerError):
+            await channel.command("deactivate")
+        profile = {
+            "component": hello.get("component", req.target.rpartition(":")[2]),
+            "target": req.target,
+            "params": hello.get("params", {}),
+            "seconds": req.seconds,
+            "cpu": {
+                "mean_pct": round(sum(cpu) / len(cpu), 2),
+                "peak_pct": round(max(cpu), 2),
+                "samples": len(cpu),
+            },
+            "memory": {
+                "peak_rss": max(rss),
+                "peak_rss_human": format_size(max(rss)),
+                "mean_rss": sum(rss) // len(rss),
+            },
+            "ports": port_rates(run.beats, directions),
+            "inputs": inputs,
+            "input_rate": req.input_rate,
+            "measured_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "host": host_info(),
+        }
+    except TimeoutError:
+        raise ProfileError(
+            f"{req.target}: no INACTIVE within {req.start_timeout} s; host log:\n"
+            + log_path.read_text(errors="replace")[-2000:]
+        ) from None
+    except ProfileError as exc:
+        raise ProfileError(
+            f"{exc}; host log:\n{log_path.read_text(errors='replace')[-2000:]}"
+        ) from None
+    finally:
+        for task in feeds:
+            task.cancel()
+        for feeder in run.feeders.values():
+            await feeder.close(linger=0.1)
+        with contextlib.suppress(SdrpeerError):
+            await channel.command("exit", timeout=2.0, wait=4.0)
+        try:
+            async with asyncio.timeout(5.0):
+                await proc.wait()
+        except TimeoutError:
+            proc.kill()
+            await proc.wait()
+        await channel.close()
+        await server.close()
+        shutil.rmtree(run_dir, ignore_errors=True)
+    return profile
+
+
+def write_profile(profile: Mapping[str, Any], out: Path | None) -> str:
+    """The profile as YAML; also written to `out` (parents created) when given."""
+    text = yaml.safe_dump(dict(profile), sort_keys=False, default_flow_style=False)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)
+    return text
+
+
+def _pairs(items: list[str], flag: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"{flag} {item!r}: expected NAME=VALUE")
+        out[key] = value
+    return out
+
+
+def add_profile_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`sdrpeer profile TARGET [--seconds N] [--param k=v] [--input port=gen] [--out FILE]`."""
+    p = sub.add_parser("profile", help="measure a component's CPU, memory and port rates")
+    p.add_argument("target", help="package.module:Class")
+    p.add_argument("--seconds", type=float, default=10.0, help="measured window (default 10)")
+    p.add_argument("--param", action="append", default=[], metavar="K=V", help="a param")
+    p.add_argument(
+        "--input",
+        action="append",
+        default=[],
+        metavar="PORT=GEN",
+        help=f"feed an in-port from a generator ({', '.join(GENERATORS)}, image:WxH) or a "
+        "msgpack file",
+    )
+    p.add_argument("--input-rate", type=float, default=10.0, help="Hz per in-port (default 10)")
+    p.add_argument("--out", type=Path, help="write the YAML here (also printed)")
+    p.set_defaults(func=cmd_profile)
+
+
+def cmd_profile(args: argparse.Namespace) -> int:
+    """Run `sdrpeer profile`."""
+    req = ProfileRequest(
+        target=args.target,
+        seconds=args.seconds,
+        params=_pairs(args.param, "--param"),
+        inputs=_pairs(args.input, "--input"),
+        input_rate=args.input_rate,
+    )
+    profile = asyncio.run(run_profile(req))
+    print(write_profile(profile, args.out), end="")
+    return 0
