@@ -6,15 +6,18 @@ exec, or a plugin) for the command; `host_env` adds the SDRPEER_* variables of d
 `open_log` appends a start banner to `DATA_DIR/instances/NAME.log` and returns the file the host's
 stdout and stderr go to. `die_with_parent` runs in the child between fork and exec: on Linux it
 asks the kernel to SIGKILL the host when the agent dies (prctl PR_SET_PDEATHSIG), so a crashed
-or killed agent leaves no orphan hosts behind.
+or killed agent leaves no orphan hosts behind. `wait_exit` and `exit_text` help stopping one.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import ctypes
 import ctypes.util
 import os
 import shlex
+import signal
 import sys
 import tempfile
 import time
@@ -102,3 +105,31 @@ def private_dir(prefix: str) -> Path:
     if len(base) > 60:
         base = tempfile.gettempdir()
     return Path(tempfile.mkdtemp(prefix=f"sdrp-{prefix[:24]}-", dir=base))
+
+
+def remove_dir(path: Path) -> None:
+    """Remove a host's private directory and what it left in it (best effort)."""
+    for child in path.iterdir():
+        with contextlib.suppress(OSError):
+            child.unlink()
+    with contextlib.suppress(OSError):
+        path.rmdir()
+
+
+def exit_text(rc: int | None) -> str:
+    """'exited with code 3' or 'killed by SIGKILL'."""
+    if rc is None:
+        return "did not start"
+    if rc < 0:
+        with contextlib.suppress(ValueError):
+            return f"killed by {signal.Signals(-rc).name}"
+    return f"exited with code {rc}"
+
+
+async def wait_exit(proc: asyncio.subprocess.Process, seconds: float) -> bool:
+    """Whether the process exited within `seconds`."""
+    try:
+        await asyncio.wait_for(proc.wait(), max(0.0, seconds))
+    except TimeoutError:
+        return False
+    return True

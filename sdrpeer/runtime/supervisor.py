@@ -17,7 +17,6 @@ import asyncio
 import contextlib
 import logging
 import os
-import signal
 import socket
 import subprocess
 import time
@@ -32,7 +31,17 @@ import psutil
 from sdrpeer.errors import ConfigError
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
 from sdrpeer.runtime.control import CommandError, ControlChannel, Report
-from sdrpeer.runtime.launch import host_argv, host_env, log_path, open_log, preexec, private_dir
+from sdrpeer.runtime.launch import (
+    exit_text,
+    host_argv,
+    host_env,
+    log_path,
+    open_log,
+    preexec,
+    private_dir,
+    remove_dir,
+    wait_exit,
+)
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
 
 log = logging.getLogger(__name__)
@@ -67,16 +76,6 @@ class SupervisorConfig:
     def fast_test(cls) -> SupervisorConfig:
         """Short timeouts and backoff for tests."""
         return cls(RestartConfig.fast_test(), 2.0, 5.0, 1.0, 1.0)
-
-
-def exit_text(rc: int | None) -> str:
-    """'exited with code 3' or 'killed by SIGKILL'."""
-    if rc is None:
-        return "did not start"
-    if rc < 0:
-        with contextlib.suppress(ValueError):
-            return f"killed by {signal.Signals(-rc).name}"
-    return f"exited with code {rc}"
 
 
 class Supervisor:
@@ -129,6 +128,11 @@ class Supervisor:
         """Whether a host process is running right now."""
         return self._proc is not None and self._proc.returncode is None
 
+    def _remove_run_dir(self) -> None:
+        if self._run_dir is not None:
+            remove_dir(self._run_dir)
+            self._run_dir = None
+
     def stop_requested(self) -> bool:
         """Whether stop() was called since the last start()."""
         return self._stopping
@@ -159,7 +163,7 @@ class Supervisor:
         self._stopping = True
         life = self._life
         if life is None or life.done():
-            self._cleanup_dir()
+            self._remove_run_dir()
             return
         if self.alive:
             await self._terminate()
@@ -167,7 +171,7 @@ class Supervisor:
             life.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await life
-        self._cleanup_dir()
+        self._remove_run_dir()
 
     async def restart(self) -> None:
         """Stop, forget past failures, start again."""
@@ -295,12 +299,12 @@ class Supervisor:
             with contextlib.suppress(CommandError):
                 timeout = self.config.exit_timeout
                 await self._channel.command("exit", wait=timeout, timeout=timeout)
-        if await _exited(proc, deadline - loop.time()):
+        if await wait_exit(proc, deadline - loop.time()):
             return
         log.warning("%s: no exit after %.1fs; SIGTERM", self.name, self.config.exit_timeout)
         with contextlib.suppress(ProcessLookupError):
             proc.terminate()
-        if await _exited(proc, self.config.term_timeout):
+        if await wait_exit(proc, self.config.term_timeout):
             return
         log.warning("%s: still alive after SIGTERM; SIGKILL", self.name)
         with contextlib.suppress(ProcessLookupError):
@@ -375,20 +379,3 @@ class Supervisor:
         if data.get("tcp"):
             return f"tcp://{data['tcp']}"
         return None
-
-    def _cleanup_dir(self) -> None:
-        if self._run_dir is not None:
-            for child in self._run_dir.iterdir():
-                with contextlib.suppress(OSError):
-                    child.unlink()
-            with contextlib.suppress(OSError):
-                self._run_dir.rmdir()
-            self._run_dir = None
-
-
-async def _exited(proc: asyncio.subprocess.Process, seconds: float) -> bool:
-    try:
-        await asyncio.wait_for(proc.wait(), max(0.0, seconds))
-    except TimeoutError:
-        return False
-    return True
