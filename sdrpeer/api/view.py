@@ -24,7 +24,8 @@ class AgentView(Protocol):
         Each dict: name, addr ("host:port"), state ("alive"|"suspect"|"dead"|"left"), incarnation,
         since (unix seconds of the last state change), api (URL or None), record_version,
         metrics (dict or None: cpu_pct, mem_total, mem_free, battery_pct, rssi_dbm, pos [x, y]),
-        links (dict peer -> {rtt_ms, jitter_ms, loss, distance_m}).
+        links (dict peer -> {rtt_ms, jitter_ms, loss, distance_m}), instances (the robot's
+        gossiped component instances: name, component, state, role, cpu_pct, rss).
         """
         ...
 
