@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 
 from sdrpeer.monitor.publish import worth_publishing
-from sdrpeer.record import LinkStats, Metrics, RobotRecord
+from sdrpeer.record import InstanceInfo, LinkStats, Metrics, RobotRecord
 
 GB = 1 << 30
 BASE = RobotRecord(
@@ -62,3 +62,14 @@ def test_first_record_is_always_published() -> None:
 def test_noise_around_a_value_does_not_flap() -> None:
     # RTT hovering around 0.5 ms: bucketed rounding would flip 0 <-> 1 ms every sample.
     assert not any(worth_publishing(BASE, link(rtt_ms=r)) for r in (0.45, 0.55, 0.49, 0.51, 0.6))
+
+
+def test_instances_compare_by_identity_and_state_with_bands_for_load() -> None:
+    cam = InstanceInfo("CameraRTC2", "Camera", "active", "primary", 12.0, 100 << 20)
+    last = replace(BASE, instances=(cam,))
+    assert not worth_publishing(last, replace(BASE, instances=(replace(cam, cpu_pct=14.0),)))
+    assert not worth_publishing(last, replace(BASE, instances=(replace(cam, rss=110 << 20),)))
+    assert worth_publishing(last, replace(BASE, instances=(replace(cam, cpu_pct=20.0),)))
+    assert worth_publishing(last, replace(BASE, instances=(replace(cam, rss=600 << 20),)))
+    assert worth_publishing(last, replace(BASE, instances=(replace(cam, state="error"),)))
+    assert worth_publishing(last, replace(BASE, instances=()))
