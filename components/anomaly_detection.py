@@ -8,11 +8,12 @@ its area lies in [min_area, max_area] and its shape is a disc: the bounding box 
 (aspect 0.75..1.33) and filled to about pi/4 (fill 0.6..0.92). Bright bars and dim round
 objects of the scene (components.scene) are therefore rejected. With `wrap` (the panorama of
 the omnidirectional camera) the left and right edges are neighbours, so an object cut in two by
-the seam is one region (its columns are tracked unwrapped from where the walk started). At
-160x120 a frame takes about a millisecond. `AnomalyDetection` runs `find_hazard` once per
-received frame (`OnInput("image")`, push policy `new`: a late detector skips to the newest
-frame) and publishes
-`{"alarm": bool, "ts", "where": [x, y] | None, "source": frame seq}` on `alarm` for every frame.
+the seam is one region (its columns are tracked unwrapped from where the walk started); the
+param `wrap=auto` wraps frames at least twice as wide as high. At 160x120 a frame takes about a
+millisecond. `AnomalyDetection` runs `find_hazard` once per received frame (`OnInput("image")`,
+push policy `new`: a late detector skips to the newest frame), publishes
+`{"alarm": bool, "ts", "where": [x, y] | None, "source": frame seq}` on `alarm` for every frame,
+and logs each raise and clear of the alarm.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from sdrpeer.sdk import InPort, OnInput, OutPort, Param
 __all__ = ["AnomalyDetection", "Blob", "find_blobs", "find_hazard", "is_hazard"]
 
 ASPECT: Final = (0.75, 1.33)
+WRAP: Final = ("auto", "yes", "no")
 FILL: Final = (0.6, 0.92)
 _TABLES: dict[int, bytes] = {}
 
@@ -130,7 +132,7 @@ class AnomalyDetection(RobotComponent):
     threshold = Param(int, 230, "grey level from which a pixel counts as bright", min=1, max=255)
     min_area = Param(int, 20, "smallest hazard in pixels", min=1)
     max_area = Param(int, 5000, "largest hazard in pixels", min=1)
-    wrap = Param(bool, False, "panoramic frames: the left and right edges touch")
+    wrap = Param(str, "auto", "edges touch: yes, no, auto (a 2:1 panorama)", choices=WRAP)
     image = InPort("camera frames {w, h, seq, ts, pixels}", policy={"push": "new", "buffer": 1})
     alarm = OutPort("{alarm, ts, where, source} for every frame")
 
@@ -139,24 +141,31 @@ class AnomalyDetection(RobotComponent):
         super().on_activated()
         self.frames = 0
         self.alarms = 0
+        self.raised = False
 
     def on_execute(self) -> None:
         """Scan the newest frame and publish the verdict."""
         if not self.image.is_new():
             return
         frame: dict[str, Any] = self.image.read()
+        w, h = frame["w"], frame["h"]
         blob = find_hazard(
             frame["pixels"],
-            frame["w"],
-            frame["h"],
+            w,
+            h,
             threshold=self.threshold,
             min_area=self.min_area,
             max_area=self.max_area,
-            wrap=self.wrap,
+            wrap=self.wrap == "yes" or (self.wrap == "auto" and w >= 2 * h),
         )
         self.frames += 1
         self.alarms += blob is not None
         where = [round(blob.x, 1), round(blob.y, 1)] if blob is not None else None
+        if (blob is not None) != self.raised:
+            self.raised = blob is not None
+            self.log.info(
+                "alarm %s (frame %s, at %s)", "raised" if blob else "cleared", frame["seq"], where
+            )
         self.alarm.write(
             {"alarm": blob is not None, "ts": time.time(), "where": where, "source": frame["seq"]}
         )
