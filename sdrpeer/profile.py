@@ -1,6 +1,7 @@
 """`sdrpeer profile pkg.mod:Class`: measure what one component costs, in a real host process.
 
-How it works: `run_profile` starts the component the way an agent does: the `python` launcher
+How it works: `run_profile` drives a `_Session` through start, wire, measure and stop. It starts
+the component the way an agent does: the `python` launcher
 (sdrpeer.launchers) builds the `python -m sdrpeer.host` command, the host inherits one end of a
 socket pair as its control channel (sdrpeer.runtime.control.ControlChannel on our end) and
 reports `hello` and `state INACTIVE`. Every OutPort is then connected (a `connect` command) to
@@ -8,11 +9,11 @@ an in-process `DataServer` that counts and discards, so frames really cross a so
 InPort is fed by an in-process data-plane `Connection` at `input_rate` Hz with values from an
 input source (`make_source`: synthetic images for `image`, plausible maps for `alarm`, `pose`
 and `odometry`, a generic map otherwise, or `--input port=FILE`: a recorded file of concatenated
-msgpack values, replayed in a loop). The host is
-activated and, for `seconds`, its CPU % (of one core) and RSS are sampled with psutil every
-`sample_interval` seconds, while its heartbeats (every 0.5 s) give the port counters. Rates are
-counter differences between the first and the last heartbeat of the window over the host's
-own heartbeat timestamps. Finally the host is deactivated and told to exit.
+msgpack values, replayed in a loop). The host is activated and, for `seconds`, its CPU % (of one
+core) and RSS are sampled with psutil every `sample_interval` seconds, while its heartbeats
+(every 0.5 s) give the port counters. Rates are counter differences between the first and the
+last heartbeat of the window over the host's own heartbeat timestamps. Finally the host is
+deactivated and told to exit (killed if it has not after 5 s).
 
 Output (YAML, written by `write_profile`; the system files of the allocation issue read it):
 
@@ -32,7 +33,9 @@ Output (YAML, written by `write_profile`; the system files of the allocation iss
 `bytes_per_s` counts wire bytes (msgpack frames, overhead included): for an OutPort the host's
 `bytes_out` counter, for an InPort the bytes our feeding connection wrote to it (the host's
 `bytes_in` counts raw bytes values only). `frames_per_s` of an InPort counts frames the host
-received. The human size uses sdrpeer.units (powers of 1000), so `parse_size` reads it back.
+received. `peak_pct` is the highest 0.1 s sample: the kernel counts CPU time in 10 ms ticks, so
+a light component's samples read 0 or about 10 %; `mean_pct` is the figure to plan with. The
+human size uses sdrpeer.units (powers of 1000), so `parse_size` reads it back.
 """
 
 from __future__ import annotations
@@ -106,42 +109,17 @@ class ProfileRequest:
 
 
 class _Sink:
-    """An InPort stand-in on our data server: counts and discards."""
-
-    def __init__(self) -> None:
-        self.frames = 0
+    """An InPort stand-in on our data server: takes every frame and forgets it."""
 
     def deliver(self, value: Any, seq: int, conn: str) -> None:
-        self.frames += 1
+        """Discard one frame."""
 
     def refuse(self) -> None:
         """Nothing to do: the server logs it."""
 
 
-@dataclass
-class _Run:
-    """State of one profiling run, filled by the control channel's report handlers."""
-
-    hello: asyncio.Future[Report]
-    inactive: asyncio.Future[Report]
-    feeders: dict[str, Connection] = field(default_factory=dict)
-    beats: list[tuple[float, dict[str, dict[str, int]], dict[str, int]]] = field(
-        default_factory=list
-    )
-    recording: bool = False
-    error: str | None = None
-
-    def on_state(self, msg: Report) -> None:
-        state = msg.get("state")
-        if state == "ERROR":
-            self.error = str(msg.get("error"))
-        if state in ("INACTIVE", "ERROR") and not self.inactive.done():
-            self.inactive.set_result(msg)
-
-    def on_heartbeat(self, msg: Report) -> None:
-        if self.recording:
-            sent = {name: c.bytes_out for name, c in self.feeders.items()}
-            self.beats.append((float(msg["ts"]), msg.get("ports", {}), sent))
+Beat = tuple[float, dict[str, dict[str, int]], dict[str, int]]
+"""One heartbeat: host time, port counters, bytes our feeders had written by then."""
 
 
 def image_source(w: int = 160, h: int = 120) -> Source:
@@ -267,142 +245,188 @@ async def _feed(conn: Connection, source: Source, rate: float) -> None:
         await asyncio.sleep(max(0.0, start + seq / rate - loop.time()))
 
 
-async def run_profile(req: ProfileRequest) -> dict[str, Any]:
-    """Run the component in a host, measure it for `req.seconds`, return the profile map."""
-    if req.seconds < 1.0:
-        raise ProfileError(f"--seconds {req.seconds}: at least 1 s (heartbeats come every 0.5 s)")
-    loop = asyncio.get_running_loop()
-    run = _Run(loop.create_future(), loop.create_future())
-    run_dir = private_dir("profile")
-    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-    argv = get_launcher("python").command(req.target, dict(req.params), python=sys.executable)
-    env = {k: v for k, v in os.environ.items() if not k.startswith("SDRPEER_")}
-    env.update(
-        host_env(
+class _Session:
+    """One host under measurement: start, wire, measure, stop (always in that order)."""
+
+    def __init__(self, req: ProfileRequest) -> None:
+        loop = asyncio.get_running_loop()
+        self.req = req
+        self.hello: asyncio.Future[Report] = loop.create_future()
+        self.inactive: asyncio.Future[None] = loop.create_future()
+        self.error: str | None = None
+        self.beats: list[Beat] = []
+        self.recording = False
+        self.feeders: dict[str, Connection] = {}
+        self.feeds: list[asyncio.Task[None]] = []
+        self.inputs: dict[str, str] = {}
+        self.run_dir = private_dir("profile")
+        self.log_path = self.run_dir / "host.log"
+        self.server = DataServer(lambda name: _Sink(), unix_path=str(self.run_dir / "sink.sock"))
+        self.proc: asyncio.subprocess.Process | None = None
+        self.channel: ControlChannel | None = None
+
+    def log_tail(self) -> str:
+        """The end of what the host wrote to stderr."""
+        text = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+        return text[-2000:]
+
+    async def start(self) -> Report:
+        """Launch the host like an agent; its hello once it reported INACTIVE."""
+        req = self.req
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        argv = get_launcher("python").command(req.target, dict(req.params), python=sys.executable)
+        env = {k: v for k, v in os.environ.items() if not k.startswith("SDRPEER_")}
+        env |= host_env(
             instance="profile",
             control_fd=theirs.fileno(),
             data_host="127.0.0.1",
-            run_dir=str(run_dir),
+            run_dir=str(self.run_dir),
         )
-    )
-    log_path = run_dir / "host.log"
-    with log_path.open("wb") as log:
-        proc = await asyncio.create_subprocess_exec(
-            *argv,
-            pass_fds=(theirs.fileno(),),
-            env=env,
-            stdin=asyncio.subprocess.DEVNULL,
-            stdout=log,
-            stderr=log,
-        )
-    theirs.close()
-
-    def closed(reason: str | None) -> None:
-        for fut in (run.hello, run.inactive):
-            if not fut.done():
-                fut.set_exception(ProfileError(f"host closed its control channel ({reason})"))
-
-    channel = ControlChannel(
-        ours,
-        {"hello": run.hello.set_result, "state": run.on_state, "heartbeat": run.on_heartbeat},
-        closed,
-        name="profile",
-    )
-    server = DataServer(lambda name: _Sink(), unix_path=str(run_dir / "sink.sock"))
-    feeds: list[asyncio.Task[None]] = []
-    try:
-        await channel.open()
-        await server.start()
-        async with asyncio.timeout(req.start_timeout):
-            hello = await run.hello
-            await run.inactive
-        if run.error is not None:
-            raise ProfileError(f"{req.target} failed to initialize: {run.error}")
-        ports: dict[str, list[str]] = hello["ports"]
-        directions = {**dict.fromkeys(ports["out"], "out"), **dict.fromkeys(ports["in"], "in")}
-        sink = f"unix://{server.addresses['unix']}"
-        for port in ports["out"]:
-            conn = {"id": f"profile-{port}", "out": port, "to": sink, "in": port, "policy": {}}
-            await channel.command("connect", conn=conn)
-        inputs: dict[str, str] = {}
-        for port in ports["in"]:
-            spec = req.inputs.get(port, "")
-            source, inputs[port] = make_source(port, spec)
-            feeder = Connection(
-                f"profile-{port}",
-                f"unix://{hello['data']['unix']}",
-                port,
-                f"profile.{port}",
-                ConnectorPolicy(),
+        with self.log_path.open("wb") as log:
+            self.proc = await asyncio.create_subprocess_exec(
+                *argv,
+                pass_fds=(theirs.fileno(),),
+                env=env,
+                stdin=asyncio.subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
             )
+        theirs.close()
+        handlers = {"hello": self.hello.set_result, "state": self._state, "heartbeat": self._beat}
+        self.channel = ControlChannel(ours, handlers, self._closed, name="profile")
+        await self.channel.open()
+        await self.server.start()
+        try:
+            async with asyncio.timeout(req.start_timeout):
+                hello = await self.hello
+                await self.inactive
+        except TimeoutError:
+            raise ProfileError(f"{req.target}: no INACTIVE within {req.start_timeout} s") from None
+        if self.error is not None:
+            raise ProfileError(f"{req.target} failed to initialize: {self.error}")
+        return hello
+
+    async def wire(self, hello: Report) -> None:
+        """Connect every OutPort to our sink and start feeding every InPort."""
+        assert self.channel is not None
+        sink = f"unix://{self.server.addresses['unix']}"
+        for port in hello["ports"]["out"]:
+            conn = {"id": f"profile-{port}", "out": port, "to": sink, "in": port, "policy": {}}
+            await self.channel.command("connect", conn=conn)
+        to = f"unix://{hello['data']['unix']}"
+        for port in hello["ports"]["in"]:
+            source, self.inputs[port] = make_source(port, self.req.inputs.get(port, ""))
+            feeder = Connection(f"profile-{port}", to, port, f"profile.{port}", ConnectorPolicy())
             feeder.start()
-            run.feeders[port] = feeder
-            feeds.append(asyncio.create_task(_feed(feeder, source, req.input_rate)))
-        meter = ProcessTreeMeter(proc.pid)
+            self.feeders[port] = feeder
+            self.feeds.append(asyncio.create_task(_feed(feeder, source, self.req.input_rate)))
+
+    async def measure(self) -> tuple[list[float], list[int]]:
+        """Activate, then sample CPU % and RSS for `seconds`; ([cpu], [rss])."""
+        assert self.channel is not None
+        assert self.proc is not None
+        meter = ProcessTreeMeter(self.proc.pid)
         meter.measure()  # psutil's cpu_percent measures from the previous call
-        await channel.command("activate")
-        run.recording = True
+        await self.channel.command("activate")
+        self.recording = True
+        loop = asyncio.get_running_loop()
         cpu: list[float] = []
         rss: list[int] = []
-        end = loop.time() + req.seconds
+        end = loop.time() + self.req.seconds
         while (left := end - loop.time()) > 0:
-            await asyncio.sleep(min(req.sample_interval, left))
+            await asyncio.sleep(min(self.req.sample_interval, left))
             c, r = meter.measure()
             cpu.append(c)
             rss.append(r)
         await asyncio.sleep(HEARTBEAT * 0.2)  # a heartbeat landing just at the end still counts
-        run.recording = False
-        if run.error is not None:
-            raise ProfileError(f"{req.target} went to ERROR while measured: {run.error}")
-        with contextlib.suppress(SdrpeerError):
-            await channel.command("deactivate")
-        profile = {
-            "component": hello.get("component", req.target.rpartition(":")[2]),
-            "target": req.target,
-            "params": hello.get("params", {}),
-            "seconds": req.seconds,
-            "cpu": {
-                "mean_pct": round(sum(cpu) / len(cpu), 2),
-                "peak_pct": round(max(cpu), 2),
-                "samples": len(cpu),
-            },
-            "memory": {
-                "peak_rss": max(rss),
-                "peak_rss_human": format_size(max(rss)),
-                "mean_rss": sum(rss) // len(rss),
-            },
-            "ports": port_rates(run.beats, directions),
-            "inputs": inputs,
-            "input_rate": req.input_rate,
-            "measured_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "host": host_info(),
-        }
-    except TimeoutError:
-        raise ProfileError(
-            f"{req.target}: no INACTIVE within {req.start_timeout} s; host log:\n"
-            + log_path.read_text(errors="replace")[-2000:]
-        ) from None
-    except ProfileError as exc:
-        raise ProfileError(
-            f"{exc}; host log:\n{log_path.read_text(errors='replace')[-2000:]}"
-        ) from None
-    finally:
-        for task in feeds:
+        self.recording = False
+        if self.error is not None:
+            raise ProfileError(f"{self.req.target} went to ERROR while measured: {self.error}")
+        return cpu, rss
+
+    async def stop(self) -> None:
+        """Stop feeding, tell the host to exit (kill it after 5 s), clean up."""
+        for task in self.feeds:
             task.cancel()
-        for feeder in run.feeders.values():
+        await asyncio.gather(*self.feeds, return_exceptions=True)
+        for feeder in self.feeders.values():
             await feeder.close(linger=0.1)
+        if self.channel is not None:
+            with contextlib.suppress(SdrpeerError):
+                await self.channel.command("exit", timeout=2.0, wait=4.0)
+        if self.proc is not None:
+            try:
+                async with asyncio.timeout(5.0):
+                    await self.proc.wait()
+            except TimeoutError:
+                self.proc.kill()
+                await self.proc.wait()
+        if self.channel is not None:
+            await self.channel.close()
+        await self.server.close()
+        shutil.rmtree(self.run_dir, ignore_errors=True)
+
+    def _state(self, msg: Report) -> None:
+        if msg.get("state") == "ERROR":
+            self.error = str(msg.get("error"))
+        if msg.get("state") in ("INACTIVE", "ERROR") and not self.inactive.done():
+            self.inactive.set_result(None)
+
+    def _beat(self, msg: Report) -> None:
+        if self.recording:
+            sent = {name: c.bytes_out for name, c in self.feeders.items()}
+            self.beats.append((float(msg["ts"]), msg.get("ports", {}), sent))
+
+    def _closed(self, reason: str | None) -> None:
+        for fut in (self.hello, self.inactive):
+            if not fut.done():
+                fut.set_exception(ProfileError(f"host closed its control channel ({reason})"))
+
+
+async def run_profile(req: ProfileRequest) -> dict[str, Any]:
+    """Run the component in a host, measure it for `req.seconds`, return the profile map."""
+    if req.seconds < 1.0:
+        raise ProfileError(f"--seconds {req.seconds}: at least 1 s (heartbeats come every 0.5 s)")
+    session = _Session(req)
+    try:
+        hello = await session.start()
+        await session.wire(hello)
+        cpu, rss = await session.measure()
+        ports = port_rates(
+            session.beats,
+            {
+                **dict.fromkeys(hello["ports"]["out"], "out"),
+                **dict.fromkeys(hello["ports"]["in"], "in"),
+            },
+        )
+        assert session.channel is not None
         with contextlib.suppress(SdrpeerError):
-            await channel.command("exit", timeout=2.0, wait=4.0)
-        try:
-            async with asyncio.timeout(5.0):
-                await proc.wait()
-        except TimeoutError:
-            proc.kill()
-            await proc.wait()
-        await channel.close()
-        await server.close()
-        shutil.rmtree(run_dir, ignore_errors=True)
-    return profile
+            await session.channel.command("deactivate")
+    except ProfileError as exc:
+        raise ProfileError(f"{exc}; host log:\n{session.log_tail()}") from None
+    finally:
+        await session.stop()
+    return {
+        "component": hello.get("component", req.target.rpartition(":")[2]),
+        "target": req.target,
+        "params": hello.get("params", {}),
+        "seconds": req.seconds,
+        "cpu": {
+            "mean_pct": round(sum(cpu) / len(cpu), 2),
+            "peak_pct": round(max(cpu), 2),
+            "samples": len(cpu),
+        },
+        "memory": {
+            "peak_rss": max(rss),
+            "peak_rss_human": format_size(max(rss)),
+            "mean_rss": sum(rss) // len(rss),
+        },
+        "ports": ports,
+        "inputs": session.inputs,
+        "input_rate": req.input_rate,
+        "measured_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "host": host_info(),
+    }
 
 
 def write_profile(profile: Mapping[str, Any], out: Path | None) -> str:
