@@ -5,8 +5,11 @@ refused right there, with an error naming the connection) and queues the bytes i
 `PendingQueue` that applies the connector policy. Writing is not a task per frame: the first
 offer in a loop iteration writes its frame immediately when the link is idle (low latency), and
 schedules one `call_soon` flush that numbers and joins everything offered meanwhile into a
-single `transport.write` (high throughput). When the transport's buffer is over its high-water
-mark the flush waits for `resume_writing`; values pile up in the queue and the policy decides.
+single `transport.write` (high throughput; headers and joins are C-level `map`s, no Python loop
+per frame). Big bytes values are queued as they are (no copy) and handed to the transport in
+256 KiB slices. The transport keeps no backlog of its own (high-water mark 0): when the kernel's
+socket buffer is full, writing pauses until it has drained and values wait in the queue, where
+the policy decides (so `new` really sends the newest value, not one stuck in a user buffer).
 
 A supervisor task owns the socket: it dials `to`, writes the hello, waits for the ok, then sleeps
 until the link drops, `repoint` changes the address, or `close` is called. A drop is redialed
@@ -22,7 +25,13 @@ import asyncio
 import contextlib
 import logging
 import socket
+import struct
+from collections import deque
+from collections.abc import Callable
+from functools import partial
 from typing import Final
+
+import msgpack
 
 from sdrpeer.dataplane.address import parse_address
 from sdrpeer.dataplane.frames import (
@@ -32,7 +41,6 @@ from sdrpeer.dataplane.frames import (
     FrameError,
     Hello,
     encode_hello,
-    encode_value,
     frame_header,
     parse_reply,
 )
@@ -40,8 +48,26 @@ from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
 
 log = logging.getLogger("sdrpeer.dataplane")
 _SNDBUF: Final = 4 * 1024 * 1024
-_HIGH_WATER: Final = 1024 * 1024
 _BIG: Final = 64 * 1024  # values at least this large are written without joining (no copy)
+_SLICE: Final = 256 * 1024  # a big value is handed to the transport this much at a time
+_SEQ32: Final = 0x1_0000_0000
+_HEADER32: Final = partial(struct.Struct(">BBI").pack, 0x92, 0xCE)
+
+
+class _Big:
+    """A large bytes value queued without copying: its msgpack bin prefix, then the bytes."""
+
+    __slots__ = ("data", "prefix")
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.prefix = b"\xc6" + len(data).to_bytes(4, "big")
+
+    def __len__(self) -> int:
+        return 5 + len(self.data)
+
+
+Item = bytes | _Big
 
 
 def next_backoff(delay: float, initial: float, cap: float) -> float:
@@ -85,7 +111,10 @@ class Connection:
         """The seq of the last frame written."""
         self.last_error: str | None = None
         """Why the last dial or link failed."""
-        self._queue = PendingQueue(policy)
+        self._queue: PendingQueue[Item] = PendingQueue(policy)
+        self._taken: deque[Item] = deque()  # taken from the queue, not yet written
+        self._rest: memoryview | None = None  # the unwritten tail of a big value
+        self._pack = msgpack.Packer().pack
         self._link: _Link | None = None
         self._scheduled = False
         self._closing = False
@@ -100,8 +129,8 @@ class Connection:
 
     @property
     def pending(self) -> int:
-        """Values waiting for the socket."""
-        return len(self._queue)
+        """Values waiting for the socket (a big one half written counts too)."""
+        return len(self._queue) + len(self._taken) + (self._rest is not None)
 
     @property
     def connected(self) -> bool:
@@ -117,19 +146,24 @@ class Connection:
         """Queue a value per the policy; False when dropped or (full=block) not queued yet."""
         if self._closing:
             return False
-        try:
-            packed = encode_value(value)
-        except FrameError as exc:
-            self.refused += 1
-            raise FrameError(exc.reason, f"connection {self.conn_id}: {exc.detail}") from None
-        if len(packed) + FRAME_OVERHEAD > self.max_frame:
+        item: Item
+        if type(value) is bytes and len(value) >= _BIG:
+            item = _Big(value)
+        else:
+            try:
+                item = self._pack(value)
+            except (TypeError, ValueError, OverflowError) as exc:
+                self.refused += 1
+                detail = f"{type(value).__name__}: {exc}"
+                raise FrameError("unencodable", f"connection {self.conn_id}: {detail}") from None
+        if len(item) + FRAME_OVERHEAD > self.max_frame:
             self.refused += 1
             raise FrameError(
                 "oversized",
                 f"connection {self.conn_id} ({self.from_} -> {self.in_port}): a frame of "
-                f"{len(packed) + FRAME_OVERHEAD} bytes exceeds the maximum {self.max_frame}",
+                f"{len(item) + FRAME_OVERHEAD} bytes exceeds the maximum {self.max_frame}",
             )
-        if not self._queue.offer(packed):
+        if not self._queue.offer(item):
             return False
         if not self._scheduled and self._link is not None:
             self._scheduled = True
@@ -149,6 +183,9 @@ class Connection:
         self.to = to
         link, self._link = self._link, None
         if link is not None:
+            if self._rest is not None:  # a frame half written: the old receiver gets all of it
+                link.transport.write(self._rest)
+                self._rest = None
             link.transport.close()
         self._wake.set()
 
@@ -160,13 +197,13 @@ class Connection:
 
     async def flushed(self) -> None:
         """Wait until nothing is pending (everything was handed to a socket)."""
-        while len(self._queue) and not self._closing:
+        while self.pending and not self._closing:
             self._room.clear()
             await self._room.wait()
 
     async def close(self, linger: float = 1.0) -> None:
         """Flush what is pending (for up to `linger` seconds if connected) and close the link."""
-        if self._link is not None and len(self._queue):
+        if self._link is not None and self.pending:
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(linger):
                     await self.flushed()
@@ -190,31 +227,63 @@ class Connection:
 
     def _flush(self) -> None:
         link = self._link
-        if link is None or link.paused or not len(self._queue):
+        if link is None:
             return
-        items = self._queue.take()
-        seq = self.seq
         write = link.transport.write
-        parts: list[bytes] = []
-        size = 0
-        for packed in items:
-            seq += 1
-            header = frame_header(seq)
-            size += len(header) + len(packed)
-            if len(packed) >= _BIG:
-                parts.append(header)
-                write(b"".join(parts))
-                write(packed)
-                parts = []
+        while not link.paused:
+            rest = self._rest
+            if rest is not None:
+                self._rest = rest[_SLICE:] if len(rest) > _SLICE else None
+                write(rest[:_SLICE])
+                continue
+            if self._taken:
+                items = list(self._taken)
+                self._taken.clear()
+            elif len(self._queue):
+                items = self._queue.take()
+                self._room.set()
             else:
-                parts.append(header)
-                parts.append(packed)
+                return
+            self._write(write, items)
+
+    def _write(self, write: Callable[[bytes | memoryview], None], items: list[Item]) -> None:
+        """Number and write `items`, stopping after the first big one (its tail goes to _rest)."""
+        seq, n = self.seq, len(items)
+        if seq + n < _SEQ32 and max(map(len, items)) < _BIG:  # the common case, no Python loop
+            parts: list[bytes] = [b""] * (2 * n)
+            parts[::2] = map(_HEADER32, range(seq + 1, seq + n + 1))
+            parts[1::2] = items  # type: ignore[assignment]
+            data = b"".join(parts)
+            write(data)
+            self.seq, self.frames_out, self.bytes_out = (
+                seq + n,
+                self.frames_out + n,
+                self.bytes_out + len(data),
+            )
+            return
+        parts = []
+        size = 0
+        for index, item in enumerate(items):
+            seq += 1
+            parts.append(frame_header(seq))
+            size += len(parts[-1]) + len(item)
+            if isinstance(item, _Big):
+                parts.append(item.prefix)
+                payload: bytes = item.data
+            elif len(item) >= _BIG:
+                payload = item
+            else:
+                parts.append(item)
+                continue
+            write(b"".join(parts))
+            parts = []
+            self._rest = memoryview(payload)
+            self._taken.extend(items[index + 1 :])
+            n = index + 1
+            break
         if parts:
             write(b"".join(parts))
-        self.seq = seq
-        self.frames_out += len(items)
-        self.bytes_out += size
-        self._room.set()
+        self.seq, self.frames_out, self.bytes_out = seq, self.frames_out + n, self.bytes_out + size
 
     def _resume(self, link: _Link) -> None:
         if link is self._link:
@@ -223,6 +292,7 @@ class Connection:
     def _lost(self, link: _Link) -> None:
         if link is self._link:
             self._link = None
+            self._rest = None  # the frame being written is lost with the link (a seq gap)
             self._wake.set()
 
     async def _run(self) -> None:
@@ -295,7 +365,7 @@ class _Link(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
-        transport.set_write_buffer_limits(high=_HIGH_WATER)
+        transport.set_write_buffer_limits(high=0)  # pause as soon as the kernel is full
 
     def data_received(self, data: bytes) -> None:
         if self._decoder is None:

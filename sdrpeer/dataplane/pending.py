@@ -14,7 +14,8 @@ value and says whether it was queued; `take()` hands everything pending to the w
 from __future__ import annotations
 
 from collections import deque
-from typing import Protocol
+from collections.abc import Sized
+from typing import Generic, Protocol, TypeVar
 
 
 class PolicyLike(Protocol):
@@ -40,13 +41,16 @@ class PolicyLike(Protocol):
         """The protocol policy map."""
 
 
-class PendingQueue:
+T = TypeVar("T", bound=Sized)
+
+
+class PendingQueue(Generic[T]):
     """Values waiting for the socket, queued by a connector policy."""
 
     __slots__ = ("_block", "_counter", "_items", "_limit", "_new", "_overwrite", "_skip", "dropped")
 
     def __init__(self, policy: PolicyLike) -> None:
-        self._items: deque[bytes] = deque()
+        self._items: deque[T] = deque()
         self._new = policy.push == "new"
         self._skip = policy.skip + 1 if policy.push == "skip" else 1
         self._limit = 1 if self._new else policy.buffer
@@ -56,7 +60,7 @@ class PendingQueue:
         self.dropped = 0
         """Values discarded by the policy (skipped, evicted, refused when full, replaced)."""
 
-    def offer(self, item: bytes) -> bool:
+    def offer(self, item: T) -> bool:
         """Queue one encoded value per the policy; False when it was not queued."""
         items = self._items
         if self._skip > 1:
@@ -76,7 +80,7 @@ class PendingQueue:
             self.dropped += 1
         return False
 
-    def take(self) -> list[bytes]:
+    def take(self) -> list[T]:
         """Everything pending, oldest first; the queue is empty afterwards."""
         items = list(self._items)
         self._items.clear()
