@@ -243,6 +243,7 @@ class Connection:
                 items = self._queue.take()
                 self._room.set()
             else:
+                self._room.set()  # all written: wakes `flushed`
                 return
             self._write(write, items)
 

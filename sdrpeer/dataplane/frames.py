@@ -137,12 +137,12 @@ class FrameDecoder:
         self._end = 0  # stream offset where the last complete object ended
         self._error: FrameError | None = None
 
-    def feed(self, data: bytes) -> None:
+    def feed(self, data: bytes | memoryview) -> None:
         """Add received bytes; FrameError("oversized") if they overflow the read buffer."""
         if len(data) > READ_SLACK:
             view = memoryview(data)
             for start in range(0, len(view), READ_SLACK):
-                self.feed(view[start : start + READ_SLACK])  # type: ignore[arg-type]
+                self.feed(view[start : start + READ_SLACK])
             return
         try:
             self._unpacker.feed(data)

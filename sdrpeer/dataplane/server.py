@@ -4,8 +4,9 @@ How it works: `DataServer` listens on TCP (and optionally a Unix socket, faster 
 robot). Each accepted connection is a `_Receiver` protocol with its own `FrameDecoder`. The first
 message must be a hello naming an InPort that `resolve` knows and protocol version 1; it is
 answered ``{"ok": true}``, or ``{"ok": false, "error": ...}`` and the connection is closed. Then
-every received chunk is decoded and each frame goes to ``port.deliver(value, seq, conn_id)``
-straight from `data_received`: no queue or task per frame. A bad frame (oversized, malformed)
+every received chunk (read into one reused 1 MiB buffer: no allocation per read) is decoded
+and each frame goes to ``port.deliver(value, seq, conn_id)`` at once: no queue or task per
+frame. A bad frame (oversized, malformed)
 calls ``port.refuse()``, is counted by reason, logged (first time per reason, then at most every
 ten seconds) and closes that connection only. Connections beyond `max_connections` are answered
 with an error and closed; a hello must arrive within `hello_timeout` seconds.
@@ -35,6 +36,7 @@ from sdrpeer.dataplane.frames import (
 log = logging.getLogger("sdrpeer.dataplane")
 _LOG_EVERY = 10.0
 _RCVBUF = 4 * 1024 * 1024
+_READ_SIZE = 1024 * 1024  # one reused receive buffer per connection: no allocation per read
 
 
 class InPortLike(Protocol):
@@ -123,12 +125,13 @@ class DataServer:
             log.warning("data connection %s: %s (%s; %d so far)", conn, reason, detail, count)
 
 
-class _Receiver(asyncio.Protocol):
+class _Receiver(asyncio.BufferedProtocol):
     """One accepted data connection."""
 
     def __init__(self, server: DataServer) -> None:
         self.server = server
         self.decoder = FrameDecoder(server.max_frame)
+        self._buffer = memoryview(bytearray(_READ_SIZE))
         self.transport: asyncio.Transport | None = None
         self.port: InPortLike | None = None
         self.conn = "?"
@@ -153,7 +156,14 @@ class _Receiver(asyncio.Protocol):
         loop = asyncio.get_running_loop()
         self._timer = loop.call_later(server.hello_timeout, self._hello_timeout)
 
-    def data_received(self, data: bytes) -> None:
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self._buffer
+
+    def buffer_updated(self, nbytes: int) -> None:
+        self.data_received(self._buffer[:nbytes])
+
+    def data_received(self, data: bytes | memoryview) -> None:
+        """Decode received bytes and deliver every complete frame."""
         try:
             self.decoder.feed(data)
             if self.port is None and not self._hello():
