@@ -11,6 +11,7 @@ from sdrpeer.dataplane.frames import (
     FrameDecoder,
     FrameError,
     Hello,
+    big_frame_header,
     encode_frame,
     encode_hello,
     encode_reply,
@@ -180,3 +181,21 @@ def test_fuzz_truncated_and_corrupted_streams(
     _only_frame_errors(data[:cut] + noise, chunk, hello_first=False)
     frames = decode_all(data, max_frame=1 << 20, chunk=chunk)  # intact: every frame back
     assert [f[0] for f in frames] == list(range(1, len(values) + 1))
+
+
+@pytest.mark.parametrize(
+    ("data", "expected"),
+    [
+        (encode_frame(7, b"x" * 70000)[:16], (7, 11, 70000)),
+        (b"\x92\x07\xc6\x00\x01\x11\x70", (7, 7, 70000)),
+        (encode_frame(2**40, b"x" * 70000)[:16], (2**40, 15, 70000)),
+        (b"\x92\xcc\x05\xc5\xff\xff", None),  # a bin16 of 65535 bytes: under the minimum
+        (encode_frame(7, b"x" * 100)[:16], None),  # small value: msgpack decodes it
+        (encode_frame(7, "x" * 70000)[:16], None),  # a str, not a bin
+        (encode_frame(7, b"x" * 70000)[:4], None),  # header incomplete
+        (b"\x93\x01\xc6\x00\x01\x00\x00", None),  # not a 2-array
+        (b"\x92\xd0\x01\xc6\x00\x01\x00\x00", None),  # signed seq
+    ],
+)
+def test_big_frame_header(data: bytes, expected: tuple[int, int, int] | None) -> None:
+    assert big_frame_header(data, 65536) == expected

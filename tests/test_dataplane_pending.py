@@ -10,7 +10,7 @@ from sdrpeer.dataplane.testing import make_policy as ConnectorPolicy
 
 
 def run(policy: PolicyLike, n: int) -> tuple[list[bool], list[bytes], int]:
-    queue = PendingQueue(policy)
+    queue: PendingQueue[bytes] = PendingQueue(policy)
     accepted = [queue.offer(str(i).encode()) for i in range(1, n + 1)]
     return accepted, queue.take(), queue.dropped
 
@@ -38,7 +38,7 @@ def test_policy_table(policy: PolicyLike, accepted: list[bool], pending: str, dr
 
 
 def test_take_empties_and_makes_room() -> None:
-    queue = PendingQueue(ConnectorPolicy("fifo", 2, "block"))
+    queue: PendingQueue[bytes] = PendingQueue(ConnectorPolicy("fifo", 2, "block"))
     assert queue.offer(b"a")
     assert queue.offer(b"b")
     full = queue.has_room

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import os
 import socket
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -194,3 +195,47 @@ async def test_connection_limit(tmp_path: Path) -> None:
     first.close()
     second.close()
     await rx.server.close()
+
+
+@pytest.mark.parametrize("kind", ["tcp", "unix"])
+async def test_big_and_small_values_mixed_arrive_intact(receiver: Receiver, kind: str) -> None:
+    big = [os.urandom(size) for size in (65536, 70001, 1_000_000, 3_000_000)]
+    values: list[object] = [1, big[0], big[1], "s", big[2], big[2], {"k": big[3]}, big[3], b"x", 2]
+    conn = connect(receiver.address(kind), push="fifo", buffer=4, full="block")
+    await offer_all_values(conn, values)
+    await until(lambda: len(receiver.port.frames) == len(values))
+    assert receiver.port.values == values
+    assert receiver.port.seqs == list(range(1, len(values) + 1))
+    await conn.close()
+
+
+async def test_big_value_header_split_from_its_bytes(receiver: Receiver) -> None:
+    sock, reply = await raw_hello(tcp_target(receiver), "in")
+    assert reply == {"ok": True}
+    value = os.urandom(100_000)
+    frame = encode_frame(1, value) + encode_frame(2, value) + encode_frame(3, "end")
+    for cut in (3, 9, 5000, 100_005, 100_011, 150_000, len(frame)):  # header, body, next header
+        sock.sendall(frame[:cut])
+        frame = frame[cut:]
+        await asyncio.sleep(0.01)
+    await until(lambda: len(receiver.port.frames) == 3)
+    assert receiver.port.values == [value, value, "end"]
+    sock.close()
+
+
+async def test_big_value_over_the_maximum_refused() -> None:
+    rx = Receiver(max_frame=100_000)
+    await rx.server.start()
+    sock, _ = await raw_hello(tcp_target(rx), "in")
+    sock.sendall(encode_frame(1, b"ok") + encode_frame(2, os.urandom(150_000)))
+    await until(lambda: rx.server.counters["refused_oversized"] == 1)
+    assert rx.port.values == [b"ok"]
+    assert rx.port.refused == 1
+    sock.close()
+    await rx.server.close()
+
+
+async def offer_all_values(conn: Connection, values: list[object]) -> None:
+    for value in values:
+        while not conn.offer(value):
+            await conn.drain()

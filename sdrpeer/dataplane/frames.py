@@ -121,6 +121,28 @@ def encode_frame(seq: int, value: object) -> bytes:
     return frame_header(seq) + encode_value(value)
 
 
+def big_frame_header(data: bytes | memoryview, min_size: int) -> tuple[int, int, int] | None:
+    """(seq, header length, value length) if `data` starts a frame whose value is a bin of at
+    least `min_size` bytes (the receiver reads those straight into place), else None."""
+    if len(data) < 2 or data[0] != 0x92:
+        return None
+    tag = data[1]
+    if tag < 0x80:
+        seq, i = tag, 2
+    elif 0xCC <= tag <= 0xCF:
+        i = 2 + (1 << (tag - 0xCC))
+        if len(data) < i:
+            return None
+        seq = int.from_bytes(data[2:i], "big")
+    else:
+        return None
+    width = {0xC5: 2, 0xC6: 4}.get(data[i]) if len(data) > i else None
+    if width is None or len(data) < i + 1 + width:
+        return None
+    size = int.from_bytes(data[i + 1 : i + 1 + width], "big")
+    return (seq, i + 1 + width, size) if size >= min_size else None
+
+
 class FrameDecoder:
     """Decodes one connection's byte stream: optionally a first map, then frames."""
 
@@ -162,6 +184,11 @@ class FrameDecoder:
             raise FrameError("malformed", f"{type(exc).__name__}: {exc}") from None
         self._check_size(self._unpacker.tell(), HELLO_MAX)
         return obj
+
+    @property
+    def at_boundary(self) -> bool:
+        """True when every byte fed belongs to a frame already returned (none half-decoded)."""
+        return self._end == self._fed and self._error is None
 
     @property
     def failed(self) -> bool:
