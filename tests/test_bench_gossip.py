@@ -37,6 +37,7 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     for cell in figures["convergence"]:
         assert _number(cell["median_s"]), cell  # every record change arrived everywhere
         assert 0 < cell["median_s"] < 5.0
+        assert 0 < cell["median_99_s"] <= cell["median_s"]
         assert len(cell["times_s"]) == cell["trials"] >= 1
     assert {c["n"]: c["target_s"] for c in figures["convergence"] if c["loss"] == 0}[10] == 1.0
 
