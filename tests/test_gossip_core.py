@@ -199,6 +199,20 @@ def test_k_confirmations_bring_the_timeout_to_the_minimum() -> None:
     assert core.state_of("r5") == DEAD
 
 
+def test_our_own_failed_probe_confirms_someone_elses_suspicion() -> None:
+    core = with_peers()
+    advance(core, 0.0, 10.0)
+    feed(core, 10.0, Suspect("r5", 0, "r1"))
+    core._merge_suspect(Suspect("r5", 0, "r0"))  # what our own failed probe round does
+    core.handle_timer(10.1)  # the next gossip round spreads it, so others count it too
+    assert Suspect("r5", 0, "r0") in [u for _, p in answer_pings(core, 10.1) for u in p.updates]
+    expected = 1.8 - 1.2 * math.log(2) / math.log(3)  # one confirmation: 1.043 s
+    advance(core, 10.11, 10.0 + expected - 0.01)
+    assert core.state_of("r5") == SUSPECT
+    advance(core, 10.0 + expected, 10.0 + expected + 0.02)
+    assert core.state_of("r5") == DEAD
+
+
 def test_suspicion_at_a_newer_incarnation_starts_afresh() -> None:
     core = with_peers()
     advance(core, 0.0, 10.0)

@@ -270,7 +270,7 @@ class Membership(Probing, AntiEntropy):
             return
         if m.state == SUSPECT and m.suspicion is not None and s.incarnation == m.incarnation:
             susp = m.suspicion
-            if s.source in susp.confirmers or s.source in (self.name, susp.origin):
+            if s.source in susp.confirmers or s.source == susp.origin:
                 return
             susp.confirmers.add(s.source)
             timeout = formulas.suspicion_timeout(
