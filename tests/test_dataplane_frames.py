@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sdrpeer.dataplane.frames import (
+    INCOMPLETE,
     FrameDecoder,
     FrameError,
     Hello,
@@ -192,7 +193,10 @@ def test_fuzz_truncated_and_corrupted_streams(
         (b"\x92\xcc\x05\xc5\xff\xff", None),  # a bin16 of 65535 bytes: under the minimum
         (encode_frame(7, b"x" * 100)[:16], None),  # small value: msgpack decodes it
         (encode_frame(7, "x" * 70000)[:16], None),  # a str, not a bin
-        (encode_frame(7, b"x" * 70000)[:4], None),  # header incomplete
+        (encode_frame(7, b"x" * 70000)[:4], INCOMPLETE),  # may still be big
+        (encode_frame(7, b"x" * 70000)[:8], INCOMPLETE),
+        (b"\x92", INCOMPLETE),
+        (b"\x92\x01\x01", None),
         (b"\x93\x01\xc6\x00\x01\x00\x00", None),  # not a 2-array
         (b"\x92\xd0\x01\xc6\x00\x01\x00\x00", None),  # signed seq
     ],

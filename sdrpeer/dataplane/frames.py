@@ -121,24 +121,37 @@ def encode_frame(seq: int, value: object) -> bytes:
     return frame_header(seq) + encode_value(value)
 
 
+INCOMPLETE: Final = (0, 0, 0)
+"""What `big_frame_header` returns while the bytes so far could still start a big frame."""
+
+
 def big_frame_header(data: bytes | memoryview, min_size: int) -> tuple[int, int, int] | None:
     """(seq, header length, value length) if `data` starts a frame whose value is a bin of at
-    least `min_size` bytes (the receiver reads those straight into place), else None."""
-    if len(data) < 2 or data[0] != 0x92:
+    least `min_size` bytes; INCOMPLETE if it may, once more bytes arrive; None if it does not."""
+    n = len(data)
+    if n == 0:
+        return INCOMPLETE
+    if data[0] != 0x92:
         return None
+    if n < 2:
+        return INCOMPLETE
     tag = data[1]
     if tag < 0x80:
         seq, i = tag, 2
     elif 0xCC <= tag <= 0xCF:
         i = 2 + (1 << (tag - 0xCC))
-        if len(data) < i:
-            return None
+        if n < i:
+            return INCOMPLETE
         seq = int.from_bytes(data[2:i], "big")
     else:
         return None
-    width = {0xC5: 2, 0xC6: 4}.get(data[i]) if len(data) > i else None
-    if width is None or len(data) < i + 1 + width:
+    if n <= i:
+        return INCOMPLETE
+    width = 2 if data[i] == 0xC5 else 4 if data[i] == 0xC6 else 0
+    if not width:
         return None
+    if n < i + 1 + width:
+        return INCOMPLETE
     size = int.from_bytes(data[i + 1 : i + 1 + width], "big")
     return (seq, i + 1 + width, size) if size >= min_size else None
 
@@ -150,11 +163,7 @@ class FrameDecoder:
 
     def __init__(self, max_frame: int = DEFAULT_MAX_FRAME) -> None:
         self.max_frame = max_frame
-        self._unpacker = msgpack.Unpacker(
-            raw=False,
-            strict_map_key=False,
-            max_buffer_size=max_frame + READ_SLACK,
-        )
+        self._unpacker = self._new_unpacker()
         self._fed = 0  # bytes fed so far
         self._end = 0  # stream offset where the last complete object ended
         self._error: FrameError | None = None
@@ -184,6 +193,21 @@ class FrameDecoder:
             raise FrameError("malformed", f"{type(exc).__name__}: {exc}") from None
         self._check_size(self._unpacker.tell(), HELLO_MAX)
         return obj
+
+    def _new_unpacker(self) -> msgpack.Unpacker:
+        return msgpack.Unpacker(
+            raw=False, strict_map_key=False, max_buffer_size=self.max_frame + READ_SLACK
+        )
+
+    @property
+    def partial(self) -> int:
+        """How many of the bytes fed belong to a frame not complete yet."""
+        return self._fed - self._end
+
+    def drop_partial(self) -> None:
+        """Forget the incomplete frame (its bytes are the caller's to handle)."""
+        self._unpacker = self._new_unpacker()
+        self._fed = self._end
 
     @property
     def at_boundary(self) -> bool:

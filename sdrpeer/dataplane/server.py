@@ -1,15 +1,12 @@
 """The receiving side of data streams: one listener per host, many connections, many InPorts.
 
 How it works: `DataServer` listens on TCP (and optionally a Unix socket, faster on the same
-robot). Each accepted connection is a `_Receiver` protocol with its own `FrameDecoder`. The first
+robot). Each accepted connection is a `_Receiver` protocol with its own `FrameReader`. The first
 message must be a hello naming an InPort that `resolve` knows and protocol version 1; it is
 answered ``{"ok": true}``, or ``{"ok": false, "error": ...}`` and the connection is closed. Then
-every received chunk (read into one reused 1 MiB buffer: no allocation per read) is decoded
-and each frame goes to ``port.deliver(value, seq, conn_id)`` at once: no queue or task per
-frame. A frame whose value is a bin of 64 KiB or more skips msgpack when it starts at a frame
-boundary: its header is parsed here and the value is read straight into a reused buffer, then
-copied once into the delivered bytes (a plain socket loop's work). After such a frame the next
-read is a 16-byte peek, so a following big value lands in place too. A bad frame (oversized,
+every received chunk (read into the connection's `FrameReader`: a reused buffer, big binary
+values taken out without msgpack) is decoded and each frame goes to
+``port.deliver(value, seq, conn_id)`` at once: no queue or task per frame. A bad frame (oversized,
 malformed) calls ``port.refuse()``, is counted by reason, logged (first time per reason, then at
 most every ten seconds) and closes that connection only. Connections beyond `max_connections`
 are answered with an error and closed; a hello must arrive within `hello_timeout` seconds.
@@ -30,19 +27,15 @@ from sdrpeer.dataplane.address import format_tcp
 from sdrpeer.dataplane.frames import (
     DEFAULT_MAX_FRAME,
     PROTOCOL_VERSION,
-    FrameDecoder,
     FrameError,
-    big_frame_header,
     encode_reply,
     parse_hello,
 )
+from sdrpeer.dataplane.reader import FrameReader
 
 log = logging.getLogger("sdrpeer.dataplane")
 _LOG_EVERY = 10.0
 _RCVBUF = 4 * 1024 * 1024
-_READ_SIZE = 1024 * 1024  # one reused receive buffer per connection: no allocation per read
-_BIG = 64 * 1024  # a bin value at least this large is received straight into its own buffer
-_PEEK = 16  # after a big value, read just enough for the next header (maybe big again)
 
 
 class InPortLike(Protocol):
@@ -136,14 +129,7 @@ class _Receiver(asyncio.BufferedProtocol):
 
     def __init__(self, server: DataServer) -> None:
         self.server = server
-        self.decoder = FrameDecoder(server.max_frame)
-        self._buffer = memoryview(bytearray(_READ_SIZE))
-        self._peek = memoryview(bytearray(_PEEK))
-        self._peeking = False
-        self._big = bytearray()  # reused: where big values are received in place
-        self._big_size = 0  # > 0 while a big value is being received
-        self._big_got = 0
-        self._big_seq = 0
+        self.reader = FrameReader(server.max_frame)
         self.transport: asyncio.Transport | None = None
         self.port: InPortLike | None = None
         self.conn = "?"
@@ -169,73 +155,24 @@ class _Receiver(asyncio.BufferedProtocol):
         self._timer = loop.call_later(server.hello_timeout, self._hello_timeout)
 
     def get_buffer(self, sizehint: int) -> memoryview:
-        if self._big_size:
-            return memoryview(self._big)[self._big_got : self._big_size]
-        return self._peek if self._peeking else self._buffer
+        return self.reader.buffer()
 
     def buffer_updated(self, nbytes: int) -> None:
-        if self._big_size:
-            self._big_got += nbytes
-            if self._big_got == self._big_size:
-                with memoryview(self._big) as view:
-                    value = bytes(view[: self._big_size])
-                self._big_size = 0
-                self._peeking = True  # the next header alone: its value can land in place too
-                self._deliver([[self._big_seq, value]])
-            return
-        chunk = (self._peek if self._peeking else self._buffer)[:nbytes]
-        self._peeking = False
-        self.data_received(chunk)
-
-    def data_received(self, data: bytes | memoryview) -> None:
-        """Decode received bytes and deliver every complete frame."""
-        decoder = self.decoder
+        reader = self.reader
+        reader.received(nbytes)
         try:
-            if self.port is None:
-                decoder.feed(data)
-                if not self._hello():
-                    return
-            elif decoder.at_boundary:
-                data = self._take_big(data)
-                if data:
-                    decoder.feed(data)
-            else:
-                decoder.feed(data)
-            frames = decoder.frames()
+            if self.port is None and not self._hello():
+                return
+            frames = reader.frames()
         except FrameError as exc:
             self._bad(exc)
             return
         self._deliver(frames)
-        if decoder.failed:
+        if reader.failed:
             try:
-                decoder.frames()
+                reader.frames()
             except FrameError as exc:
                 self._bad(exc)
-
-    def _take_big(self, data: bytes | memoryview) -> bytes | memoryview:
-        """Deliver the big-bin frames `data` starts with; the first incomplete one is then
-        received in place. Returns the bytes left for the decoder."""
-        pos = 0
-        while pos < len(data):
-            head = big_frame_header(data[pos : pos + _PEEK], _BIG)
-            if head is None:
-                break
-            seq, header, size = head
-            if header + size > self.decoder.max_frame:
-                raise FrameError(
-                    "oversized", f"frame of {header + size} bytes, max {self.decoder.max_frame}"
-                )
-            if len(self._big) < size:
-                self._big = bytearray(size)
-            got = min(size, len(data) - pos - header)
-            self._big[:got] = data[pos + header : pos + header + got]
-            pos += header + got
-            if got < size:
-                self._big_size, self._big_got, self._big_seq = size, got, seq
-                return b""
-            with memoryview(self._big) as view:
-                self._deliver([[seq, bytes(view[:size])]])
-        return data[pos:]
 
     def _deliver(self, frames: list[list[Any]]) -> None:
         if self.port is None:
@@ -251,7 +188,7 @@ class _Receiver(asyncio.BufferedProtocol):
 
     def _hello(self) -> bool:
         """Handle the hello if it has arrived; True when frames may follow."""
-        obj = self.decoder.next_map()
+        obj = self.reader.first_map()
         if obj is None:
             return False
         if self._timer is not None:

@@ -1,0 +1,123 @@
+"""A data connection's receive buffer: where the socket reads into, and how frames come out.
+
+How it works: one reused bytearray per connection (1 MiB; it grows for big values, up to 32 MiB
+or one frame, never past what a frame needs) is what the transport reads into, so a read
+allocates nothing. `frames()` then walks the bytes received:
+- at a frame boundary, a frame whose value is a bin of 64 KiB or more (an image, a point cloud)
+  skips msgpack: its header is parsed here, and once all of it is in the buffer the value is
+  copied out once into the delivered bytes (what a plain socket loop does). An incomplete one
+  stays in place (moved to the front of the buffer, or the buffer grown, only when it would not
+  fit) and the socket reads the rest straight behind it;
+- everything else is fed to the `FrameDecoder`, which checks and decodes it. If what it is left
+  holding is the beginning of a big frame (and those bytes are still in the buffer), the reader
+  takes them back, so big values after small ones in the same read skip msgpack too.
+Errors keep the decoder's rule: good frames before a bad one come out first, then `failed` is
+set and the next `frames()` raises the FrameError.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Final
+
+from sdrpeer.dataplane.frames import INCOMPLETE, FrameDecoder, FrameError, big_frame_header
+
+READ_SIZE: Final = 1024 * 1024
+BIG: Final = 64 * 1024
+"""Bin values at least this large skip msgpack on the way in."""
+_GROWN_MAX: Final = 32 * 1024 * 1024
+_PEEK: Final = 16  # the longest big-frame header is 15 bytes
+
+
+class FrameReader:
+    """The receive buffer and decoder of one connection."""
+
+    def __init__(self, max_frame: int) -> None:
+        self.decoder = FrameDecoder(max_frame)
+        self._array = bytearray(READ_SIZE)
+        self._view = memoryview(self._array)
+        self._start = 0  # first byte not yet consumed
+        self._end = 0  # end of the bytes received
+        self._error: FrameError | None = None
+
+    def buffer(self) -> memoryview:
+        """Free space to receive into (never empty)."""
+        return self._view[self._end :]
+
+    def received(self, nbytes: int) -> None:
+        """`nbytes` were written into the start of the last `buffer()`."""
+        self._end += nbytes
+
+    def first_map(self) -> object | None:
+        """The hello: everything received goes to the decoder, which returns its first map."""
+        self.decoder.feed(self._view[self._start : self._end])
+        self._start = self._end = 0
+        return self.decoder.next_map()
+
+    @property
+    def failed(self) -> bool:
+        """True when the stream is broken: the next `frames()` raises the FrameError."""
+        return self._error is not None or self.decoder.failed
+
+    def frames(self) -> list[list[Any]]:
+        """Every complete frame received so far, each ``[seq, value]``, oldest first."""
+        if self._error is not None:
+            raise self._error
+        out: list[list[Any]] = []
+        view, start, end, decoder = self._view, self._start, self._end, self.decoder
+        try:
+            while start < end or not decoder.at_boundary:
+                if decoder.at_boundary:
+                    head = big_frame_header(view[start : start + _PEEK], BIG)
+                    if head is INCOMPLETE:
+                        break
+                    if head is not None:
+                        seq, header, size = head
+                        total = header + size
+                        if total > decoder.max_frame:
+                            raise FrameError(
+                                "oversized", f"frame of {total} bytes, max {decoder.max_frame}"
+                            )
+                        if end - start < total:
+                            start, end = self._make_room(start, end, total)
+                            break
+                        out.append([seq, bytes(view[start + header : start + total])])
+                        start += total
+                        continue
+                fed, start = start, end
+                decoder.feed(view[fed:end])
+                out.extend(decoder.frames())
+                partial = decoder.partial
+                at = end - partial  # where the incomplete frame starts in the buffer
+                if (
+                    0 < partial <= end - fed
+                    and not decoder.failed
+                    and big_frame_header(view[at : at + _PEEK], BIG) is not None  # or INCOMPLETE
+                ):
+                    decoder.drop_partial()  # a big frame begins here: take it back
+                    start = at
+                    continue
+                break
+        except FrameError as exc:
+            if not out:
+                raise
+            self._error = exc
+        if start == end:
+            start = end = 0
+        elif len(self._array) - end < BIG:  # only a header's first bytes wait: to the front
+            start, end = self._make_room(start, end, end - start)
+        self._start, self._end = start, end
+        return out
+
+    def _make_room(self, start: int, end: int, total: int) -> tuple[int, int]:
+        """Ensure a frame of `total` bytes starting at `start` fits; returns the new start, end."""
+        if len(self._array) - start >= total:
+            return start, end
+        kept = end - start
+        if total > len(self._array):
+            size = max(total, min(8 * total, _GROWN_MAX))
+            array = bytearray(size)
+            array[:kept] = self._view[start:end]
+            self._array, self._view = array, memoryview(array)
+        else:
+            self._view[:kept] = self._view[start:end]
+        return 0, kept
