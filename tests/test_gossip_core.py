@@ -445,3 +445,33 @@ def test_remote_death_in_a_sync_is_only_a_suspicion_here() -> None:
     feed(core, 0.0, Alive("r1", addr(1), 0), Alive("r2", addr(2), 0))
     core.receive(1.0, addr(2), Sync("r2", False, (("r1", addr(1), 0, DEAD, 0),)))
     assert core.state_of("r1") == SUSPECT
+
+
+def test_periodic_sync_goes_to_a_live_seed_no_more_than_to_any_peer() -> None:
+    core = robot()
+    core.join(0.0, [addr(1)])
+    feed(core, 0.1, *(Alive(n, addr(int(n[1:])), 0) for n in PEERS))  # the seed r1 is live
+    targets: list[Addr] = []
+    t = 0.1
+    for _ in range(10_000):
+        t = round(t + 0.05, 6)
+        core.handle_timer(t)
+        for dst, p in answer_pings(core, t):
+            if isinstance(p, Sync) and p.reply:
+                targets.append(dst)
+    assert len(targets) > 60
+    share = targets.count(addr(1)) / len(targets)
+    assert share < 0.25  # a fair share among 9 peers is 0.11; it was 0.33 + 0.67 / 9 = 0.41
+
+
+def test_periodic_sync_retries_a_dead_members_last_address() -> None:
+    core = robot()
+    feed(core, 0.0, *(Alive(n, addr(int(n[1:])), 0) for n in PEERS))
+    feed(core, 0.1, Dead("r9", 0, "r1"))
+    targets: list[Addr] = []
+    t = 0.1
+    for _ in range(3000):
+        t = round(t + 0.05, 6)
+        core.handle_timer(t)
+        targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Sync) and p.reply]
+    assert targets.count(addr(9)) / len(targets) > 0.2  # about one sync in three heals partitions

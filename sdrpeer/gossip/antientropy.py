@@ -43,10 +43,12 @@ class AntiEntropy(CoreState):
         for name, (_, died) in list(self._dead_addrs.items()):
             if died < horizon:
                 del self._dead_addrs[name]
-        lost = list(self._dead_addrs.values())
-        if (lost or self._seeds) and (not self._peers or self.rng.random() < 1 / 3):
-            pool = [a for a, _ in lost] + self._seeds
-            target = self.rng.choice(pool)
+        lost = [addr for addr, _ in self._dead_addrs.values()]
+        if self._seeds:  # a seed is worth a reconnect only if it is not already a live peer
+            live = {self._members[name].addr for name in self._peers.names()}
+            lost += [seed for seed in self._seeds if seed not in live]
+        if lost and (not self._peers or self.rng.random() < 1 / 3):
+            target = self.rng.choice(lost)
         elif self._peers:
             target = self._members[self._peers.sample(self.rng, 1)[0]].addr
         if target is not None:
