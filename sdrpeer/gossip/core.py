@@ -8,7 +8,7 @@ How it works:
   timers and dissemination in `base`; this module holds the inputs, outputs and merge rules.
 - Suspicion (Lifeguard): the timeout starts at max and shrinks towards min as independent
   confirmations arrive; a suspicion at a newer incarnation starts afresh. The suspect is told at
-  once and again every half minimum timeout (buddy system), answers each with its Alive, and a
+  once and again every quarter minimum timeout (buddy system), answers each with its Alive, and a
   refuter answers its accuser directly.
 - Corrections: a robot that receives a Suspect or Dead older than the Alive it holds answers the
   sender with that Alive. Push gossip reaches almost everyone; corrections reach exactly the
@@ -289,7 +289,7 @@ class Membership(Probing, AntiEntropy):
         self._set_state(m, SUSPECT, s.incarnation)
         m.suspicion = susp
         self._at(susp.deadline, SUSPICION, (m.name, susp))
-        self._at(self._now + min_t / 2, RECHECK, (m.name, susp))
+        self._at(self._now + min_t / 4, RECHECK, (m.name, susp))
         self._enqueue(("m", m.name), s)
         # Buddy system: tell the suspect at once so it can refute before anyone times out (the
         # accuser always; others with a probability that keeps ~4 direct notices per suspicion).
@@ -369,14 +369,14 @@ class Membership(Probing, AntiEntropy):
         self._enqueue(("m", name), d)
 
     def _recheck(self, name: str, susp: Suspicion) -> None:
-        """Every half minimum timeout, tell the suspect directly: it answers with its Alive if it
+        """Every quarter minimum timeout, tell the suspect directly: it answers with its Alive if it
         refuted (or refutes now), so we do not time out merely for missing the refutation."""
         m = self._members.get(name)
         if m is not None and m.suspicion is susp:
             self._out.append(
                 (m.addr, Gossip(self.name, (Suspect(name, m.incarnation, self.name),)))
             )
-            self._at(self._now + susp.min_t / 2, RECHECK, (name, susp))
+            self._at(self._now + susp.min_t / 4, RECHECK, (name, susp))
 
     def _reap(self, name: str, since: float) -> None:
         m = self._members.get(name)
