@@ -250,6 +250,15 @@ class Connection:
     def _write(self, write: Callable[[bytes | memoryview], None], items: list[Item]) -> None:
         """Number and write `items`, stopping after the first big one (its tail goes to _rest)."""
         seq, n = self.seq, len(items)
+        if n == 1 and seq + 1 < _SEQ32 and type(items[0]) is bytes and len(items[0]) < _BIG:
+            data = _HEADER32(seq + 1) + items[0]  # one small value (latency): no join
+            write(data)
+            self.seq, self.frames_out, self.bytes_out = (
+                seq + 1,
+                self.frames_out + 1,
+                self.bytes_out + len(data),
+            )
+            return
         if seq + n < _SEQ32 and max(map(len, items)) < _BIG:  # the common case, no Python loop
             parts: list[bytes] = [b""] * (2 * n)
             parts[::2] = map(_HEADER32, range(seq + 1, seq + n + 1))

@@ -68,10 +68,11 @@ class FrameReader:
             raise self._error
         out: list[list[Any]] = []
         view, start, end, decoder = self._view, self._start, self._end, self.decoder
+        look = end - start >= BIG or self._need > 0  # else a big frame cannot be complete yet
         self._need = 0
         try:
             while start < end or not decoder.at_boundary:
-                if decoder.at_boundary:
+                if look and decoder.at_boundary:
                     head = big_frame_header(view[start : start + _PEEK], BIG)
                     if head is INCOMPLETE:
                         break
@@ -100,7 +101,7 @@ class FrameReader:
                     and big_frame_header(view[at : at + _PEEK], BIG) is not None  # or INCOMPLETE
                 ):
                     decoder.drop_partial()  # a big frame begins here: take it back
-                    start = at
+                    start, look = at, True
                     continue
                 break
         except FrameError as exc:
