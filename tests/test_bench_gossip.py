@@ -42,7 +42,13 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     assert {c["n"]: c["target_s"] for c in figures["convergence"] if c["loss"] == 0}[10] == 1.0
 
     bandwidth = figures["bandwidth"]
-    for key in ("mean_bytes_per_s", "max_bytes_per_s", "mean_datagrams_per_s"):
+    assert bandwidth["max_robot"].startswith("r")
+    for key in (
+        "mean_bytes_per_s",
+        "max_bytes_per_s",
+        "mean_datagrams_per_s",
+        "max_bytes_per_s_churned",
+    ):
         assert _number(bandwidth[key]), key
         assert bandwidth[key] > 0, key
     assert bandwidth["max_bytes_per_s"] >= bandwidth["mean_bytes_per_s"]

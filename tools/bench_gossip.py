@@ -190,6 +190,12 @@ def speed_and_bandwidth(plan: Plan, seed: int) -> tuple[dict[str, Any], dict[str
         cluster.schedule(t1 + (k + 0.5) * plan.churn_every, churn)
     first, first_dgrams = list(cluster.sent_bytes), list(cluster.sent_datagrams)
     cluster.run_for(plan.steady)
+    window = (t1, cluster.now)
+    churned_rates = [
+        (cluster.sent_bytes[i] - first[i]) / uptime(cluster, i, *window)
+        for i in (cluster.index[name] for name in churned)
+        if uptime(cluster, i, *window) > 1.0
+    ]
     steady = [i for i, name in enumerate(cluster.names) if name not in churned]
     rates = [(cluster.sent_bytes[i] - first[i]) / (cluster.now - t1) for i in steady]
     dgrams = [(cluster.sent_datagrams[i] - first_dgrams[i]) / (cluster.now - t1) for i in steady]
@@ -198,11 +204,30 @@ def speed_and_bandwidth(plan: Plan, seed: int) -> tuple[dict[str, Any], dict[str
         "duration_s": cluster.now - t1,
         "mean_bytes_per_s": statistics.fmean(rates),
         "max_bytes_per_s": max(rates),
+        "max_robot": cluster.names[steady[rates.index(max(rates))]],
         "mean_datagrams_per_s": statistics.fmean(dgrams),
         "churned": len(churned),
+        "max_bytes_per_s_churned": max(churned_rates, default=0.0),
         "target_bytes_per_s": TARGET_BANDWIDTH,
     }
     return speed, bandwidth
+
+
+def uptime(cluster: Cluster, i: int, t1: float, t2: float) -> float:
+    """Seconds node i was running within [t1, t2]."""
+    events = sorted(
+        [(t, 1) for t in cluster.trace.boots[i]] + [(t, -1) for t in cluster.trace.downs[i]]
+    )
+    up, since, total = False, t1, 0.0
+    for t, change in events:
+        if t > t2:
+            break
+        if up and t > t1:
+            total += t - max(since, t1)
+        up, since = change > 0, t
+    if up:
+        total += t2 - max(since, t1)
+    return total
 
 
 def failure_detection(plan: Plan, seed: int) -> list[dict[str, Any]]:
@@ -289,9 +314,10 @@ def report(results: dict[str, Any]) -> str:
             f"Bandwidth per robot at N = {bw['n']} ({bw['duration_s']:.0f} s, churn, "
             f"{bw['churned']} churned robots left out)",
             f"  mean {show(bw['mean_bytes_per_s'], 'B/s')}, "
-            f"max {show(bw['max_bytes_per_s'], 'B/s')} "
+            f"max {show(bw['max_bytes_per_s'], 'B/s')} ({bw['max_robot']}) "
             f"({bw['mean_datagrams_per_s']:.1f} datagrams/s); "
             f"target < {show(bw['target_bytes_per_s'], 'B/s')} (serf)",
+            f"  churned robots, per second up: max {show(bw['max_bytes_per_s_churned'], 'B/s')}",
         ]
     if "failure_detection" in results:
         out += [
