@@ -189,5 +189,5 @@ def cmd_lab_status(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """sdrpeer demo: a foreground lab in a temporary directory for --seconds."""
     with tempfile.TemporaryDirectory(prefix="sdrpeer-demo-") as tmp:
-        options = UpOptions(robots=args.robots, lab_dir=Path(tmp), preset="fast_test")
+        options = UpOptions(robots=args.robots, lab_dir=Path(tmp), preset="lan")
         return run_lab(options, detach=False, seconds=args.seconds)
