@@ -78,3 +78,9 @@ def test_hello_then_frames_in_the_same_read() -> None:
     assert reader.first_map() == {"v": 1}
     frames = reader.frames()
     assert [f[0] for f in frames] == [1, 2]
+
+
+def test_many_small_frames_through_a_full_buffer() -> None:
+    frames = [encode_frame(i, b"x" * 100) for i in range(1, 30001)]  # 3 MiB: buffer wraps
+    got = receive(FrameReader(1 << 20), b"".join(frames), [READ_SIZE])
+    assert [f[0] for f in got] == list(range(1, 30001))

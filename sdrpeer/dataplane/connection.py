@@ -1,15 +1,14 @@
 """The sending side of one data stream: an OutPort's sink that writes frames to a receiver.
 
-How it works: `offer(value)` packs the value at once (so an oversized or unencodable value is
-refused right there, with an error naming the connection) and queues the bytes in a
-`PendingQueue` that applies the connector policy. Writing is not a task per frame: the first
-offer in a loop iteration writes its frame immediately when the link is idle (low latency), and
-schedules one `call_soon` flush that numbers and joins everything offered meanwhile into a
-single `transport.write` (high throughput; headers and joins are C-level `map`s, no Python loop
-per frame). Big bytes values are queued as they are (no copy) and handed to the transport in
-256 KiB slices. The transport keeps no backlog of its own (high-water mark 0): when the kernel's
-socket buffer is full, writing pauses until it has drained and values wait in the queue, where
-the policy decides (so `new` really sends the newest value, not one stuck in a user buffer).
+How it works: an asyncio shell around a `FrameWriter` (packing, policy queue, numbering,
+joining). `offer(value)` encodes the value at once (so an oversized or unencodable value is
+refused right there, with an error naming the connection) and queues it. Writing is not a task
+per frame: the first offer in a loop iteration writes its frame immediately when the link is
+idle (low latency) and schedules one `call_soon` flush that writes everything offered meanwhile
+in one `transport.write` (high throughput). The transport keeps no backlog of its own
+(high-water mark 0): when the kernel's socket buffer is full, writing pauses until it drained
+and values wait in the queue, where the policy decides (so `new` really sends the newest value,
+not one stuck in a user-space buffer).
 
 A supervisor task owns the socket: it dials `to`, writes the hello, waits for the ok, then sleeps
 until the link drops, `repoint` changes the address, or `close` is called. A drop is redialed
@@ -25,49 +24,22 @@ import asyncio
 import contextlib
 import logging
 import socket
-import struct
-from collections import deque
-from collections.abc import Callable
-from functools import partial
 from typing import Final
-
-import msgpack
 
 from sdrpeer.dataplane.address import parse_address
 from sdrpeer.dataplane.frames import (
     DEFAULT_MAX_FRAME,
-    FRAME_OVERHEAD,
     FrameDecoder,
     FrameError,
     Hello,
     encode_hello,
-    frame_header,
     parse_reply,
 )
-from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
+from sdrpeer.dataplane.pending import PolicyLike
+from sdrpeer.dataplane.writer import FrameWriter
 
 log = logging.getLogger("sdrpeer.dataplane")
 _SNDBUF: Final = 4 * 1024 * 1024
-_BIG: Final = 64 * 1024  # values at least this large are written without joining (no copy)
-_SLICE: Final = 256 * 1024  # a big value is handed to the transport this much at a time
-_SEQ32: Final = 0x1_0000_0000
-_HEADER32: Final = partial(struct.Struct(">BBI").pack, 0x92, 0xCE)
-
-
-class _Big:
-    """A large bytes value queued without copying: its msgpack bin prefix, then the bytes."""
-
-    __slots__ = ("data", "prefix")
-
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-        self.prefix = b"\xc6" + len(data).to_bytes(4, "big")
-
-    def __len__(self) -> int:
-        return 5 + len(self.data)
-
-
-Item = bytes | _Big
 
 
 def next_backoff(delay: float, initial: float, cap: float) -> float:
@@ -99,22 +71,14 @@ class Connection:
         self.max_frame = max_frame
         self.backoff = backoff
         self.hello_timeout = hello_timeout
-        self.frames_out = 0
-        """Frames handed to a socket."""
-        self.bytes_out = 0
-        """Bytes of those frames."""
         self.reconnects = 0
         """Successful redials after a dropped link."""
         self.refused = 0
         """Values refused at `offer` because they were oversized or unencodable."""
-        self.seq = 0
-        """The seq of the last frame written."""
         self.last_error: str | None = None
         """Why the last dial or link failed."""
-        self._queue: PendingQueue[Item] = PendingQueue(policy)
-        self._taken: deque[Item] = deque()  # taken from the queue, not yet written
-        self._rest: memoryview | None = None  # the unwritten tail of a big value
-        self._pack = msgpack.Packer().pack
+        self._writer = FrameWriter(policy, max_frame)
+        self._queue = self._writer.queue
         self._link: _Link | None = None
         self._scheduled = False
         self._closing = False
@@ -128,9 +92,24 @@ class Connection:
         return self._queue.dropped
 
     @property
+    def frames_out(self) -> int:
+        """Frames handed to a socket."""
+        return self._writer.frames_out
+
+    @property
+    def bytes_out(self) -> int:
+        """Bytes of those frames."""
+        return self._writer.bytes_out
+
+    @property
+    def seq(self) -> int:
+        """The seq of the last frame written (0 before the first)."""
+        return self._writer.seq
+
+    @property
     def pending(self) -> int:
         """Values waiting for the socket (a big one half written counts too)."""
-        return len(self._queue) + len(self._taken) + (self._rest is not None)
+        return self._writer.pending
 
     @property
     def connected(self) -> bool:
@@ -146,23 +125,13 @@ class Connection:
         """Queue a value per the policy; False when dropped or (full=block) not queued yet."""
         if self._closing:
             return False
-        item: Item
-        if type(value) is bytes and len(value) >= _BIG:
-            item = _Big(value)
-        else:
-            try:
-                item = self._pack(value)
-            except (TypeError, ValueError, OverflowError) as exc:
-                self.refused += 1
-                detail = f"{type(value).__name__}: {exc}"
-                raise FrameError("unencodable", f"connection {self.conn_id}: {detail}") from None
-        if len(item) + FRAME_OVERHEAD > self.max_frame:
-            self.refused += 1
-            raise FrameError(
-                "oversized",
-                f"connection {self.conn_id} ({self.from_} -> {self.in_port}): a frame of "
-                f"{len(item) + FRAME_OVERHEAD} bytes exceeds the maximum {self.max_frame}",
+        try:
+            item = self._writer.encode(
+                value, f"connection {self.conn_id} ({self.from_} -> {self.in_port})"
             )
+        except FrameError:
+            self.refused += 1
+            raise
         if not self._queue.offer(item):
             return False
         if not self._scheduled and self._link is not None:
@@ -183,9 +152,7 @@ class Connection:
         self.to = to
         link, self._link = self._link, None
         if link is not None:
-            if self._rest is not None:  # a frame half written: the old receiver gets all of it
-                link.transport.write(self._rest)
-                self._rest = None
+            self._writer.finish_frame(link.transport.write)  # the old receiver gets all of it
             link.transport.close()
         self._wake.set()
 
@@ -227,73 +194,9 @@ class Connection:
 
     def _flush(self) -> None:
         link = self._link
-        if link is None:
-            return
-        write = link.transport.write
-        while not link.paused:
-            rest = self._rest
-            if rest is not None:
-                self._rest = rest[_SLICE:] if len(rest) > _SLICE else None
-                write(rest[:_SLICE])
-                continue
-            if self._taken:
-                items = list(self._taken)
-                self._taken.clear()
-            elif len(self._queue):
-                items = self._queue.take()
-                self._room.set()
-            else:
-                self._room.set()  # all written: wakes `flushed`
-                return
-            self._write(write, items)
-
-    def _write(self, write: Callable[[bytes | memoryview], None], items: list[Item]) -> None:
-        """Number and write `items`, stopping after the first big one (its tail goes to _rest)."""
-        seq, n = self.seq, len(items)
-        if n == 1 and seq + 1 < _SEQ32 and type(items[0]) is bytes and len(items[0]) < _BIG:
-            data = _HEADER32(seq + 1) + items[0]  # one small value (latency): no join
-            write(data)
-            self.seq, self.frames_out, self.bytes_out = (
-                seq + 1,
-                self.frames_out + 1,
-                self.bytes_out + len(data),
-            )
-            return
-        if seq + n < _SEQ32 and max(map(len, items)) < _BIG:  # the common case, no Python loop
-            parts: list[bytes] = [b""] * (2 * n)
-            parts[::2] = map(_HEADER32, range(seq + 1, seq + n + 1))
-            parts[1::2] = items  # type: ignore[assignment]
-            data = b"".join(parts)
-            write(data)
-            self.seq, self.frames_out, self.bytes_out = (
-                seq + n,
-                self.frames_out + n,
-                self.bytes_out + len(data),
-            )
-            return
-        parts = []
-        size = 0
-        for index, item in enumerate(items):
-            seq += 1
-            parts.append(frame_header(seq))
-            size += len(parts[-1]) + len(item)
-            if isinstance(item, _Big):
-                parts.append(item.prefix)
-                payload: bytes = item.data
-            elif len(item) >= _BIG:
-                payload = item
-            else:
-                parts.append(item)
-                continue
-            write(b"".join(parts))
-            parts = []
-            self._rest = memoryview(payload)
-            self._taken.extend(items[index + 1 :])
-            n = index + 1
-            break
-        if parts:
-            write(b"".join(parts))
-        self.seq, self.frames_out, self.bytes_out = seq, self.frames_out + n, self.bytes_out + size
+        if link is not None:
+            self._writer.flush(link.transport.write, link.is_paused)
+            self._room.set()  # wakes `drain` and `flushed`, which recheck
 
     def _resume(self, link: _Link) -> None:
         if link is self._link:
@@ -302,7 +205,7 @@ class Connection:
     def _lost(self, link: _Link) -> None:
         if link is self._link:
             self._link = None
-            self._rest = None  # the frame being written is lost with the link (a seq gap)
+            self._writer.drop_frame()  # the frame being written is lost with the link
             self._wake.set()
 
     async def _run(self) -> None:
@@ -389,6 +292,10 @@ class _Link(asyncio.Protocol):
         except FrameError as exc:
             self.reply.set_exception(exc)
         self._decoder = None
+
+    def is_paused(self) -> bool:
+        """True while the kernel's buffer is full."""
+        return self.paused
 
     def pause_writing(self) -> None:
         self.paused = True

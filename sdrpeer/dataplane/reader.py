@@ -110,8 +110,9 @@ class FrameReader:
             self._error = exc
         if start == end:
             start = end = 0
-        elif len(self._array) - end < BIG:  # only a header's first bytes wait: to the front
-            start, end = self._make_room(start, end, end - start)
+        elif len(self._array) - end < BIG and not self._need:  # a header's first bytes wait
+            self._view[: end - start] = self._view[start:end]  # move them to the front
+            start, end = 0, end - start
         self._start, self._end = start, end
         return out
 

@@ -1,0 +1,159 @@
+"""The sender's frame writer, without I/O: values in, numbered frames out to a `write` callable.
+
+How it works: `encode` packs a value once, when it is offered (a bytes value of 64 KiB or more
+is kept as it is, behind a 5-byte bin prefix: no copy); `queue` (a `PendingQueue`) applies the
+connector policy. `flush(write, paused)` numbers what is pending and writes it: many small
+values become one joined buffer (the headers and the join are C-level `map`s, no Python loop per
+frame), a big value is written as its header, then its bytes in 256 KiB slices, each only while
+`paused()` is false, so the socket's buffer, not ours, holds what the kernel has not taken. seq
+is given when a frame is written (starting at 1), so values dropped by the policy leave no gap;
+frames lost with a broken link do.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections import deque
+from collections.abc import Callable
+from functools import partial
+from typing import Final
+
+import msgpack
+
+from sdrpeer.dataplane.frames import FRAME_OVERHEAD, FrameError, frame_header
+from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
+
+BIG: Final = 64 * 1024
+"""Bytes values at least this large are queued and written without a copy."""
+SLICE: Final = 256 * 1024
+"""A big value is handed to the transport this much at a time."""
+_SEQ32: Final = 0x1_0000_0000
+_HEADER32: Final = partial(struct.Struct(">BBI").pack, 0x92, 0xCE)
+
+Write = Callable[[bytes | memoryview], None]
+
+
+class _Big:
+    """A large bytes value queued without copying: its msgpack bin prefix, then the bytes."""
+
+    __slots__ = ("data", "prefix")
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.prefix = b"\xc6" + len(data).to_bytes(4, "big")
+
+    def __len__(self) -> int:
+        return 5 + len(self.data)
+
+
+Item = bytes | _Big
+
+
+class FrameWriter:
+    """Pending values of one connection and the numbering of its frames."""
+
+    def __init__(self, policy: PolicyLike, max_frame: int) -> None:
+        self.queue: PendingQueue[Item] = PendingQueue(policy)
+        self.max_frame = max_frame
+        self.seq = 0
+        """The seq of the last frame written."""
+        self.frames_out = 0
+        """Frames written."""
+        self.bytes_out = 0
+        """Bytes of those frames."""
+        self._taken: deque[Item] = deque()  # taken from the queue, not yet written
+        self._rest: memoryview | None = None  # the unwritten tail of a big value
+        self._pack = msgpack.Packer().pack
+
+    @property
+    def pending(self) -> int:
+        """Values not fully written yet (a big one half written counts)."""
+        return len(self.queue) + len(self._taken) + (self._rest is not None)
+
+    def encode(self, value: object, where: str) -> Item:
+        """A value's encoding; FrameError (unencodable, oversized) naming `where` otherwise."""
+        item: Item
+        if type(value) is bytes and len(value) >= BIG:
+            item = _Big(value)
+        else:
+            try:
+                item = self._pack(value)
+            except (TypeError, ValueError, OverflowError) as exc:
+                detail = f"{where}: {type(value).__name__}: {exc}"
+                raise FrameError("unencodable", detail) from None
+        if len(item) + FRAME_OVERHEAD > self.max_frame:
+            size = len(item) + FRAME_OVERHEAD
+            detail = f"{where}: a frame of {size} bytes exceeds the maximum {self.max_frame}"
+            raise FrameError("oversized", detail)
+        return item
+
+    def flush(self, write: Write, paused: Callable[[], bool]) -> None:
+        """Write everything pending, as long as `paused()` is false."""
+        while not paused():
+            rest = self._rest
+            if rest is not None:
+                self._rest = rest[SLICE:] if len(rest) > SLICE else None
+                write(rest[:SLICE])
+            elif self._taken:
+                items = list(self._taken)
+                self._taken.clear()
+                self._write(write, items)
+            elif len(self.queue):
+                self._write(write, self.queue.take())
+            else:
+                return
+
+    def finish_frame(self, write: Write) -> None:
+        """Write the rest of a big value now (before its link is closed for a repoint)."""
+        if self._rest is not None:
+            write(self._rest)
+            self._rest = None
+
+    def drop_frame(self) -> None:
+        """Forget the rest of a big value (its link broke: the frame is lost)."""
+        self._rest = None
+
+    def _write(self, write: Write, items: list[Item]) -> None:
+        """Number and write `items`, stopping after the first big one (its tail in _rest)."""
+        seq, n = self.seq, len(items)
+        if n == 1 and seq + 1 < _SEQ32 and type(items[0]) is bytes and len(items[0]) < BIG:
+            data = _HEADER32(seq + 1) + items[0]  # one small value (latency): no join
+        elif seq + n < _SEQ32 and max(map(len, items)) < BIG:  # the common case
+            parts: list[bytes] = [b""] * (2 * n)
+            parts[::2] = map(_HEADER32, range(seq + 1, seq + n + 1))
+            parts[1::2] = items  # type: ignore[assignment]
+            data = b"".join(parts)
+        else:
+            self._write_slowly(write, items)
+            return
+        write(data)
+        self.seq, self.frames_out, self.bytes_out = (
+            seq + n,
+            self.frames_out + n,
+            self.bytes_out + len(data),
+        )
+
+    def _write_slowly(self, write: Write, items: list[Item]) -> None:
+        seq, size, parts = self.seq, 0, []
+        n = len(items)
+        for index, item in enumerate(items):
+            seq += 1
+            parts.append(frame_header(seq))
+            size += len(parts[-1]) + len(item)
+            if isinstance(item, _Big):
+                parts.append(item.prefix)
+                payload: bytes = item.data
+            elif len(item) >= BIG:
+                payload = item
+            else:
+                parts.append(item)
+                continue
+            write(b"".join(parts))
+            parts = []
+            self._rest = memoryview(payload)
+            self._taken.extend(items[index + 1 :])
+            n = index + 1
+            break
+        if parts:
+            write(b"".join(parts))
+        self.seq, self.frames_out, self.bytes_out = seq, self.frames_out + n, self.bytes_out + size
