@@ -9,6 +9,8 @@ sender and receiver are separate processes on this machine, as two component hos
   both read from CLOCK_MONOTONIC (`time.perf_counter`, one clock for both processes); 100-byte
   frames in frames/s, 1 MB frames in MB/s (10^6 bytes);
 - round trip: the sender times each 100-byte ping until its pong arrives; p50 and p99 in µs.
+  `asyncio_raw` (a bare asyncio Protocol echo, no framing at all) is the floor of any design
+  on asyncio's event loop, shown for scale.
 Contenders: sdrpeer (Connection -> DataServer; policy fifo + block, TCP or Unix socket), pyzmq
 (PUSH/PULL, REQ/REP; blocking sockets), a plain length-prefixed socket loop (one sendall per
 frame; the receiver parses frames out of a recv_into buffer and makes each a bytes object) and
@@ -98,6 +100,21 @@ async def _peer_sdr_echo(reply_to: str) -> None:
     await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)  # until parent exits
     await back.close()
     await server.close()
+
+
+async def _peer_asyncio_echo() -> None:
+    class Echo(asyncio.Protocol):
+        def connection_made(self, transport: asyncio.BaseTransport) -> None:
+            assert isinstance(transport, asyncio.Transport)
+            self.transport = transport
+
+        def data_received(self, data: bytes) -> None:
+            self.transport.write(data)
+
+    server = await asyncio.get_running_loop().create_server(Echo, "127.0.0.1", 0)
+    _emit({"tcp": f"127.0.0.1:{server.sockets[0].getsockname()[1]}"})
+    await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
+    server.close()
 
 
 def _peer_plain_sink(n: int) -> None:
@@ -190,6 +207,8 @@ def _run_peer(role: str, n: int, arg: str) -> None:
         _peer_plain_sink(n)
     elif role == "plain-echo":
         _peer_plain_echo()
+    elif role == "asyncio-echo":
+        asyncio.run(_peer_asyncio_echo())
     else:
         _peer_zmq(role, n)
 
@@ -321,6 +340,30 @@ async def _sdr_pings(m: int) -> list[float]:
     return times
 
 
+async def _asyncio_pings(m: int) -> list[float]:
+    """Round trips of a bare asyncio Protocol ping-pong: the floor under any asyncio design."""
+    loop = asyncio.get_running_loop()
+    waiter: list[asyncio.Future[None]] = []
+
+    class Ping(asyncio.Protocol):
+        def data_received(self, data: bytes) -> None:
+            waiter.pop().set_result(None)
+
+    peer = await asyncio.to_thread(Peer, "asyncio-echo")
+    transport, _ = await loop.create_connection(Ping, *peer.tcp())
+    frame, times = LEN.pack(SMALL) + payload(SMALL), []
+    for _ in range(m):
+        fut = loop.create_future()
+        waiter.append(fut)
+        t0 = time.perf_counter()
+        transport.write(frame)
+        await fut
+        times.append(time.perf_counter() - t0)
+    transport.close()
+    peer.stop()
+    return times
+
+
 def plain_pings(m: int) -> list[float]:
     """Round trips of a blocking socket ping-pong."""
     peer = Peer("plain-echo")
@@ -382,6 +425,7 @@ def measure(
         "sdrpeer_tcp": lambda: asyncio.run(_sdr_pings(m)),
         "plain_tcp": lambda: plain_pings(m),
         "zmq": lambda: zmq_pings(m),
+        "asyncio_raw": lambda: asyncio.run(_asyncio_pings(m)),
     }
     out: dict[str, Any] = {"quick": quick, "reps": reps, "small": {}, "big": {}, "rtt": {}}
     runs: dict[tuple[str, str], list[float]] = {}

@@ -1,0 +1,44 @@
+"""The data-plane benchmark's smoke test: `--quick --json` runs and writes every figure."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _positive(value: object) -> bool:
+    return isinstance(value, int | float) and math.isfinite(value) and value > 0
+
+
+def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
+    out = tmp_path / "bench.json"
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "bench_dataplane.py"), "--quick", "--json", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "Targets" in done.stdout
+    figures = json.loads(out.read_text())
+    assert figures["quick"] is True
+    small = {"sdrpeer_tcp", "sdrpeer_unix", "zmq", "plain_tcp", "plain_tcp_coalesced"}
+    assert set(figures["small"]) == small
+    assert set(figures["big"]) == {"sdrpeer_tcp", "sdrpeer_unix", "plain_tcp", "zmq"}
+    assert set(figures["rtt"]) == {"sdrpeer_tcp", "plain_tcp", "zmq", "asyncio_raw"}
+    for section in ("small", "big"):
+        for name, cell in figures[section].items():
+            assert _positive(cell["median"]), (section, name)
+            assert len(cell["runs"]) == figures["reps"] == 1
+    for name, cell in figures["rtt"].items():
+        assert 0 < cell["p50_us"] <= cell["p99_us"], name
+    assert len(figures["targets"]) == 4
+    for target in figures["targets"]:
+        assert _positive(target["ratio"])
+        assert isinstance(target["met"], bool)
