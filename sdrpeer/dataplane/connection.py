@@ -79,6 +79,7 @@ class Connection:
         """Why the last dial or link failed."""
         self._writer = FrameWriter(policy, max_frame)
         self._queue = self._writer.queue
+        self._writer_offer = self._writer.offer
         self._link: _Link | None = None
         self._scheduled = False
         self._closing = False
@@ -126,14 +127,12 @@ class Connection:
         if self._closing:
             return False
         try:
-            item = self._writer.encode(
-                value, f"connection {self.conn_id} ({self.from_} -> {self.in_port})"
-            )
-        except FrameError:
+            if not self._writer_offer(value):
+                return False
+        except FrameError as exc:
             self.refused += 1
-            raise
-        if not self._queue.offer(item):
-            return False
+            where = f"connection {self.conn_id} ({self.from_} -> {self.in_port})"
+            raise FrameError(exc.reason, f"{where}: {exc.detail}") from None
         if not self._scheduled and self._link is not None:
             self._scheduled = True
             asyncio.get_running_loop().call_soon(self._flush_soon)

@@ -1,13 +1,13 @@
 """The sender's frame writer, without I/O: values in, numbered frames out to a `write` callable.
 
-How it works: `encode` packs a value once, when it is offered (a bytes value of 64 KiB or more
-is kept as it is, behind a 5-byte bin prefix: no copy); `queue` (a `PendingQueue`) applies the
-connector policy. `flush(write, paused)` numbers what is pending and writes it: many small
-values become one joined buffer (the headers and the join are C-level `map`s, no Python loop per
-frame), a big value is written as its header, then its bytes in 256 KiB slices, each only while
-`paused()` is false, so the socket's buffer, not ours, holds what the kernel has not taken. seq
-is given when a frame is written (starting at 1), so values dropped by the policy leave no gap;
-frames lost with a broken link do.
+How it works: `offer` packs a value once, when it is offered (a bytes value of 64 KiB or more
+is kept as it is, behind a 5-byte bin prefix: no copy) and queues it in `queue` (a
+`PendingQueue`, which applies the connector policy). `flush(write, paused)` numbers what is
+pending and writes it: many small values become one joined buffer (the headers and the join
+are C-level `map`s, no Python loop per frame); a big value is written as its header, then its
+bytes in 256 KiB slices, each only while `paused()` is false, so the socket's buffer, not ours,
+holds what the kernel has not taken. seq is given when a frame is written (starting at 1), so
+values dropped by the policy leave no gap; frames lost with a broken link do.
 """
 
 from __future__ import annotations
@@ -55,6 +55,8 @@ class FrameWriter:
     def __init__(self, policy: PolicyLike, max_frame: int) -> None:
         self.queue: PendingQueue[Item] = PendingQueue(policy)
         self.max_frame = max_frame
+        self._max_value = max_frame - FRAME_OVERHEAD
+        self._queue_offer = self.queue.offer
         self.seq = 0
         """The seq of the last frame written."""
         self.frames_out = 0
@@ -70,8 +72,9 @@ class FrameWriter:
         """Values not fully written yet (a big one half written counts)."""
         return len(self.queue) + len(self._taken) + (self._rest is not None)
 
-    def encode(self, value: object, where: str) -> Item:
-        """A value's encoding; FrameError (unencodable, oversized) naming `where` otherwise."""
+    def offer(self, value: object) -> bool:
+        """Encode a value and queue it per the policy (False: not queued); FrameError when it
+        cannot be encoded or its frame would be over the maximum."""
         item: Item
         if type(value) is bytes and len(value) >= BIG:
             item = _Big(value)
@@ -79,13 +82,12 @@ class FrameWriter:
             try:
                 item = self._pack(value)
             except (TypeError, ValueError, OverflowError) as exc:
-                detail = f"{where}: {type(value).__name__}: {exc}"
-                raise FrameError("unencodable", detail) from None
-        if len(item) + FRAME_OVERHEAD > self.max_frame:
+                raise FrameError("unencodable", f"{type(value).__name__}: {exc}") from None
+        if len(item) > self._max_value:
             size = len(item) + FRAME_OVERHEAD
-            detail = f"{where}: a frame of {size} bytes exceeds the maximum {self.max_frame}"
+            detail = f"a frame of {size} bytes exceeds the maximum {self.max_frame}"
             raise FrameError("oversized", detail)
-        return item
+        return self._queue_offer(item)
 
     def flush(self, write: Write, paused: Callable[[], bool]) -> None:
         """Write everything pending, as long as `paused()` is false."""
