@@ -47,13 +47,30 @@ T = TypeVar("T", bound=Sized)
 class PendingQueue(Generic[T]):
     """Values waiting for the socket, queued by a connector policy."""
 
-    __slots__ = ("_block", "_counter", "_items", "_limit", "_new", "_overwrite", "_skip", "dropped")
+    __slots__ = (
+        "_block",
+        "_counter",
+        "_items",
+        "_new",
+        "_overwrite",
+        "_skip",
+        "dropped",
+        "items",
+        "limit",
+        "simple",
+    )
 
     def __init__(self, policy: PolicyLike) -> None:
         self._items: deque[T] = deque()
         self._new = policy.push == "new"
         self._skip = policy.skip + 1 if policy.push == "skip" else 1
-        self._limit = 1 if self._new else policy.buffer
+        self.limit = 1 if self._new else policy.buffer
+        """How many values may wait."""
+        self.simple = policy.push in ("all", "fifo")
+        """True when a value is queued as-is while there is room (a caller's fast path may
+        ``items.append`` itself then)."""
+        self.items = self._items
+        """The values waiting, oldest first (read, or append under `simple` with room)."""
         self._overwrite = policy.full == "overwrite"
         self._block = policy.full == "block"
         self._counter = 0
@@ -68,7 +85,7 @@ class PendingQueue(Generic[T]):
             if (self._counter - 1) % self._skip:
                 self.dropped += 1
                 return False
-        if len(items) < self._limit:
+        if len(items) < self.limit:
             items.append(item)
             return True
         if self._new or self._overwrite:
@@ -89,7 +106,7 @@ class PendingQueue(Generic[T]):
     @property
     def has_room(self) -> bool:
         """True when `offer` would queue a value without evicting or refusing one."""
-        return len(self._items) < self._limit
+        return len(self._items) < self.limit
 
     def __len__(self) -> int:
         return len(self._items)

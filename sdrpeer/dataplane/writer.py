@@ -87,6 +87,10 @@ class FrameWriter:
             size = len(item) + FRAME_OVERHEAD
             detail = f"a frame of {size} bytes exceeds the maximum {self.max_frame}"
             raise FrameError("oversized", detail)
+        queue = self.queue
+        if queue.simple and len(queue.items) < queue.limit:  # the hot path, inlined
+            queue.items.append(item)
+            return True
         return self._queue_offer(item)
 
     def flush(self, write: Write, paused: Callable[[], bool]) -> None:
