@@ -75,6 +75,7 @@ async def test_frames_arrive_in_order_with_seq(receiver: Receiver, kind: str) ->
     assert receiver.port.values == list(range(1, 2001))
     assert {c for _, _, c in receiver.port.frames} == {"c1"}
     assert (conn.frames_out, conn.seq, conn.dropped) == (2000, 2000, 0)
+    assert receiver.server.bytes_in["in"] == conn.bytes_out
     await conn.close()
 
 

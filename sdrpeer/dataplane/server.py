@@ -71,6 +71,8 @@ class DataServer:
         self.hello_timeout = hello_timeout
         self.counters: Counter[str] = Counter()
         """accepted, rejected (hello refused or over the limit), refused_<reason>, deliver_error."""
+        self.bytes_in: Counter[str] = Counter()
+        """Bytes received after the hello, by in-port name (for the port's `bytes_in`)."""
         self._servers: list[asyncio.Server] = []
         self._receivers: set[_Receiver] = set()
         self._addresses: dict[str, str] = {}
@@ -133,6 +135,7 @@ class _Receiver(asyncio.BufferedProtocol):
         self.transport: asyncio.Transport | None = None
         self.port: InPortLike | None = None
         self.conn = "?"
+        self.in_port = ""
         self._timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -160,6 +163,8 @@ class _Receiver(asyncio.BufferedProtocol):
     def buffer_updated(self, nbytes: int) -> None:
         reader = self.reader
         reader.received(nbytes)
+        if self.port is not None:
+            self.server.bytes_in[self.in_port] += nbytes
         try:
             if self.port is None and not self._hello():
                 return
@@ -211,6 +216,7 @@ class _Receiver(asyncio.BufferedProtocol):
             self.transport.close()
             return False
         self.port = port
+        self.in_port = hello.in_port
         return True
 
     def _bad(self, exc: FrameError) -> None:
