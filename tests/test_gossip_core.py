@@ -475,3 +475,18 @@ def test_periodic_sync_retries_a_dead_members_last_address() -> None:
         core.handle_timer(t)
         targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Sync) and p.reply]
     assert targets.count(addr(9)) / len(targets) > 0.2  # about one sync in three heals partitions
+
+
+def test_a_member_back_from_the_dead_is_no_longer_a_reconnect_target() -> None:
+    core = robot()
+    feed(core, 0.0, *(Alive(n, addr(int(n[1:])), 0) for n in PEERS))
+    feed(core, 0.1, Dead("r9", 0, "r1"))
+    feed(core, 0.2, Alive("r9", addr(9), 1))  # it restarted and refuted
+    targets: list[Addr] = []
+    t = 0.2
+    for _ in range(10_000):
+        t = round(t + 0.05, 6)
+        core.handle_timer(t)
+        targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Sync) and p.reply]
+    assert len(targets) > 60
+    assert targets.count(addr(9)) / len(targets) < 0.25  # a peer like any other, not 1 in 3

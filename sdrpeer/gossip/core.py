@@ -350,6 +350,7 @@ class Membership(Probing, AntiEntropy):
         m.state = state
         m.since = self._now
         if state in (ALIVE, SUSPECT):
+            self._dead_addrs.pop(m.name, None)  # back: no more reconnect syncs to its old life
             if m.name not in self._peers and m is not self._me:
                 self._peers.add(m.name)
                 self._ring.insert(self.rng, m.name)
