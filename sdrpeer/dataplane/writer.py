@@ -5,7 +5,7 @@ is kept as it is, behind a 5-byte bin prefix: no copy) and queues it in `queue` 
 `PendingQueue`, which applies the connector policy). `flush(write, paused)` numbers what is
 pending and writes it: many small values become one joined buffer (the headers and the join
 are C-level `map`s, no Python loop per frame); a big value is written as its header, then its
-bytes in 256 KiB slices, each only while `paused()` is false, so the socket's buffer, not ours,
+bytes in 1 MiB slices, each only while `paused()` is false, so the socket's buffer, not ours,
 holds what the kernel has not taken. seq is given when a frame is written (starting at 1), so
 values dropped by the policy leave no gap; frames lost with a broken link do.
 """
@@ -25,7 +25,7 @@ from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
 
 BIG: Final = 64 * 1024
 """Bytes values at least this large are queued and written without a copy."""
-SLICE: Final = 256 * 1024
+SLICE: Final = 1024 * 1024
 """A big value is handed to the transport this much at a time."""
 _SEQ32: Final = 0x1_0000_0000
 _HEADER32: Final = partial(struct.Struct(">BBI").pack, 0x92, 0xCE)
