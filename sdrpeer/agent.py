@@ -37,7 +37,7 @@ from sdrpeer.gossip.events import (
     RecordChanged,
 )
 from sdrpeer.gossip.messages import STATE_NAMES
-from sdrpeer.gossip.udp import GossipShell, open_gossip
+from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.logs import setup_logging
 from sdrpeer.monitor.links import LinkTable, distance
 from sdrpeer.monitor.publish import worth_publishing

@@ -34,19 +34,11 @@ codec only encodes packets whose `sender` is its own.
 
 from __future__ import annotations
 
-import base64
-import binascii
-import hashlib
-import hmac
-import os
-import re
-from collections import Counter, OrderedDict
-from collections.abc import Sequence
-from pathlib import Path
+from collections import Counter
 
 import msgpack
 
-from sdrpeer.errors import ConfigError, WireError
+from sdrpeer.errors import WireError
 from sdrpeer.gossip.messages import (
     STATE_NAMES,
     Ack,
@@ -65,19 +57,44 @@ from sdrpeer.gossip.messages import (
     SyncEntry,
     Update,
 )
+from sdrpeer.keyring import (
+    INSECURE_KEY_ID,
+    KEY_ID_SIZE,
+    MAC_SIZE,
+    MIN_KEY_SIZE,
+    Keyring,
+    format_key,
+    key_id,
+    parse_key,
+)
+from sdrpeer.replay import REPLAY_WINDOW, ReplayGuard
+
+__all__ = [  # the keyring and replay guard live in their own modules; re-exported here
+    "HEADER_SIZE",
+    "INSECURE_KEY_ID",
+    "KEY_ID_SIZE",
+    "MAC_SIZE",
+    "MIN_KEY_SIZE",
+    "PROTOCOL_VERSION",
+    "REASONS",
+    "REPLAY_WINDOW",
+    "Codec",
+    "Keyring",
+    "ReplayGuard",
+    "decode_update",
+    "encode_update",
+    "encoded_size",
+    "format_key",
+    "key_id",
+    "packet_body",
+    "parse_key",
+]
 
 PROTOCOL_VERSION = 1
 """Bumped on any incompatible change of the header or body layout."""
 MAGIC = b"SP"
-KEY_ID_SIZE = 4
-MAC_SIZE = 32
 HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + MAC_SIZE
 """Bytes the envelope adds before the body (39; `GossipConfig.packet_overhead` budgets 48)."""
-INSECURE_KEY_ID = b"\0" * KEY_ID_SIZE
-MIN_KEY_SIZE = 16
-REPLAY_WINDOW = 1024
-"""How many seqs below a sender's highest one are remembered (older ones are rejected)."""
-_WINDOW_MASK = (1 << REPLAY_WINDOW) - 1
 MAX_FIELDS = 32
 """Largest msgpack array or map accepted anywhere in a body (a head has at most 8 fields)."""
 MAX_NAME = 255
@@ -101,177 +118,6 @@ U_ALIVE, U_SUSPECT, U_DEAD, U_RECORD, U_EVENT = range(5)
 _PACKER = msgpack.Packer(use_bin_type=True)
 _pack = _PACKER.pack
 _MAC_OFFSET = HEADER_SIZE - MAC_SIZE
-_HEX = re.compile(r"(?:[0-9a-fA-F]{2})+")
-
-
-# ---------------------------------------------------------------------------------------------
-# Keys
-
-
-def key_id(key: bytes) -> bytes:
-    """The 4-byte id of `key` sent in every datagram it signs: sha256(key)[:4]."""
-    return hashlib.sha256(key).digest()[:KEY_ID_SIZE]
-
-
-def format_key(key: bytes) -> str:
-    """`key` as a line for a key file (lowercase hex)."""
-    return key.hex()
-
-
-def parse_key(text: str) -> bytes:
-    """A key written as hex or base64 (prefix "hex:" or "base64:" to say which; else detected)."""
-    if text.startswith("hex:"):
-        return bytes.fromhex(text[4:])
-    if text.startswith("base64:"):
-        return base64.b64decode(text[7:], validate=True)
-    if _HEX.fullmatch(text):
-        return bytes.fromhex(text)
-    return base64.b64decode(text, validate=True)
-
-
-class Keyring:
-    """Cluster keys: the first signs, every key verifies (so keys rotate without downtime)."""
-
-    def __init__(self, keys: Sequence[bytes]) -> None:
-        unique = list(dict.fromkeys(bytes(k) for k in keys))
-        if not unique:
-            raise ConfigError("keyring: at least one key is needed")
-        for i, key in enumerate(unique):
-            if len(key) < MIN_KEY_SIZE:
-                raise ConfigError(
-                    f"keyring: key #{i + 1} has {len(key)} bytes, at least {MIN_KEY_SIZE} needed"
-                )
-        self._keys = tuple(unique)
-        self._ids = tuple(key_id(k) for k in unique)
-        if INSECURE_KEY_ID in self._ids:
-            raise ConfigError("keyring: a key has the all-zero key id of unsigned datagrams")
-        self._macs: dict[bytes, list[hmac.HMAC]] = {}
-        for kid, key in zip(self._ids, self._keys, strict=True):
-            self._macs.setdefault(kid, []).append(hmac.new(key, digestmod=hashlib.sha256))
-        self._signer = self._macs[self._ids[0]][0]
-
-    @property
-    def signing_key(self) -> bytes:
-        """The key that signs outgoing datagrams (the first one)."""
-        return self._keys[0]
-
-    @property
-    def key_ids(self) -> tuple[bytes, ...]:
-        """Ids of every key, the signing key's first."""
-        return self._ids
-
-    def __len__(self) -> int:
-        """Number of distinct keys."""
-        return len(self._keys)
-
-    def __repr__(self) -> str:
-        """Key ids only: a keyring never prints its keys."""
-        return f"Keyring(key_ids=[{', '.join(k.hex() for k in self._ids)}])"
-
-    def knows(self, kid: bytes) -> bool:
-        """Whether some key in the ring has id `kid`."""
-        return kid in self._macs
-
-    def sign(self, data: bytes) -> tuple[bytes, bytes]:
-        """(key id, HMAC-SHA256 of `data`) under the signing key."""
-        mac = self._signer.copy()
-        mac.update(data)
-        return self._ids[0], mac.digest()
-
-    def verify(self, kid: bytes, data: bytes, mac: bytes) -> bool:
-        """Whether `mac` is the HMAC of `data` under a key with id `kid` (constant-time compare)."""
-        ok = False
-        for base in self._macs.get(kid, ()):
-            h = base.copy()
-            h.update(data)
-            ok |= hmac.compare_digest(h.digest(), mac)
-        return ok
-
-    @staticmethod
-    def generate() -> bytes:
-        """A new random 32-byte key."""
-        return os.urandom(32)
-
-    format_key = staticmethod(format_key)
-
-    @classmethod
-    def from_file(cls, path: str | os.PathLike[str]) -> Keyring:
-        """Keys from a file: one per line, hex or base64, `#` comments; the first key signs.
-
-        A line of an even number of hex digits is hex, anything else must be base64 (a 32-byte
-        key is 64 chars in hex, 44 chars ending in "=" in base64); "hex:" or "base64:" in front
-        of a key says which explicitly.
-        """
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as e:
-            raise ConfigError(f"{path}: cannot read key file: {e}") from e
-        keys: list[bytes] = []
-        for lineno, raw in enumerate(text.splitlines(), 1):
-            line = raw.split("#", 1)[0].strip()
-            if not line:
-                continue
-            try:
-                key = parse_key(line)
-            except (ValueError, binascii.Error):
-                raise ConfigError(
-                    f"{path}:{lineno}: not a hex or base64 key (one key per line, # comments)"
-                ) from None
-            if len(key) < MIN_KEY_SIZE:
-                raise ConfigError(
-                    f"{path}:{lineno}: key has {len(key)} bytes, at least {MIN_KEY_SIZE} needed"
-                )
-            keys.append(key)
-        if not keys:
-            raise ConfigError(f"{path}: no key in key file")
-        return cls(keys)
-
-
-# ---------------------------------------------------------------------------------------------
-# Replay protection
-
-
-class ReplayGuard:
-    """Rejects stale timestamps and repeated or too old per-sender seqs (no clock of its own)."""
-
-    def __init__(self, freshness_s: float = 30.0, max_senders: int = 4096) -> None:
-        if freshness_s <= 0 or max_senders < 1:
-            raise ValueError("freshness_s must be > 0 and max_senders >= 1")
-        self.freshness_ms = int(freshness_s * 1000)
-        self.max_senders = max_senders
-        # sender -> [highest seq, bitmap]; bit i set = seq (highest - i) was accepted.
-        self._senders: OrderedDict[str, list[int]] = OrderedDict()
-
-    def __len__(self) -> int:
-        """Number of senders tracked."""
-        return len(self._senders)
-
-    def check(self, sender: str, seq: int, ts_ms: int, now_ms: int) -> str | None:
-        """None if acceptable (the seq is then recorded), else "stale" or "replayed"."""
-        if abs(now_ms - ts_ms) > self.freshness_ms:
-            return "stale"
-        state = self._senders.get(sender)
-        if state is None:
-            if len(self._senders) >= self.max_senders:
-                self._senders.popitem(last=False)
-            self._senders[sender] = [seq, 1]
-            return None
-        top, bits = state
-        if seq > top:
-            shift = seq - top
-            state[0] = seq
-            state[1] = ((bits << shift) | 1) & _WINDOW_MASK if shift < REPLAY_WINDOW else 1
-        else:
-            offset = top - seq
-            if offset >= REPLAY_WINDOW or (bits >> offset) & 1:
-                return "replayed"
-            state[1] = bits | (1 << offset)
-        self._senders.move_to_end(sender)
-        return None
-
-
-# ---------------------------------------------------------------------------------------------
-# Body encoding
 
 
 def encode_update(u: Update) -> list[object]:

@@ -1,0 +1,55 @@
+"""Replay protection: a freshness window plus a per-sender sliding window of sequence numbers.
+
+How it works (as IPsec's anti-replay window): for each sender we keep its highest seq and a
+bitmap of the `REPLAY_WINDOW` seqs below it. A datagram is refused as "stale" when its timestamp
+is outside the freshness window of our clock, and as "replayed" when its seq was seen already or
+is older than the window. Time is passed in; at most `max_senders` senders are tracked (the least
+recently seen is forgotten first), so a flood of forged names cannot exhaust memory.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+REPLAY_WINDOW = 1024
+"""How many seqs below a sender's highest one are remembered (older ones are rejected)."""
+_WINDOW_MASK = (1 << REPLAY_WINDOW) - 1
+
+
+class ReplayGuard:
+    """Rejects stale timestamps and repeated or too old per-sender seqs (no clock of its own)."""
+
+    def __init__(self, freshness_s: float = 30.0, max_senders: int = 4096) -> None:
+        if freshness_s <= 0 or max_senders < 1:
+            raise ValueError("freshness_s must be > 0 and max_senders >= 1")
+        self.freshness_ms = int(freshness_s * 1000)
+        self.max_senders = max_senders
+        # sender -> [highest seq, bitmap]; bit i set = seq (highest - i) was accepted.
+        self._senders: OrderedDict[str, list[int]] = OrderedDict()
+
+    def __len__(self) -> int:
+        """Number of senders tracked."""
+        return len(self._senders)
+
+    def check(self, sender: str, seq: int, ts_ms: int, now_ms: int) -> str | None:
+        """None if acceptable (the seq is then recorded), else "stale" or "replayed"."""
+        if abs(now_ms - ts_ms) > self.freshness_ms:
+            return "stale"
+        state = self._senders.get(sender)
+        if state is None:
+            if len(self._senders) >= self.max_senders:
+                self._senders.popitem(last=False)
+            self._senders[sender] = [seq, 1]
+            return None
+        top, bits = state
+        if seq > top:
+            shift = seq - top
+            state[0] = seq
+            state[1] = ((bits << shift) | 1) & _WINDOW_MASK if shift < REPLAY_WINDOW else 1
+        else:
+            offset = top - seq
+            if offset >= REPLAY_WINDOW or (bits >> offset) & 1:
+                return "replayed"
+            state[1] = bits | (1 << offset)
+        self._senders.move_to_end(sender)
+        return None
