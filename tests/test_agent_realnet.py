@@ -13,7 +13,7 @@ import random
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
@@ -27,15 +27,6 @@ pytestmark = pytest.mark.realnet
 
 RESTART_BOUND = 5.0  # a restarted robot must be alive again at every peer within this (seconds)
 PROPAGATION_BOUND = 5.0  # a record change or a trap must reach another robot within this
-
-
-@pytest.fixture
-def cluster(tmp_path: Path) -> Iterator[RealCluster]:
-    net = RealCluster(tmp_path / "net")
-    try:
-        yield net
-    finally:
-        net.close()
 
 
 @pytest.fixture

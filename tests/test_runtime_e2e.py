@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import signal
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,15 +24,6 @@ components:
 connections:
   - {from: Pub.out, to: Rec.inp, policy: {buffer: 16}}
 """
-
-
-@pytest.fixture
-def cluster(tmp_path: Path) -> Iterator[RealCluster]:
-    net = RealCluster(tmp_path / "net")
-    try:
-        yield net
-    finally:
-        net.close()
 
 
 def instances(agent: Agent) -> dict[str, dict[str, Any]]:
