@@ -41,9 +41,9 @@ def test_decoder_reassembles_split_messages():
 @pytest.mark.parametrize(
     ("message", "why"),
     [
-        ([1, 2], "not a map"),
-        ({"x": 1}, "not a map"),
-        ({"t": 5}, "not a map"),
+        ([1, 2], "expected a map, got list"),
+        ({"x": 1}, "without a str 't'"),
+        ({"t": 5}, "without a str 't'"),
         ({"t": "hello", "protocol": 2, "pid": 1}, "protocol 2"),
         ({"t": "state", "state": "RUNNING"}, "unknown state"),
         ({"t": "reply", "id": "1", "ok": True}, "reply"),

@@ -1,8 +1,8 @@
 """The host side of the control channel (docs/protocol.md, section 1).
 
 How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CONTROL_FD`. Bytes read
-from it go through `ControlDecoder`, a pure core: it cuts the msgpack stream into values, enforces
-the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
+from it go through `ControlDecoder`, a pure core: the shared framing (`sdrpeer.control_stream`,
+the same code the agent uses) cuts the msgpack stream into values and enforces the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
 `ControlProtocolError`) and turns maps carrying an integer `"id"` into `Command`s. The report
 builders (`hello`, `state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs,
 `now` included. `ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a
@@ -26,25 +26,36 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import msgpack
-
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.control_stream import (
+    MAX_MESSAGE,
+    PROTOCOL,
+    ControlProtocolError,
+    Message,
+    MessageStream,
+    encode,
+)
 
 log = logging.getLogger("sdrpeer.host.control")
 
-PROTOCOL_VERSION = 1
-MAX_MESSAGE = 1 << 20
-"""Largest control message accepted, in bytes."""
+__all__ = [
+    "HEARTBEAT_INTERVAL",
+    "MAX_MESSAGE",
+    "Command",
+    "ControlChannel",
+    "ControlDecoder",
+    "ControlProtocolError",
+    "Message",
+    "arm_parent_death_signal",
+    "encode",
+    "fault",
+    "heartbeat",
+    "hello",
+    "reply",
+    "state",
+]
+
 HEARTBEAT_INTERVAL = 0.5
 """Seconds between two heartbeats."""
-_PIECE = 64 * 1024
-"""Incoming bytes are fed to the unpacker in pieces of at most this size (bounds its buffer)."""
-
-Message = dict[str, Any]
-
-
-class ControlProtocolError(SdrpeerError):
-    """The peer sent something the control channel contract forbids; the channel is closed."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,62 +71,24 @@ class Command:
 
 
 class ControlDecoder:
-    """Cuts a msgpack byte stream into checked messages (pure: no I/O, no clock)."""
+    """Cuts the byte stream from the agent into commands (pure: no I/O, no clock)."""
 
     def __init__(self, max_message: int = MAX_MESSAGE) -> None:
-        self.max_message = max_message
-        self._unpacker = msgpack.Unpacker(raw=False, max_buffer_size=max_message + _PIECE)
-        self._offset = 0
+        self._stream = MessageStream(max_message)
         self.ignored = 0
         """Maps that were well-formed but not commands (no integer id): logged and skipped."""
 
     def feed(self, data: bytes) -> list[Command]:
         """Consume `data`; return the complete commands in it; raise ControlProtocolError."""
         out: list[Command] = []
-        view = memoryview(data)
-        for start in range(0, len(view), _PIECE):
-            try:
-                self._unpacker.feed(view[start : start + _PIECE])
-            except msgpack.BufferFull:
-                raise ControlProtocolError(f"message over {self.max_message} bytes") from None
-            self._drain(out)
+        for msg in self._stream.feed(data):
+            ident = msg.get("id")
+            if type(ident) is not int:
+                self.ignored += 1
+                log.warning("control: %r without an integer id ignored", msg["t"])
+                continue
+            out.append(Command(t=msg["t"], id=ident, msg=msg))
         return out
-
-    def _drain(self, out: list[Command]) -> None:
-        """Unpack every complete value in the buffer into `out`."""
-        while True:
-            try:
-                value = self._unpacker.unpack()
-            except msgpack.OutOfData:
-                return
-            except Exception as exc:
-                raise ControlProtocolError(f"undecodable msgpack: {type(exc).__name__}") from exc
-            end = self._unpacker.tell()
-            size, self._offset = end - self._offset, end
-            if size > self.max_message:
-                raise ControlProtocolError(f"message of {size} bytes (limit {self.max_message})")
-            command = self._check(value)
-            if command is not None:
-                out.append(command)
-
-    def _check(self, value: object) -> Command | None:
-        """Validate one value; a map without an integer id is counted and skipped."""
-        if not isinstance(value, dict):
-            raise ControlProtocolError(f"expected a map, got {type(value).__name__}")
-        t = value.get("t")
-        if not isinstance(t, str):
-            raise ControlProtocolError("map without a str 't'")
-        ident = value.get("id")
-        if type(ident) is not int:
-            self.ignored += 1
-            log.warning("control: %r without an integer id ignored", t)
-            return None
-        return Command(t=t, id=ident, msg=value)
-
-
-def encode(msg: Message) -> bytes:
-    """The bytes of one report."""
-    return msgpack.packb(msg, use_bin_type=True)  # type: ignore[no-any-return]
 
 
 def hello(
@@ -129,7 +102,7 @@ def hello(
     """The first report: who we are and where our data server listens."""
     return {
         "t": "hello",
-        "protocol": PROTOCOL_VERSION,
+        "protocol": PROTOCOL,
         "pid": pid,
         "component": component,
         "ports": ports,

@@ -1,7 +1,8 @@
 """The agent's end of a host's control channel (docs/protocol.md, section 1).
 
 How it works: `ControlDecoder` is the pure part: bytes in, validated messages out (msgpack maps
-with a string "t", at most 1 MiB each; anything else raises `ProtocolError`). `ControlChannel` is
+with a string "t", at most 1 MiB each, framed by `sdrpeer.control_stream` exactly as the host does;
+anything else raises `ProtocolError`). `ControlChannel` is
 its asyncio shell over the agent's end of a `socket.socketpair()`: `command(t, **fields)` sends a
 map with a fresh integer id and awaits the matching `reply` (timeout -> `CommandError` "timeout",
 ok=false -> "refused", channel gone -> "closed"); reports (`hello`, `state`, `heartbeat`,
@@ -19,23 +20,40 @@ import socket
 from collections.abc import Callable, Mapping
 from typing import Any
 
-import msgpack
-
+from sdrpeer.control_stream import (
+    MAX_MESSAGE,
+    PROTOCOL,
+    ControlProtocolError,
+    MessageStream,
+    encode,
+)
 from sdrpeer.errors import SdrpeerError
 
-PROTOCOL = 1
-MAX_MESSAGE = 1 << 20
 REPORTS = ("hello", "state", "heartbeat", "fault")
 LIFECYCLE = ("CREATED", "INACTIVE", "ACTIVE", "ERROR", "FINALIZED")
 _READ = 64 * 1024
 log = logging.getLogger(__name__)
 
+__all__ = [
+    "LIFECYCLE",
+    "MAX_MESSAGE",
+    "REPORTS",
+    "CommandError",
+    "ControlChannel",
+    "ControlDecoder",
+    "ProtocolError",
+    "Report",
+    "ReportHandler",
+    "check_report",
+    "encode",
+]
+
 Report = dict[str, Any]
 ReportHandler = Callable[[Report], None]
 
 
-class ProtocolError(SdrpeerError):
-    """The host sent something the protocol does not allow."""
+ProtocolError = ControlProtocolError
+"""The host sent something the protocol does not allow (the channel's one error type)."""
 
 
 class CommandError(SdrpeerError):
@@ -65,42 +83,17 @@ def check_report(msg: Report) -> None:
 
 
 class ControlDecoder:
-    """Turns the byte stream from a host into validated messages (pure)."""
+    """Turns the byte stream from a host into validated reports (pure)."""
 
     def __init__(self, max_message: int = MAX_MESSAGE) -> None:
-        self.max_message = max_message
-        self._unpacker = msgpack.Unpacker(raw=False, max_buffer_size=2 * max_message)
-        self._fed = 0
-        self._used = 0
+        self._stream = MessageStream(max_message)
 
     def feed(self, data: bytes) -> list[Report]:
-        """Every complete message in the stream so far; ProtocolError on a bad one."""
-        self._fed += len(data)
-        items = []
-        try:
-            self._unpacker.feed(data)
-            for item in self._unpacker:
-                used = self._unpacker.tell()
-                if used - self._used > self.max_message:
-                    raise ProtocolError("message over the size limit")
-                self._used = used
-                items.append(item)
-        except msgpack.BufferFull:
-            raise ProtocolError("message over the size limit") from None
-        except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as e:
-            raise ProtocolError(f"not msgpack: {e}") from None
-        if self._fed - self._used > self.max_message:
-            raise ProtocolError("message over the size limit")
-        for item in items:
-            if not isinstance(item, dict) or not isinstance(item.get("t"), str):
-                raise ProtocolError(f"not a map with a string 't': {str(item)[:80]}")
-            check_report(item)
-        return items
-
-
-def encode(msg: Mapping[str, Any]) -> bytes:
-    """One control message as msgpack."""
-    return bytes(msgpack.packb(dict(msg), use_bin_type=True))
+        """Every complete report in the stream so far; ProtocolError on a bad one."""
+        reports = self._stream.feed(data)
+        for msg in reports:
+            check_report(msg)
+        return reports
 
 
 class ControlChannel:
