@@ -1,11 +1,12 @@
 """The host side of the control channel (docs/protocol.md, section 1).
 
-How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CONTROL_FD`. Bytes read
-from it go through `ControlDecoder`, a pure core: the shared framing (`sdrpeer.control_stream`,
-the same code the agent uses) cuts the msgpack stream into values and enforces the limits (a
-value over 1 MiB, or one that is not a map with a str `"t"`, is a `ControlProtocolError`); maps
-carrying an integer `"id"` become `Command`s. The report builders (`hello`, `state`, `reply`,
-`heartbeat`, `fault`) are pure functions of their inputs, `now` included. `ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a
+How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CONTROL_FD`. Bytes
+read from it go through `ControlDecoder`, a pure core: the shared framing
+(`sdrpeer.control_stream`, the same code the agent uses) cuts the msgpack stream into values and
+enforces the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
+`ControlProtocolError`); maps carrying an integer `"id"` become `Command`s. The report builders
+(`hello`, `state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs, `now`
+included. `ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a
 callback, writes reports at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once
 when the channel ends: the agent closed it (the agent died), a protocol error closed it, or the
 parent pid changed. A host must never outlive its agent, so `arm_parent_death_signal` also asks
