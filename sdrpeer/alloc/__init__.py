@@ -1,0 +1,1 @@
+"""Dynamic module allocation: a pure core from (system, cluster view) to a plan."""

@@ -1,0 +1,1 @@
+"""System files: what a fleet should run (components, connections, allocation, recovery)."""
