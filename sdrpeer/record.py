@@ -7,13 +7,17 @@ unexpected (never another exception), so a bad peer cannot crash an agent.
 
 Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
 
-    [FORMAT, metrics, links, api, priority, components, instances, ts]
+    [FORMAT, metrics, links, api, priority, components, instances, ts, election, plan]
     metrics   = [cpu_dpct, mem_total_kib, mem_free_kib, battery_dpct|nil, rssi_ddbm|nil,
                  [x_cm, y_cm]|nil]
     links     = [peer, rtt_10us, jitter_10us, loss_permille, peer, ...]   (flat, 4 per link)
     components= [component name, ...]                 (each distinct component once)
     instances = [[component_index, shared_prefix_len, name_rest, state, role, cpu_dpct,
-                  rss_kib], ...]
+                  rss_kib, data_addr|nil], ...]
+    election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
+    plan      = [epoch, version, digest] | nil       (the newest plan this robot holds)
+
+Records of the first layout (8 fields, 7 per instance) are still accepted.
 
 `dpct` is 0.1 %, `ddbm` 0.1 dB, `10us` 0.01 ms, `permille` 0.1 % loss. An instance name usually
 starts with its component's name (`CameraRTC2` of `CameraRTC`), so only the differing tail is
@@ -37,7 +41,7 @@ FORMAT = 1
 
 STATES = ("created", "inactive", "active", "error", "finalized", "starting", "stopping")
 """Instance states sent as an index; others go as strings."""
-ROLES = ("primary", "standby")
+ROLES = ("active", "standby")
 """Instance roles sent as an index; others go as strings."""
 
 _MAX_NAME = 255
@@ -75,6 +79,27 @@ class InstanceInfo:
     role: str
     cpu_pct: float
     rss: int
+    data: str | None = None
+    """Where other robots' senders reach its InPorts (tcp://host:port), while it runs."""
+
+
+@dataclass(frozen=True, slots=True)
+class ElectionInfo:
+    """What a robot believes about the allocator role."""
+
+    epoch: int
+    leader: str | None
+    claiming: bool
+    """True when this robot claims the role itself."""
+
+
+@dataclass(frozen=True, slots=True)
+class PlanInfo:
+    """Which plan a robot holds: others fetch it from the robot's API when theirs is older."""
+
+    epoch: int
+    version: int
+    digest: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,6 +112,8 @@ class RobotRecord:
     priority: int
     instances: tuple[InstanceInfo, ...]
     ts: float
+    election: ElectionInfo | None = None
+    plan: PlanInfo | None = None
 
 
 def _fix(x: float, scale: float) -> int:
@@ -144,9 +171,22 @@ def encode_record(r: RobotRecord) -> bytes:
                 _code(inst.role, ROLES),
                 _fix(inst.cpu_pct, 10),
                 _kib(inst.rss),
+                inst.data,
             ]
         )
-    wire = [FORMAT, metrics, links, r.api, r.priority, components, instances, float(r.ts)]
+    e, p = r.election, r.plan
+    wire = [
+        FORMAT,
+        metrics,
+        links,
+        r.api,
+        r.priority,
+        components,
+        instances,
+        float(r.ts),
+        None if e is None else [e.epoch, e.leader, e.claiming],
+        None if p is None else [p.epoch, p.version, p.digest],
+    ]
     data: bytes = msgpack.packb(wire, use_bin_type=True)
     return data
 
@@ -225,7 +265,10 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
     components = [_str(c, "component") for c in _list(comps, "components")]
     out = []
     for item in _list(x, "instances"):
-        ci, shared, rest, state, role, cpu, rss = _list(item, "instance", 7)
+        fields = _list(item, "instance")
+        if len(fields) == 7:
+            fields = [*fields, None]
+        ci, shared, rest, state, role, cpu, rss, data = _list(fields, "instance", 8)
         component = components[_int(ci, "instance.component", 0, len(components) - 1)]
         prefix = component[: _int(shared, "instance.prefix", 0, len(component))]
         out.append(
@@ -236,9 +279,34 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
                 role=_named(role, ROLES, "instance.role"),
                 cpu_pct=_int(cpu, "instance.cpu_pct", 0, 1_000_000) / 10,
                 rss=_int(rss, "instance.rss") * 1024,
+                data=None if data is None else _str(data, "instance.data"),
             )
         )
     return tuple(out)
+
+
+def _election(x: object) -> ElectionInfo | None:
+    if x is None:
+        return None
+    epoch, leader, claiming = _list(x, "election", 3)
+    if not isinstance(claiming, bool):
+        raise _Malformed("election.claiming: expected a boolean")
+    return ElectionInfo(
+        epoch=_int(epoch, "election.epoch", 0, 2**62),
+        leader=None if leader is None else _str(leader, "election.leader"),
+        claiming=claiming,
+    )
+
+
+def _plan(x: object) -> PlanInfo | None:
+    if x is None:
+        return None
+    epoch, version, digest = _list(x, "plan", 3)
+    return PlanInfo(
+        epoch=_int(epoch, "plan.epoch", 0, 2**62),
+        version=_int(version, "plan.version", 0, 2**62),
+        digest=_str(digest, "plan.digest", empty=True),
+    )
 
 
 def decode_record(b: bytes) -> RobotRecord:
@@ -248,7 +316,12 @@ def decode_record(b: bytes) -> RobotRecord:
     except Exception as e:  # msgpack raises many types on garbage; all mean the same here
         raise WireError("malformed", f"record: not msgpack ({type(e).__name__})") from None
     try:
-        fmt, metrics, links, api, priority, comps, instances, ts = _list(wire, "record", 8)
+        top = _list(wire, "record")
+        if len(top) == 8:
+            top = [*top, None, None]
+        fmt, metrics, links, api, priority, comps, instances, ts, elect, plan = _list(
+            top, "record", 10
+        )
         if fmt != FORMAT or isinstance(fmt, bool):
             raise _Malformed(f"record: format {fmt!r} not understood")
         if not isinstance(ts, float) or not math.isfinite(ts):
@@ -262,6 +335,8 @@ def decode_record(b: bytes) -> RobotRecord:
             priority=_int(priority, "priority", -(2**31), 2**31 - 1),
             instances=_instances(comps, instances),
             ts=ts,
+            election=_election(elect),
+            plan=_plan(plan),
         )
     except (_Malformed, ValueError, TypeError) as e:
         # ValueError/TypeError come from unpacking a list of the wrong length.
@@ -298,10 +373,21 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
                 "role": i.role,
                 "cpu_pct": i.cpu_pct,
                 "rss": i.rss,
+                "data": i.data,
             }
             for i in r.instances
         ],
         "ts": r.ts,
+        "election": None
+        if r.election is None
+        else {
+            "epoch": r.election.epoch,
+            "leader": r.election.leader,
+            "claiming": r.election.claiming,
+        },
+        "plan": None
+        if r.plan is None
+        else {"epoch": r.plan.epoch, "version": r.plan.version, "digest": r.plan.digest},
     }
 
 
@@ -326,7 +412,7 @@ def reference_record(peers: int = 10, instances: int = 10, ts: float = 0.0) -> R
             name=f"{PAPER_COMPONENTS[i % 5]}{i + 1}",
             component=PAPER_COMPONENTS[i % 5],
             state="active" if i % 2 else "inactive",
-            role="primary" if i < 7 else "standby",
+            role="active" if i < 7 else "standby",
             cpu_pct=12.3 + i,
             rss=512_000_000 + i * 1_234_567,
         )

@@ -65,7 +65,7 @@ def test_noise_around_a_value_does_not_flap() -> None:
 
 
 def test_instances_compare_by_identity_and_state_with_bands_for_load() -> None:
-    cam = InstanceInfo("CameraRTC2", "Camera", "active", "primary", 12.0, 100 << 20)
+    cam = InstanceInfo("CameraRTC2", "Camera", "active", "active", 12.0, 100 << 20)
     last = replace(BASE, instances=(cam,))
     assert not worth_publishing(last, replace(BASE, instances=(replace(cam, cpu_pct=14.0),)))
     assert not worth_publishing(last, replace(BASE, instances=(replace(cam, rss=110 << 20),)))

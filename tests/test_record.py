@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import msgpack
 import pytest
@@ -11,9 +12,11 @@ from hypothesis import strategies as st
 
 from sdrpeer.errors import WireError
 from sdrpeer.record import (
+    ElectionInfo,
     InstanceInfo,
     LinkStats,
     Metrics,
+    PlanInfo,
     RobotRecord,
     decode_record,
     encode_record,
@@ -69,7 +72,7 @@ def test_minimal_record_and_unknown_names() -> None:
         ts=0.0,
     )
     assert decode_record(encode_record(r)) == r
-    assert len(encode_record(r)) == 64  # 30 of them are the three free-form strings
+    assert len(encode_record(r)) == 67  # 30 of them are the three free-form strings
 
 
 def test_record_to_json() -> None:
@@ -182,3 +185,40 @@ def test_mutated_records_decode_or_fail_cleanly(data: bytes) -> None:
         assert decode_record(encode_record(r)) == r
         reason = "malformed"
     assert reason == "malformed"
+
+
+def test_election_plan_and_data_address_round_trip() -> None:
+    base = big_record()
+    inst = replace(base.instances[0], data="tcp://10.0.0.7:40123")
+    r = replace(
+        base,
+        instances=(inst, *base.instances[1:]),
+        election=ElectionInfo(epoch=7, leader="robot-2", claiming=False),
+        plan=PlanInfo(epoch=7, version=3, digest="ab12cd34ef56ab78"),
+    )
+    back = decode_record(encode_record(r))
+    assert back.election == ElectionInfo(7, "robot-2", False)
+    assert back.plan == PlanInfo(7, 3, "ab12cd34ef56ab78")
+    assert back.instances[0].data == "tcp://10.0.0.7:40123"
+    assert back.instances[1].data is None
+
+
+def test_first_layout_still_accepted() -> None:
+    wire = msgpack.unpackb(encode_record(big_record()), raw=False)
+    old = wire[:8]
+    old[6] = [item[:7] for item in old[6]]
+    back = decode_record(msgpack.packb(old, use_bin_type=True))
+    assert back.election is None
+    assert back.plan is None
+    assert all(i.data is None for i in back.instances)
+
+
+@pytest.mark.parametrize(
+    "election",
+    [[1, "r"], [-1, "r", True], [1, 5, True], [1, "r", 1]],
+)
+def test_malformed_election_refused(election: list[object]) -> None:
+    wire = msgpack.unpackb(encode_record(big_record()), raw=False)
+    wire[8] = election
+    with pytest.raises(WireError, match="malformed"):
+        decode_record(msgpack.packb(wire, use_bin_type=True))

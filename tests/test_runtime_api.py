@@ -146,8 +146,8 @@ async def test_converge_act_logs_and_remove(setup):
     assert log_a.index("got connect") < log_a.index("got activate")
     infos = manager.infos()
     assert [(i.name, i.state, i.role) for i in infos] == [
-        ("A", "active", "primary"),
-        ("B", "active", "primary"),
+        ("A", "active", "active"),
+        ("B", "active", "active"),
     ]
 
     resp = await client.post("/v1/instances/A/deactivate", headers=AUTH)

@@ -35,7 +35,6 @@ _OBSERVED = {
     "STOPPING": "stopping",
     "FINALIZED": "stopping",
 }
-_RECORD_ROLE = {"active": "primary", "standby": "standby"}  # sdrpeer.record.ROLES
 
 
 class InstanceManager:
@@ -242,9 +241,10 @@ class InstanceManager:
                 name=sup.name,
                 component=sup.spec.component,
                 state=sup.state.lower(),
-                role=_RECORD_ROLE.get(sup.spec.role, sup.spec.role),
+                role=sup.spec.role,
                 cpu_pct=round(sup.cpu_pct, 1),
                 rss=sup.rss,
+                data=sup.tcp_address(),
             )
             for _, sup in sorted(self._sups.items())
         )

@@ -371,6 +371,11 @@ class Supervisor:
                 self.cpu_pct, self.rss = 0.0, 0
         return self.cpu_pct, self.rss
 
+    def tcp_address(self) -> str | None:
+        """Where senders on other robots reach this host (its TCP data address), if running."""
+        tcp = (self.hello.get("data") or {}).get("tcp")
+        return f"tcp://{tcp}" if tcp else None
+
     def data_address(self) -> str | None:
         """Where senders on this robot reach this host: its Unix socket, else its TCP address."""
         data = self.hello.get("data") or {}
