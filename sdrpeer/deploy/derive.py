@@ -1,0 +1,121 @@
+"""What one robot must host under a plan, as instance specs for its reconciler (pure).
+
+How it works: every placement on the robot becomes an `InstanceSpec` (cold standbys are placed
+but not launched). Only active instances send: each connection of the system whose sender's
+active instance is here becomes a `ConnectionSpec` to the receiver's active instance. A receiver
+on this robot is resolved by the reconciler from its host's hello; a receiver on another robot
+by the data address that robot gossips for it (`Remote.data`). Until that address is known the
+connection is left out, and the sender is kept INACTIVE unless it is ACTIVE already, so senders
+start after their receivers across robots too. Likewise a sender waits for a remote receiver
+to be ACTIVE, except inside a cycle of connections, where no order can be respected.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, replace
+
+from sdrpeer.plan import Placement, Plan
+from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
+from sdrpeer.system.model import ConnectionDef, SystemDef
+
+
+@dataclass(frozen=True, slots=True)
+class Remote:
+    """An instance another robot gossips about."""
+
+    robot: str
+    state: str
+    """Lifecycle state in lower case (active, inactive, ...)."""
+    data: str | None
+    """Its TCP data address, while its host runs."""
+
+
+def reachable(system: SystemDef) -> dict[str, set[str]]:
+    """component -> every component its data reaches (transitively), for cycle checks."""
+    out: dict[str, set[str]] = {c.name: set() for c in system.components}
+    edges: dict[str, set[str]] = {c.name: set() for c in system.components}
+    for conn in system.connections:
+        edges[conn.from_component].add(conn.to_component)
+    for start, targets in edges.items():
+        stack = list(targets)
+        while stack:
+            node = stack.pop()
+            if node not in out[start]:
+                out[start].add(node)
+                stack.extend(edges.get(node, ()))
+    return out
+
+
+def specs_for_robot(
+    plan: Plan,
+    robot: str,
+    remote: Mapping[str, Remote],
+    active_here: Collection[str] = (),
+) -> list[InstanceSpec]:
+    """The instances `robot` must host under `plan`.
+
+    `remote`: instance name -> what gossip says of it (instances on other robots);
+    `active_here`: names of local instances that are ACTIVE now (never held back once running).
+    """
+    system = plan.system
+    if system is None:
+        return []
+    reach = reachable(system)
+    specs = []
+    for p in plan.on_robot(robot):
+        if p.role == "standby" and p.mode == "cold":
+            continue
+        comp = system.component(p.component)
+        conns: list[ConnectionSpec] = []
+        ready = True
+        if p.role == "active":
+            for c in system.connections:
+                if c.from_component != comp.name:
+                    continue
+                receiver = plan.active_of(c.to_component)
+                if receiver is None:
+                    continue
+                spec, ok = _connection(c, receiver, robot, remote, reach)
+                if spec is not None:
+                    conns.append(spec)
+                ready = ready and ok
+        desired = "active" if ready or p.instance in active_here else "inactive"
+        specs.append(
+            InstanceSpec(
+                name=p.instance,
+                component=comp.name,
+                launcher=comp.launcher,
+                target=comp.target,
+                params=comp.params,
+                desired=desired,
+                role=p.role,
+                connections=tuple(conns),
+            )
+        )
+    return specs
+
+
+def _connection(
+    c: ConnectionDef,
+    receiver: Placement,
+    robot: str,
+    remote: Mapping[str, Remote],
+    reach: Mapping[str, set[str]],
+) -> tuple[ConnectionSpec | None, bool]:
+    """(the connection spec or None while unresolvable, whether the sender may activate)."""
+    base = ConnectionSpec(
+        id=c.id,
+        out_port=c.from_port,
+        to_instance=receiver.instance,
+        in_port=c.to_port,
+        policy=c.policy,
+    )
+    if receiver.robot == robot:
+        return base, True
+    seen = remote.get(receiver.instance)
+    if seen is None or seen.robot != receiver.robot or seen.data is None:
+        return None, False
+    in_cycle = c.from_component in reach.get(c.to_component, set())
+    ok = in_cycle or seen.state == "active"
+    return replace(base, to_addr=seen.data), ok

@@ -1,0 +1,125 @@
+"""Plan -> instance specs for one robot, and the plan store's fencing and persistence."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sdrpeer.deploy.derive import Remote, reachable, specs_for_robot
+from sdrpeer.deploy.planstore import PlanStore
+from sdrpeer.plan import Placement, Plan, plan_from_json
+from sdrpeer.system.model import ComponentDef, ConnectionDef, StandbySpec, SystemDef
+
+
+def _system(cycle: bool = False) -> SystemDef:
+    comps = tuple(
+        ComponentDef(name=n, launcher="python", target=f"components.x:{n}", params=(("k", 1),))
+        for n in ("Cam", "Det", "Ctl")
+    )
+    conns = [
+        ConnectionDef("Cam", "image", "Det", "image", (("buffer", 4),)),
+        ConnectionDef("Det", "alarm", "Ctl", "alarm"),
+    ]
+    if cycle:
+        conns.append(ConnectionDef("Ctl", "odom", "Det", "odom"))
+    return SystemDef(name="s", components=comps, connections=tuple(conns))
+
+
+def _plan(system: SystemDef, where: dict[str, str], **kw: object) -> Plan:
+    placements = [Placement(c, c, r) for c, r in where.items()]
+    placements.append(Placement("Cam", "Cam-s1", "r2", "standby", "hot"))
+    placements.append(Placement("Det", "Det-s1", "r2", "standby", "cold"))
+    return Plan(epoch=1, version=1, system=system, placements=tuple(placements), allocator="r1")
+
+
+def test_local_connections_resolve_by_the_reconciler() -> None:
+    plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
+    specs = {s.name: s for s in specs_for_robot(plan, "r1", {})}
+    assert sorted(specs) == ["Cam", "Ctl", "Det"]
+    cam = specs["Cam"]
+    assert cam.desired == "active"
+    assert cam.params == (("k", 1),)
+    (conn,) = cam.connections
+    assert (conn.id, conn.to_instance, conn.in_port, conn.to_addr) == (
+        "Cam.image->Det.image",
+        "Det",
+        "image",
+        None,
+    )
+    assert conn.policy == (("buffer", 4),)
+    assert specs["Ctl"].connections == ()
+
+
+def test_standbys_hot_started_cold_not_and_standbys_do_not_send() -> None:
+    plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
+    specs = specs_for_robot(plan, "r2", {})
+    assert [(s.name, s.role, s.connections) for s in specs] == [("Cam-s1", "standby", ())]
+
+
+def test_remote_receiver_waits_for_address_then_for_active() -> None:
+    plan = _plan(_system(), {"Cam": "r1", "Det": "r2", "Ctl": "r2"})
+    (cam,) = specs_for_robot(plan, "r1", {})
+    assert cam.connections == ()
+    assert cam.desired == "inactive"
+    started = {"Det": Remote("r2", "inactive", "tcp://127.0.0.1:4000")}
+    (cam,) = specs_for_robot(plan, "r1", started)
+    assert cam.connections[0].to_addr == "tcp://127.0.0.1:4000"
+    assert cam.desired == "inactive"  # receiver not ACTIVE yet
+    active = {"Det": Remote("r2", "active", "tcp://127.0.0.1:4000")}
+    (cam,) = specs_for_robot(plan, "r1", active)
+    assert cam.desired == "active"
+
+
+def test_running_sender_is_not_held_back_when_receiver_moves() -> None:
+    plan = _plan(_system(), {"Cam": "r1", "Det": "r3", "Ctl": "r3"})
+    stale = {"Det": Remote("r2", "active", "tcp://127.0.0.1:4000")}  # old robot
+    (cam,) = specs_for_robot(plan, "r1", stale, active_here={"Cam"})
+    assert cam.connections == ()
+    assert cam.desired == "active"
+
+
+def test_cycle_across_robots_does_not_deadlock() -> None:
+    system = _system(cycle=True)
+    assert "Det" in reachable(system)["Det"]
+    plan = _plan(system, {"Cam": "r1", "Det": "r1", "Ctl": "r2"})
+    remote = {"Ctl": Remote("r2", "inactive", "tcp://127.0.0.1:4001")}
+    specs = {s.name: s for s in specs_for_robot(plan, "r1", remote)}
+    assert specs["Det"].desired == "active"
+
+
+def test_undeployed_plan_hosts_nothing() -> None:
+    assert specs_for_robot(Plan(2, 1, None), "r1", {}) == []
+
+
+def test_plan_json_round_trip() -> None:
+    system = SystemDef(
+        name="s",
+        components=(
+            ComponentDef("A", "exec", ("prog", "--x"), (("list", (1, 2)),), standby=StandbySpec(1)),
+        ),
+    )
+    plan = Plan(3, 4, system, (Placement("A", "A", "r1"),), "r1")
+    assert plan_from_json(plan.to_json()) == plan
+
+
+def test_store_fences_older_epochs_and_persists(tmp_path: Path) -> None:
+    system = _system()
+    store = PlanStore(tmp_path / "plan.json")
+    assert store.offer(Plan(2, 1, system, (), "a"))
+    assert not store.offer(Plan(2, 1, system, (), "a"))  # not newer
+    assert not store.offer(Plan(1, 9, system, (), "old"))  # stale allocator
+    store.see_epoch(5)
+    assert not store.offer(Plan(4, 1, system, (), "b"))  # an allocator of epoch 5 exists
+    assert store.offer(Plan(5, 1, None, (), "c"))
+    assert store.refused_stale == 3
+    info = store.info()
+    assert info is not None
+    assert (info.epoch, info.version) == (5, 1)
+    again = PlanStore(tmp_path / "plan.json")
+    assert again.plan == Plan(5, 1, None, (), "c")
+    assert again.highest_epoch == 5
+    assert again.info() == info
+
+
+def test_store_ignores_a_corrupt_file(tmp_path: Path) -> None:
+    (tmp_path / "plan.json").write_text("{not json")
+    assert PlanStore(tmp_path / "plan.json").plan is None
