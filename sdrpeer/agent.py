@@ -21,7 +21,7 @@ import signal
 import time
 from typing import TYPE_CHECKING, Any
 
-from sdrpeer import __version__
+from sdrpeer import agent_views
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.errors import ConfigError, WireError
@@ -39,7 +39,7 @@ from sdrpeer.gossip.events import (
 from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.logs import setup_logging
-from sdrpeer.monitor.links import LinkTable, distance
+from sdrpeer.monitor.links import LinkTable
 from sdrpeer.monitor.publish import worth_publishing
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.sources import HostMetrics
@@ -52,11 +52,10 @@ from sdrpeer.record import (
     decode_record,
     encode_record,
     metrics_to_json,
-    record_to_json,
 )
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.supervisor import SupervisorConfig
-from sdrpeer.wire import REASONS, Codec, Keyring
+from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
@@ -306,74 +305,13 @@ class Agent:
             log.info("%s is %s (incarnation %d)", event.name, kind[7:], event.incarnation)
 
     # ----------------------------------------------------------------- AgentView
-    def _wall_of(self, t: float) -> float:
-        return round(time.time() - (asyncio.get_running_loop().time() - t), 3)
-
     def members_view(self) -> list[dict[str, Any]]:
         """Every known member with its metrics and links (see AgentView)."""
-        if self.core is None:
-            return []
-        out = []
-        positions = {n: r.metrics.pos for n, (_, r) in self.records.items()}
-        positions[self.name] = self.metrics.pos if self.metrics else None
-        for m in sorted(self.core.members(), key=lambda m: m.name):
-            rec: RobotRecord | None
-            if m.name == self.name:
-                own = self.core.record_of(self.name)
-                rec = decode_record(own[1]) if own else None
-                version = own[0] if own else 0
-            else:
-                version, rec = self.records.get(m.name, (0, None))
-            doc = record_to_json(rec) if rec is not None else {"metrics": None, "links": {}}
-            for peer, link in doc["links"].items():
-                d = distance(positions.get(m.name), positions.get(peer))
-                link["distance_m"] = None if d is None else round(d, 2)
-            out.append(
-                {
-                    "name": m.name,
-                    "addr": f"{m.addr[0]}:{m.addr[1]}",
-                    "state": STATE_NAMES.get(m.state, str(m.state)),
-                    "incarnation": m.incarnation,
-                    "since": self._wall_of(m.since),
-                    "api": rec.api if rec is not None else None,
-                    "record_version": version,
-                    "metrics": doc["metrics"],
-                    "links": doc["links"],
-                    "instances": doc.get("instances", []),
-                }
-            )
-        return out
+        return agent_views.members_view(self)
 
     def agent_view(self) -> dict[str, Any]:
         """This agent's counters and settings (see AgentView)."""
-        assert self.core is not None
-        assert self.shell is not None
-        c = self.shell.counters
-        codec = self.shell.codec.counters
-        states = dict.fromkeys(STATE_NAMES.values(), 0)
-        for m in self.core.members():
-            states[STATE_NAMES[m.state]] += 1
-        return {
-            "name": self.name,
-            "addr": f"{self.core.addr[0]}:{self.core.addr[1]}",
-            "api": self.api_url,
-            "version": __version__,
-            "uptime_s": round(time.time() - self._started_wall, 3),
-            "insecure": self.keyring is None,
-            "preset": self.config.preset,
-            "health_score": self.core.health_score,
-            "messages": {
-                "in": c["messages_in"],
-                "out": c["messages_out"],
-                "bytes_in": c["bytes_in"],
-                "bytes_out": c["bytes_out"],
-                "bytes_in_per_s": round(self._rate["in_s"], 1),
-                "bytes_out_per_s": round(self._rate["out_s"], 1),
-            },
-            "rejected": {r: codec.get(r, 0) for r in REASONS},
-            "members": states,
-            "gossip": dict(self.core.counters),
-        }
+        return agent_views.agent_view(self)
 
     def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
         """Event log entries after `since` (see AgentView)."""

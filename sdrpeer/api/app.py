@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 VIEW_KEY = web.AppKey("view", AgentView)
 TOKEN_KEY = web.AppKey("token", str)
+PEER_TOKEN_KEY = web.AppKey("peer_token", str)
 REGISTRY_KEY = web.AppKey("registry", CollectorRegistry)
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 MAX_EVENTS_LIMIT = 10_000
@@ -76,7 +77,11 @@ def _token_ok(request: web.Request) -> bool:
     scheme, _, given = header.partition(" ")
     if scheme.lower() != "bearer" or not given:
         return False
-    return hmac.compare_digest(given.strip().encode(), request.app[TOKEN_KEY].encode())
+    given_b = given.strip().encode()
+    if hmac.compare_digest(given_b, request.app[TOKEN_KEY].encode()):
+        return True
+    peer = request.app.get(PEER_TOKEN_KEY)
+    return peer is not None and hmac.compare_digest(given_b, peer.encode())
 
 
 @web.middleware
@@ -287,14 +292,23 @@ def add_routes(app: web.Application, routes: Iterable[Route]) -> None:
 
 
 def build_app(
-    view: AgentView, *, token: str, extra_routes: Iterable[Route] = ()
+    view: AgentView,
+    *,
+    token: str,
+    extra_routes: Iterable[Route] = (),
+    peer_token: str | None = None,
 ) -> web.Application:
-    """The API application for one agent; `token` guards every state-changing route."""
+    """The API application for one agent; `token` guards every state-changing route.
+
+    `peer_token` (derived from the cluster key) is accepted too: other agents use it.
+    """
     if not token:
         raise ValueError("the API token must not be empty")
     app = web.Application(middlewares=[error_middleware, auth_middleware])
     app[VIEW_KEY] = view
     app[TOKEN_KEY] = token
+    if peer_token:
+        app[PEER_TOKEN_KEY] = peer_token
     app[REGISTRY_KEY] = metrics.make_registry(view)
     add_routes(app, [*ROUTES, *extra_routes])
     return app

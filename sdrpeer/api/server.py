@@ -3,16 +3,26 @@
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Iterable
 
 from aiohttp import web
 
-from sdrpeer.api.app import build_app
+from sdrpeer.api.app import Route, build_app
 from sdrpeer.api.view import AgentView
 
 
-async def serve_api(view: AgentView, token: str, host: str, port: int) -> tuple[web.AppRunner, str]:
+async def serve_api(
+    view: AgentView,
+    token: str,
+    host: str,
+    port: int,
+    *,
+    extra_routes: Iterable[Route] = (),
+    peer_token: str | None = None,
+) -> tuple[web.AppRunner, str]:
     """Start the API on host:port (0 picks a free port); returns the runner and the base URL."""
-    runner = web.AppRunner(build_app(view, token=token), access_log=None)
+    app = build_app(view, token=token, extra_routes=extra_routes, peer_token=peer_token)
+    runner = web.AppRunner(app, access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
     await site.start()

@@ -1,0 +1,92 @@
+"""The JSON views of an agent shown by its API: members with their records, and its counters.
+
+How it works: plain functions of the `Agent` (kept out of agent.py so that file stays about
+wiring); they read the gossip core's table, the decoded records and the shell's counters.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from typing import TYPE_CHECKING, Any
+
+from sdrpeer import __version__
+from sdrpeer.gossip.messages import STATE_NAMES
+from sdrpeer.monitor.links import distance
+from sdrpeer.record import RobotRecord, decode_record, record_to_json
+from sdrpeer.wire import REASONS
+
+if TYPE_CHECKING:
+    from sdrpeer.agent import Agent
+
+
+def _wall_of(t: float) -> float:
+    return round(time.time() - (asyncio.get_running_loop().time() - t), 3)
+
+
+def members_view(self: Agent) -> list[dict[str, Any]]:
+    """Every known member with its metrics and links (see AgentView)."""
+    if self.core is None:
+        return []
+    out = []
+    positions = {n: r.metrics.pos for n, (_, r) in self.records.items()}
+    positions[self.name] = self.metrics.pos if self.metrics else None
+    for m in sorted(self.core.members(), key=lambda m: m.name):
+        rec: RobotRecord | None
+        if m.name == self.name:
+            own = self.core.record_of(self.name)
+            rec = decode_record(own[1]) if own else None
+            version = own[0] if own else 0
+        else:
+            version, rec = self.records.get(m.name, (0, None))
+        doc = record_to_json(rec) if rec is not None else {"metrics": None, "links": {}}
+        for peer, link in doc["links"].items():
+            d = distance(positions.get(m.name), positions.get(peer))
+            link["distance_m"] = None if d is None else round(d, 2)
+        out.append(
+            {
+                "name": m.name,
+                "addr": f"{m.addr[0]}:{m.addr[1]}",
+                "state": STATE_NAMES.get(m.state, str(m.state)),
+                "incarnation": m.incarnation,
+                "since": _wall_of(m.since),
+                "api": rec.api if rec is not None else None,
+                "record_version": version,
+                "metrics": doc["metrics"],
+                "links": doc["links"],
+                "instances": doc.get("instances", []),
+            }
+        )
+    return out
+
+
+def agent_view(self: Agent) -> dict[str, Any]:
+    """This agent's counters and settings (see AgentView)."""
+    assert self.core is not None
+    assert self.shell is not None
+    c = self.shell.counters
+    codec = self.shell.codec.counters
+    states = dict.fromkeys(STATE_NAMES.values(), 0)
+    for m in self.core.members():
+        states[STATE_NAMES[m.state]] += 1
+    return {
+        "name": self.name,
+        "addr": f"{self.core.addr[0]}:{self.core.addr[1]}",
+        "api": self.api_url,
+        "version": __version__,
+        "uptime_s": round(time.time() - self._started_wall, 3),
+        "insecure": self.keyring is None,
+        "preset": self.config.preset,
+        "health_score": self.core.health_score,
+        "messages": {
+            "in": c["messages_in"],
+            "out": c["messages_out"],
+            "bytes_in": c["bytes_in"],
+            "bytes_out": c["bytes_out"],
+            "bytes_in_per_s": round(self._rate["in_s"], 1),
+            "bytes_out_per_s": round(self._rate["out_s"], 1),
+        },
+        "rejected": {r: codec.get(r, 0) for r in REASONS},
+        "members": states,
+        "gossip": dict(self.core.counters),
+    }
