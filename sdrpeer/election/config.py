@@ -1,0 +1,58 @@
+"""Election settings, with presets.
+
+Every duration is in seconds. The grace period should cover a few gossip rounds: it is how long a
+robot gives each higher-ranked robot to claim the vacant role before it claims it itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+
+@dataclass(frozen=True, slots=True)
+class ElectionConfig:
+    """Tunables of the election core. Use a preset (`lan()`, `fast_test()`) and `with_()`."""
+
+    grace: float = 0.5
+    """How long a robot waits for each alive, eligible robot ranked above it to claim a vacant
+    role: the k-th in rank claims after k * grace (the top one at once). A few gossip rounds."""
+    startup_grace: float = 1.5
+    """A freshly started robot claims nothing for this long, so that it first hears the cluster's
+    records (the current allocator and the highest epoch) through gossip."""
+    preempt: bool = False
+    """When True, an alive, eligible robot ranked above the current allocator takes the role from
+    it (with a higher epoch). When False (the default) a healthy allocator keeps the role."""
+
+    def __post_init__(self) -> None:
+        if self.grace < 0 or self.startup_grace < 0:
+            raise ValueError(
+                f"election grace periods must be >= 0 "
+                f"(grace={self.grace}, startup_grace={self.startup_grace})"
+            )
+
+    def with_(self, **changes: Any) -> ElectionConfig:
+        """A copy with some fields changed."""
+        return replace(self, **changes)
+
+
+def lan() -> ElectionConfig:
+    """Robots on one Wi-Fi network, gossiping with the `lan` gossip preset (0.1 s rounds)."""
+    return ElectionConfig()
+
+
+def fast_test() -> ElectionConfig:
+    """Loopback tests and the simulator with the `fast_test` gossip preset (0.05 s rounds)."""
+    return ElectionConfig(grace=0.25, startup_grace=0.75)
+
+
+PRESETS = {"lan": lan, "fast_test": fast_test}
+
+
+def preset(name: str) -> ElectionConfig:
+    """The preset called `name` (lan, fast_test)."""
+    try:
+        return PRESETS[name]()
+    except KeyError:
+        known = ", ".join(PRESETS)
+        raise ValueError(f"unknown election preset {name!r} (known: {known})") from None

@@ -1,0 +1,194 @@
+"""The bully election of the allocator, as a pure core fed with the gossip view.
+
+How it works:
+- gossip already says who is alive, so the bully's "are you alive?" round is the membership
+  view: the caller passes one `Candidate` per robot (itself included) to `update(now, view)`
+  whenever membership or a record changes, and calls `handle_timer(now)` at `next_timer()`;
+- the allocator a robot believes in is the valid claim (alive, eligible, claiming) with the
+  highest `(epoch, name)`; with none, the role is vacant;
+- on a vacancy, a robot that may hold the role (alive, eligible, not leaving) waits k * grace,
+  k = the alive eligible robots ranked above it by (priority, health, name): the top one claims at
+  once, the next only if the top one has not claimed within a grace period (a bully whose higher
+  peers do not answer), and so on. A claim takes epoch = the highest epoch ever seen + 1;
+- a claimer that sees a higher valid claim steps down; one that becomes ineligible or leaves
+  abdicates (publishes claiming=False) and the others elect the next; one that hears of an epoch
+  above its claim claims again past it (the moves are the table in `rules.py`);
+- without `preempt`, a valid allocator keeps the role whoever returns; with it, a robot ranked
+  above the allocator starts the same grace countdown and claims at a higher epoch;
+- `state()` is what to publish in the robot's gossip record; `next_event()` drains what changed.
+The core never reads a clock: every time is passed in.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+
+from sdrpeer.election.config import ElectionConfig
+from sdrpeer.election.events import Elected, ElectionEvent, LeaderChanged, SteppedDown
+from sdrpeer.election.rules import Role, next_role
+from sdrpeer.election.state import Candidate, ClaimKey, ElectionState, rank
+
+_EMPTY: Mapping[str, Candidate] = {}
+
+
+class Election:
+    """One robot's view of the allocator election."""
+
+    def __init__(
+        self, name: str, config: ElectionConfig, now: float, *, known_epoch: int = 0
+    ) -> None:
+        """`known_epoch`: the highest epoch this robot saw before a restart (its fence), if kept."""
+        self.name = name
+        self.config = config
+        self.role = Role.FOLLOWER
+        """FOLLOWER, WAITING or LEADER (see `rules.py`)."""
+        self._started = now
+        self._max_epoch = known_epoch
+        self._claim_epoch = 0
+        self._leader: ClaimKey | None = None
+        self._waiting_since = math.inf
+        self._deadline = math.inf
+        self._left = False
+        self._view = _EMPTY
+        self._events: deque[ElectionEvent] = deque()
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def update(self, now: float, view: Mapping[str, Candidate]) -> None:
+        """The gossip view changed: `view` maps every known robot (this one included) to what
+        gossip tells of it. The mapping is read now and on later timers, not copied."""
+        self._view = view
+        self._evaluate(now)
+
+    def handle_timer(self, now: float) -> None:
+        """The deadline of `next_timer()` has passed."""
+        self._evaluate(now)
+
+    def leave(self, now: float) -> None:
+        """This robot is leaving the cluster: abdicate for good, never claim again."""
+        self._left = True
+        self._evaluate(now)
+
+    # -- outputs ------------------------------------------------------------------------------
+
+    def state(self) -> ElectionState:
+        """What to publish in this robot's gossip record now."""
+        if self.role is Role.LEADER:
+            return ElectionState(self._claim_epoch, self.name, True)
+        if self._leader is not None:
+            return ElectionState(self._leader[0], self._leader[1], False)
+        return ElectionState(self._max_epoch, None, False)
+
+    def next_timer(self) -> float:
+        """When to call `handle_timer` (inf: nothing pending)."""
+        return self._deadline
+
+    def next_event(self) -> ElectionEvent | None:
+        """The oldest undrained event, or None."""
+        return self._events.popleft() if self._events else None
+
+    @property
+    def leader(self) -> str | None:
+        """The allocator this robot believes in (itself when it claims), None while vacant."""
+        return None if self._leader is None else self._leader[1]
+
+    @property
+    def epoch(self) -> int:
+        """The epoch of that allocator (the highest epoch known while vacant)."""
+        return self._max_epoch if self._leader is None else self._leader[0]
+
+    @property
+    def is_leader(self) -> bool:
+        """Whether this robot claims the role."""
+        return self.role is Role.LEADER
+
+    @property
+    def max_epoch(self) -> int:
+        """The highest epoch this robot has seen (persist it with the fence across restarts)."""
+        return self._max_epoch
+
+    # -- the rules ----------------------------------------------------------------------------
+
+    def _evaluate(self, now: float) -> None:
+        view, name = self._view, self.name
+        me = view.get(name)
+        able = not self._left and me is not None and me.alive and me.eligible
+        best: ClaimKey | None = None
+        top = self._max_epoch
+        for other, c in view.items():
+            s = c.state
+            if s is None or other == name:
+                continue
+            top = max(top, s.epoch)
+            if s.claiming and c.alive and c.eligible and (best is None or (s.epoch, other) > best):
+                best = (s.epoch, other)
+        self._max_epoch = top
+        before = self._leader
+
+        if self.role is Role.LEADER:
+            if not able:
+                self._step_down(now, "left" if self._left else "ineligible")
+            elif best is not None and best > (self._claim_epoch, name):
+                self._step_down(now, "outranked")
+            elif top > self._claim_epoch:
+                self._move("newer_epoch")
+                self._claim(now, previous=self._claim_epoch)
+        if self.role is not Role.LEADER:
+            self._leader = best
+            self._deadline = math.inf
+            if able and me is not None and self._may_claim(me):
+                self._contend(now, me)
+            elif self.role is Role.WAITING:
+                self._move("settled")
+                self._waiting_since = math.inf
+        if self._leader != before:
+            epoch, leader = self._leader or (self._max_epoch, None)
+            previous = None if before is None else before[1]
+            self._events.append(LeaderChanged(epoch, leader, previous, now))
+
+    def _may_claim(self, me: Candidate) -> bool:
+        """No valid claim, or preempt and we rank above the allocator."""
+        if self._leader is None:
+            return True
+        if not self.config.preempt:
+            return False
+        holder = self._view.get(self._leader[1])
+        return holder is None or rank(self._leader[1], holder) < rank(self.name, me)
+
+    def _contend(self, now: float, me: Candidate) -> None:
+        """Wait for the robots ranked above us (k * grace), then claim."""
+        if self.role is Role.FOLLOWER:
+            self._move("vacancy")
+            self._waiting_since = now
+        mine = rank(self.name, me)
+        above = sum(
+            1
+            for other, c in self._view.items()
+            if c.alive and c.eligible and other != self.name and rank(other, c) > mine
+        )
+        due = max(
+            self._waiting_since + above * self.config.grace,
+            self._started + self.config.startup_grace,
+        )
+        if now >= due:
+            self._move("claim")
+            self._waiting_since = math.inf
+            self._claim(now, previous=None)
+        else:
+            self._deadline = due
+
+    def _claim(self, now: float, previous: int | None) -> None:
+        self._max_epoch += 1
+        self._claim_epoch = self._max_epoch
+        self._leader = (self._claim_epoch, self.name)
+        self._events.append(Elected(self._claim_epoch, previous, now))
+
+    def _step_down(self, now: float, reason: str) -> None:
+        self._move(reason)
+        self._events.append(SteppedDown(self._claim_epoch, reason, now))
+        self._leader = None
+
+    def _move(self, trigger: str) -> None:
+        self.role = next_role(self.role, trigger)

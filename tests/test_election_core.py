@@ -1,0 +1,307 @@
+"""The election rules with literal times: claims, grace periods, abdication, preemption,
+conflicting claims and re-claims past a newer epoch."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sdrpeer.election import (
+    Candidate,
+    Elected,
+    Election,
+    ElectionConfig,
+    ElectionError,
+    ElectionEvent,
+    ElectionState,
+    LeaderChanged,
+    Role,
+    SteppedDown,
+)
+from sdrpeer.election.rules import TRANSITIONS, next_role
+
+CONFIG = ElectionConfig(grace=1.0, startup_grace=0.0)
+
+
+def cand(
+    *,
+    alive: bool = True,
+    eligible: bool = True,
+    priority: int = 0,
+    health: int = 3,
+    state: ElectionState | None = None,
+) -> Candidate:
+    return Candidate(alive, eligible, priority, health, state)
+
+
+def claim(epoch: int, name: str) -> ElectionState:
+    return ElectionState(epoch, name, True)
+
+
+def follows(epoch: int, name: str | None) -> ElectionState:
+    return ElectionState(epoch, name, False)
+
+
+def drain(e: Election) -> list[ElectionEvent]:
+    out = []
+    while (ev := e.next_event()) is not None:
+        out.append(ev)
+    return out
+
+
+def test_the_only_robot_claims_epoch_one_at_once() -> None:
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, {"a": cand()})
+    assert e.is_leader
+    assert e.role is Role.LEADER
+    assert e.state() == claim(1, "a")
+    assert drain(e) == [Elected(1, None, 0.0), LeaderChanged(1, "a", None, 0.0)]
+
+
+def test_the_highest_ranked_claims_past_the_highest_epoch_seen() -> None:
+    e = Election("b", CONFIG, 0.0)
+    view = {
+        "a": cand(priority=1, state=follows(7, "x")),
+        "b": cand(priority=5),
+        "x": cand(alive=False, state=claim(7, "x")),  # the dead allocator
+    }
+    e.update(0.0, view)
+    assert e.state() == claim(8, "b")
+
+
+def test_rank_is_priority_then_health_then_name() -> None:
+    view = {"a": cand(priority=1, health=3), "b": cand(priority=2, health=0), "c": cand()}
+    for name, leads in (("a", False), ("b", True), ("c", False)):
+        e = Election(name, CONFIG, 0.0)
+        e.update(0.0, view)
+        assert e.is_leader is leads, name
+    healthier = {"a": cand(health=2), "b": cand(health=1)}
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, healthier)
+    assert e.is_leader
+    tie = {"a": cand(), "b": cand()}
+    e = Election("b", CONFIG, 0.0)  # equal priority and health: the higher name
+    e.update(0.0, tie)
+    assert e.is_leader
+
+
+def test_a_lower_robot_waits_a_grace_per_robot_above_then_claims() -> None:
+    e = Election("c", CONFIG, 0.0)
+    view = {"a": cand(priority=9), "b": cand(priority=5), "c": cand(priority=1)}
+    e.update(10.0, view)
+    assert e.role is Role.WAITING
+    assert not e.is_leader
+    assert e.next_timer() == 12.0  # two robots above: 2 * grace
+    assert e.state() == follows(0, None)
+    e.handle_timer(11.9)
+    assert e.role is Role.WAITING
+    e.handle_timer(12.0)  # nobody claimed: the bully whose higher peers do not answer
+    assert e.state() == claim(1, "c")
+    assert e.next_timer() == math.inf
+
+
+def test_a_waiting_robot_follows_a_claim_that_arrives_within_grace() -> None:
+    e = Election("b", CONFIG, 0.0)
+    view = {"a": cand(priority=9), "b": cand(priority=1)}
+    e.update(0.0, view)
+    assert e.next_timer() == 1.0
+    view["a"] = cand(priority=9, state=claim(1, "a"))
+    e.update(0.3, view)
+    assert e.role is Role.FOLLOWER
+    assert e.leader == "a"
+    assert e.epoch == 1
+    assert e.next_timer() == math.inf
+    assert e.state() == follows(1, "a")
+    assert drain(e) == [LeaderChanged(1, "a", None, 0.3)]
+
+
+def test_grace_shrinks_when_a_higher_robot_dies() -> None:
+    e = Election("c", CONFIG, 0.0)
+    view = {"a": cand(priority=9), "b": cand(priority=5), "c": cand(priority=1)}
+    e.update(0.0, view)
+    assert e.next_timer() == 2.0
+    view["a"] = cand(priority=9, alive=False)
+    e.update(0.5, view)
+    assert e.next_timer() == 1.0
+
+
+def test_startup_grace_holds_a_fresh_robot_back() -> None:
+    e = Election("a", CONFIG.with_(startup_grace=1.5), 100.0)
+    e.update(100.0, {"a": cand()})
+    assert e.next_timer() == 101.5
+    assert not e.is_leader
+    e.update(100.5, {"a": cand(), "z": cand(priority=-1, state=claim(4, "z"))})
+    assert e.leader == "z"
+    assert e.next_timer() == math.inf
+
+
+def test_ineligible_or_dead_robots_neither_claim_nor_count_as_above() -> None:
+    view = {"a": cand(priority=9, eligible=False), "b": cand(priority=5, alive=False), "c": cand()}
+    e = Election("c", CONFIG, 0.0)
+    e.update(0.0, view)
+    assert e.is_leader
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, view)
+    assert e.role is Role.FOLLOWER
+    assert e.next_timer() == math.inf
+
+
+def test_an_allocator_that_becomes_ineligible_abdicates_and_the_next_claims() -> None:
+    leader, other = Election("a", CONFIG, 0.0), Election("b", CONFIG, 0.0)
+    view = {"a": cand(priority=9), "b": cand(priority=1)}
+    leader.update(0.0, view)
+    view["a"] = cand(priority=9, state=leader.state())
+    other.update(0.1, view)
+    assert other.leader == "a"
+    drain(leader)
+    view["a"] = cand(priority=9, eligible=False, state=leader.state())
+    leader.update(1.0, view)
+    assert leader.state() == follows(1, None)
+    assert drain(leader) == [SteppedDown(1, "ineligible", 1.0), LeaderChanged(1, None, "a", 1.0)]
+    view["a"] = cand(priority=9, eligible=False, state=leader.state())
+    other.update(1.1, view)
+    assert other.state() == claim(2, "b")  # the next one, with a higher epoch
+
+
+def test_an_allocator_whose_claim_is_withdrawn_is_replaced_even_if_eligible() -> None:
+    other = Election("b", CONFIG, 0.0)
+    other.update(0.0, {"a": cand(priority=9, state=claim(3, "a")), "b": cand()})
+    assert other.leader == "a"
+    other.update(1.0, {"a": cand(priority=9, state=follows(3, None)), "b": cand()})
+    assert other.role is Role.WAITING  # a still ranks above: one grace for it to claim again
+    other.handle_timer(2.0)
+    assert other.state() == claim(4, "b")
+
+
+def test_a_leaving_allocator_abdicates_for_good() -> None:
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, {"a": cand()})
+    drain(e)
+    e.leave(5.0)
+    assert e.state() == follows(1, None)
+    assert drain(e)[0] == SteppedDown(1, "left", 5.0)
+    e.update(6.0, {"a": cand()})
+    assert not e.is_leader
+    assert e.role is Role.FOLLOWER
+
+
+def test_a_dead_or_left_allocator_leaves_a_vacancy() -> None:
+    e = Election("b", CONFIG, 0.0)
+    e.update(0.0, {"a": cand(priority=9, state=claim(2, "a")), "b": cand()})
+    assert e.leader == "a"
+    e.update(3.0, {"a": cand(priority=9, alive=False, state=claim(2, "a")), "b": cand()})
+    assert e.state() == claim(3, "b")
+
+
+def test_no_preemption_a_returning_higher_robot_follows() -> None:
+    back = Election("a", CONFIG, 50.0)
+    view = {"a": cand(priority=9), "b": cand(priority=1, state=claim(4, "b"))}
+    back.update(50.0, view)
+    assert back.leader == "b"
+    assert back.role is Role.FOLLOWER
+    back.handle_timer(100.0)
+    assert not back.is_leader
+
+
+def test_preempt_a_returning_higher_robot_takes_the_role() -> None:
+    back = Election("a", CONFIG.with_(preempt=True), 50.0)
+    view = {"a": cand(priority=9), "b": cand(priority=1, state=claim(4, "b"))}
+    back.update(50.0, view)
+    assert back.state() == claim(5, "a")
+    old = Election("b", CONFIG.with_(preempt=True), 0.0)
+    old.update(0.0, {"b": cand(priority=1)})
+    assert old.state() == claim(1, "b")
+    drain(old)
+    old.update(51.0, {"a": cand(priority=9, state=back.state()), "b": cand(priority=1)})
+    assert old.state() == follows(5, "a")
+    assert drain(old) == [SteppedDown(1, "outranked", 51.0), LeaderChanged(5, "a", "b", 51.0)]
+
+
+def test_preempt_waits_for_robots_ranked_above_itself() -> None:
+    e = Election("b", CONFIG.with_(preempt=True), 0.0)
+    view = {
+        "a": cand(priority=9),
+        "b": cand(priority=5),
+        "c": cand(priority=1, state=claim(2, "c")),
+    }
+    e.update(0.0, view)
+    assert e.role is Role.WAITING
+    assert e.next_timer() == 1.0
+    view["a"] = cand(priority=9, state=claim(3, "a"))
+    e.update(0.5, view)
+    assert e.leader == "a"
+    assert e.next_timer() == math.inf  # no longer waiting
+
+
+def test_conflicting_claims_resolve_by_epoch_then_name() -> None:
+    e = Election("z", CONFIG, 0.0)
+    view = {
+        "a": cand(priority=9, state=claim(4, "a")),
+        "b": cand(priority=1, state=claim(5, "b")),
+        "c": cand(state=claim(5, "c")),
+        "z": cand(),
+    }
+    e.update(0.0, view)
+    assert (e.epoch, e.leader) == (5, "c")
+    view["c"] = cand(eligible=False, state=claim(5, "c"))  # an ineligible claim is not valid
+    e.update(1.0, view)
+    assert (e.epoch, e.leader) == (5, "b")
+
+
+def test_a_claimer_steps_down_before_a_higher_claim_and_ignores_a_lower_one() -> None:
+    e = Election("b", CONFIG, 0.0)
+    e.update(0.0, {"b": cand()})
+    assert e.state() == claim(1, "b")
+    e.update(1.0, {"b": cand(), "a": cand(priority=9, state=claim(1, "a"))})
+    assert e.is_leader  # same epoch, lower name: ours wins
+    drain(e)
+    e.update(2.0, {"b": cand(), "c": cand(state=claim(1, "c"))})
+    assert e.state() == follows(1, "c")
+    assert drain(e) == [SteppedDown(1, "outranked", 2.0), LeaderChanged(1, "c", "b", 2.0)]
+
+
+def test_partition_heal_the_higher_epoch_wins() -> None:
+    low, high = Election("a", CONFIG, 0.0), Election("b", CONFIG, 0.0)
+    low.update(0.0, {"a": cand(priority=9)})
+    high.update(0.0, {"b": cand(), "x": cand(alive=False, state=claim(6, "x"))})
+    assert (low.epoch, high.epoch) == (1, 7)
+    healed = {"a": cand(priority=9, state=low.state()), "b": cand(state=high.state())}
+    low.update(1.0, healed)
+    high.update(1.0, healed)
+    assert low.state() == follows(7, "b")
+    assert high.state() == claim(7, "b")
+
+
+def test_an_allocator_that_hears_of_a_newer_epoch_claims_past_it() -> None:
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, {"a": cand()})
+    drain(e)
+    e.update(1.0, {"a": cand(), "b": cand(state=follows(9, "x")), "x": cand(alive=False)})
+    assert e.state() == claim(10, "a")
+    assert drain(e) == [Elected(10, 1, 1.0), LeaderChanged(10, "a", "a", 1.0)]
+
+
+def test_known_epoch_survives_a_restart_and_own_stale_record_is_ignored() -> None:
+    e = Election("a", CONFIG, 0.0, known_epoch=12)
+    e.update(0.0, {"a": cand(state=claim(3, "a"))})  # our record from before the restart
+    assert e.state() == claim(13, "a")
+
+
+def test_a_robot_missing_from_its_own_view_never_claims() -> None:
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, {"b": cand(alive=False)})
+    assert e.role is Role.FOLLOWER
+    assert e.state() == follows(0, None)
+
+
+def test_the_role_table_rejects_illegal_moves() -> None:
+    assert next_role(Role.WAITING, "claim") is Role.LEADER
+    with pytest.raises(ElectionError, match="outranked"):
+        next_role(Role.FOLLOWER, "outranked")
+    assert {role for role, _ in TRANSITIONS} == set(Role)
+
+
+def test_config_rejects_negative_graces() -> None:
+    with pytest.raises(ValueError, match="grace"):
+        ElectionConfig(grace=-1.0)
