@@ -1,0 +1,249 @@
+"""The `components:` section: what to run, what it needs, where it may go.
+
+How it works: each item is read field by field through `Problems`, so every wrong field of every
+component is reported. Names, launchers and targets go through the same checks as an agent's
+instance specs (sdrpeer.runtime.spec), so a system that loads can be deployed. For a `python`
+target the class is imported (sdrpeer.system.classes) and the params are converted by the class's
+own declarations. Requirements come from `profile:` (a file written by `sdrpeer profile`, path
+relative to the system file) and/or `requires:` (inline); an inline value wins over the profile's,
+and inline `traffic:` rates are merged over the profiled out-port rates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sdrpeer.runtime.spec import SpecError, _launcher, _name, _target
+from sdrpeer.system.classes import ClassInfo, check_params, inspect_target
+from sdrpeer.system.model import STANDBY_MODES, ComponentDef, Requirements, StandbySpec
+from sdrpeer.system.problems import MISSING, Problems
+from sdrpeer.system.profiles import ProfileError, ProfileFigures, read_profile
+from sdrpeer.system.values import (
+    bounded,
+    integer,
+    param_value,
+    parse_bandwidth,
+    robot_name,
+    robot_names,
+    text,
+)
+from sdrpeer.units import parse_percent, parse_size
+
+COMPONENT_KEYS = (
+    "name",
+    "launcher",
+    "target",
+    "params",
+    "profile",
+    "requires",
+    "standby",
+    "pin",
+    "prefer",
+)
+REQUIRES_KEYS = ("cpu", "memory", "traffic")
+STANDBY_KEYS = ("same_robot", "other_robots", "mode")
+
+parse_cpu = bounded(parse_percent, 0.0, 10_000.0, "0% to 10000%: percent of one core")
+parse_memory = bounded(lambda v: float(parse_size(v)), 0.0, 1e12, "0 to 1TB")
+
+
+@dataclass
+class ComponentEntry:
+    """One component as read, with what the connections check needs."""
+
+    node: yaml.Node
+    where: str
+    info: ClassInfo | None
+    """The imported class (python launcher), None when its ports cannot be known."""
+    definition: ComponentDef | None
+    """None when something in the component was wrong."""
+
+
+def read_components(p: Problems, node: yaml.Node, base_dir: Path) -> dict[str, ComponentEntry]:
+    """Every component by name (duplicates and problems recorded in `p`)."""
+    out: dict[str, ComponentEntry] = {}
+    items = p.sequence(node, "components")
+    if isinstance(node, yaml.SequenceNode) and not items:
+        p.add(node, "components", "a system needs at least one component")
+    for i, item in enumerate(items):
+        where = f"components[{i}]"
+        fields = p.mapping(item, where, COMPONENT_KEYS, ("name", "target"))
+        if fields is None:
+            continue
+        name, entry = _component(p, fields, item, where, base_dir)
+        if not name:
+            continue
+        if name in out:
+            first = out[name].node.start_mark.line + 1
+            p.add(fields["name"], f"{where}.name", f"{name!r} given twice (first at line {first})")
+            continue
+        out[name] = entry
+    return out
+
+
+def _component(
+    p: Problems, fields: dict[str, yaml.Node], node: yaml.Node, where: str, base_dir: Path
+) -> tuple[str, ComponentEntry]:
+    errors_before = len(p.items)
+    name = _spec_field(p, fields, "name", where, _name)
+    launcher = _spec_field(p, fields, "launcher", where, _launcher, default="python")
+    target: Any = MISSING
+    if launcher and "target" in fields:
+        target = _spec_field(p, fields, "target", where, lambda v, w: _target(launcher, v, w))
+    info: ClassInfo | None = None
+    if target:
+        with p.guard():
+            info = p.f.parse(
+                fields["target"], f"{where}.target", lambda _: inspect_target(launcher, target)
+            )
+    params = _params(p, fields, where, info)
+    figures: ProfileFigures | None = None
+    if "profile" in fields:
+        figures = _profile(p, fields["profile"], f"{where}.profile", base_dir, target)
+    requires = _requires(p, fields, where, figures, info)
+    standby = _standby(p, fields, where)
+    pin = p.get(fields, "pin", where, robot_name, None)
+    prefer = p.get(fields, "prefer", where, robot_names, ())
+    definition = None
+    if len(p.items) == errors_before:
+        definition = ComponentDef(
+            name=name,
+            launcher=launcher,
+            target=target,
+            params=params,
+            requires=requires,
+            standby=standby,
+            pin=pin,
+            prefer=prefer,
+        )
+    return name, ComponentEntry(node, where, info, definition)
+
+
+def _spec_field(
+    p: Problems,
+    fields: dict[str, yaml.Node],
+    key: str,
+    where: str,
+    check: Callable[[Any, str], Any],
+    *,
+    default: Any = None,
+) -> Any:
+    """A field checked by one of the instance spec's validators."""
+    node = fields.get(key)
+    if node is None:
+        return default if default is not None else MISSING
+    try:
+        return check(p.f.value(node), f"{where}.{key}")
+    except SpecError as e:
+        p.add(node, e.field, str(e).split("': ", 1)[-1])
+        return MISSING
+
+
+def _params(
+    p: Problems, fields: dict[str, yaml.Node], where: str, info: ClassInfo | None
+) -> tuple[tuple[str, Any], ...]:
+    node = fields.get("params")
+    if node is None:
+        return ()
+    items = p.mapping(node, f"{where}.params", None)
+    if items is None:
+        return ()
+    values: dict[str, Any] = {}
+    for key, value_node in items.items():
+        value = p.get(items, key, f"{where}.params", param_value, MISSING)
+        if value is MISSING:
+            continue
+        values[key] = value
+        if info is not None:
+            for _, message in check_params(info, {key: value}):
+                p.add(value_node, f"{where}.params.{key}", message)
+    return tuple(sorted(values.items()))
+
+
+def _profile(
+    p: Problems, node: yaml.Node, where: str, base_dir: Path, target: Any
+) -> ProfileFigures | None:
+    path: str = MISSING
+    with p.guard():
+        path = p.f.parse(node, where, text)
+    if not path:
+        return None
+    try:
+        figures = read_profile(base_dir / path, path)
+    except ProfileError as e:
+        p.add(node, where, str(e))
+        return None
+    if isinstance(target, str) and figures.target is not None and figures.target != target:
+        p.add(node, where, f"{path} was measured for {figures.target}, not {target}")
+        return None
+    return figures
+
+
+def _requires(
+    p: Problems,
+    fields: dict[str, yaml.Node],
+    where: str,
+    figures: ProfileFigures | None,
+    info: ClassInfo | None,
+) -> Requirements:
+    cpu = figures.cpu_pct if figures else 0.0
+    mem = figures.mem_bytes if figures else 0
+    rates = dict(figures.out_bytes_per_s) if figures else {}
+    node = fields.get("requires")
+    inline = p.mapping(node, f"{where}.requires", REQUIRES_KEYS) if node is not None else {}
+    if inline:
+        cpu = p.get(inline, "cpu", f"{where}.requires", parse_cpu, cpu)
+        mem = round(p.get(inline, "memory", f"{where}.requires", parse_memory, float(mem)) or 0)
+        rates.update(_traffic(p, inline.get("traffic"), f"{where}.requires.traffic", info))
+    return Requirements(
+        cpu_pct=cpu or 0.0,
+        mem_bytes=mem,
+        out_bytes_per_s=tuple(sorted(rates.items())),
+        profile=figures.path if figures else None,
+    )
+
+
+def _traffic(
+    p: Problems, node: yaml.Node | None, where: str, info: ClassInfo | None
+) -> dict[str, float]:
+    if node is None:
+        return {}
+    items = p.mapping(node, where, None)
+    out: dict[str, float] = {}
+    for port, value_node in (items or {}).items():
+        rate = p.get(items or {}, port, where, parse_bandwidth, MISSING)
+        if info is not None and port not in info.out_ports:
+            p.add(
+                value_node,
+                f"{where}.{port}",
+                f"no OutPort {port!r} (out ports: {info.ports_text('out')})",
+            )
+        elif rate is not MISSING:
+            out[port] = rate
+    return out
+
+
+def _standby(p: Problems, fields: dict[str, yaml.Node], where: str) -> StandbySpec:
+    node = fields.get("standby")
+    if node is None:
+        return StandbySpec()
+    items = p.mapping(node, f"{where}.standby", STANDBY_KEYS)
+    if items is None:
+        return StandbySpec()
+    w = f"{where}.standby"
+    return StandbySpec(
+        same_robot=p.get(items, "same_robot", w, integer(0, 16), 0),
+        other_robots=p.get(items, "other_robots", w, integer(0, 64), 0),
+        mode=p.get(items, "mode", w, _mode, "hot"),
+    )
+
+
+def _mode(value: object) -> str:
+    if value not in STANDBY_MODES:
+        raise ValueError(f"expected one of {', '.join(STANDBY_MODES)}, got {value!r}")
+    return str(value)

@@ -1,0 +1,111 @@
+"""The `connections:` section: data streams `from: Comp.port` -> `to: Comp.port`.
+
+How it works: each end is split at its last dot into a component of the `components:` section and
+a port name. When the component's class was imported (python launcher), the `from` port must be
+one of its OutPorts and the `to` port one of its InPorts; otherwise only the form of the name is
+checked (the host reports its ports when it starts). The policy is checked by the instance spec's
+`validate_policy`, so every policy that loads can be sent to an agent. Traffic is `traffic:` when
+given, else the sender's profiled rate for that port, else unknown (None). The same stream given
+twice is an error.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import yaml
+
+from sdrpeer.runtime.spec import SpecError, _port, validate_policy
+from sdrpeer.system.components import ComponentEntry
+from sdrpeer.system.model import ConnectionDef
+from sdrpeer.system.problems import MISSING, Problems
+from sdrpeer.system.values import parse_bandwidth
+
+CONNECTION_KEYS = ("from", "to", "policy", "traffic")
+_KIND = {"from": ("out", "OutPort"), "to": ("in", "InPort")}
+
+
+def read_connections(
+    p: Problems, node: yaml.Node | None, components: dict[str, ComponentEntry]
+) -> tuple[ConnectionDef, ...]:
+    """Every connection (problems recorded in `p`)."""
+    if node is None:
+        return ()
+    out: list[ConnectionDef] = []
+    seen: dict[str, int] = {}
+    for i, item in enumerate(p.sequence(node, "connections")):
+        where = f"connections[{i}]"
+        fields = p.mapping(item, where, CONNECTION_KEYS, ("from", "to"))
+        if fields is None:
+            continue
+        before = len(p.items)
+        sender = _end(p, fields, "from", where, components)
+        receiver = _end(p, fields, "to", where, components)
+        policy: Any = ()
+        if "policy" in fields:
+            policy = _policy(p, fields["policy"], f"{where}.policy")
+        traffic: float | None = p.get(fields, "traffic", where, parse_bandwidth, None)
+        if len(p.items) != before:
+            continue
+        entry = components[sender[0]].definition
+        if traffic is None and entry is not None:
+            traffic = entry.requires.port_rate(sender[1])
+        conn = ConnectionDef(*sender, *receiver, policy=policy, traffic_bytes_per_s=traffic)
+        if conn.id in seen:
+            p.add(item, where, f"{conn.id} given twice (first at line {seen[conn.id]})")
+            continue
+        seen[conn.id] = item.start_mark.line + 1
+        out.append(conn)
+    return tuple(out)
+
+
+def _end(
+    p: Problems,
+    fields: dict[str, yaml.Node],
+    key: str,
+    where: str,
+    components: dict[str, ComponentEntry],
+) -> tuple[str, str]:
+    """(component, port) of one end; MISSING pair when it is wrong (already recorded)."""
+    node = fields.get(key)
+    field = f"{where}.{key}"
+    if node is None:
+        return MISSING, MISSING
+    value = p.f.value(node)
+    comp, dot, port = value.rpartition(".") if isinstance(value, str) else ("", "", "")
+    if not dot or not comp or not port:
+        p.add(node, field, f"expected Component.port, got {value!r}")
+        return MISSING, MISSING
+    if comp not in components:
+        known = ", ".join(components) or "none"
+        p.add(node, field, f"no component {comp!r} (known: {known})")
+        return MISSING, MISSING
+    try:
+        _port(port, field)
+    except SpecError as e:
+        p.add(node, field, str(e).split("': ", 1)[-1])
+        return MISSING, MISSING
+    info = components[comp].info
+    kind, kind_name = _KIND[key]
+    if info is not None and info.port_kind(port) != kind:
+        cls = info.cls.__name__
+        if info.port_kind(port) is None:
+            message = f"{cls} has no port {port!r} ({kind_name}s: {info.ports_text(kind)})"
+        else:
+            message = f"{comp}.{port} is not an {kind_name} of {cls} ({kind_name}s: "
+            message += f"{info.ports_text(kind)})"
+        p.add(node, field, message)
+        return MISSING, MISSING
+    return comp, port
+
+
+def _policy(p: Problems, node: yaml.Node, where: str) -> tuple[tuple[str, Any], ...]:
+    try:
+        return validate_policy(p.f.value(node), where)
+    except SpecError as e:
+        inner = node
+        if isinstance(node, yaml.MappingNode):
+            key = e.field.rsplit(".", 1)[-1]
+            inner = next((v for k, v in node.value if p.f.value(k) == key), node)
+        p.add(inner, e.field, str(e).split("': ", 1)[-1])
+        return ()
