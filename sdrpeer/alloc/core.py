@@ -1,0 +1,369 @@
+"""Dynamic module allocation: (system, cluster view[, previous plan]) -> a plan or a report.
+
+How it works (pure: no I/O, no clock; `allocate` is the whole API):
+1. Robots are indexed in first-fit order (`view.origin` first). Components are ordered so that
+   connected ones follow each other (`order.py`). Each instance is a slot: the active one, then
+   `standby.same_robot` standbys on the active's robot and `standby.other_robots` standbys each
+   on a robot of its own (not the active's, not another standby's).
+2. Actives are placed first, in three passes: (a) every active that the previous plan or a
+   running instance of the same name already has on a robot stays there if that robot still
+   passes every constraint (smallest change); (b) pinned components, on their pin or nowhere;
+   (c) the rest: a robot already running a standby of the component (the paper reuses started
+   standbys; the active takes over that instance and its name; only without a previous plan),
+   then `prefer`, then the strategy's order. Standbys follow in two passes: (a) kept where the
+   previous plan or a running instance has them, (b) the rest, named `<component>-s<k>` with the
+   smallest free k (names held by the previous plan stay with their instance).
+3. A robot takes an instance when every enabled robot constraint passes with what the plan put
+   there so far, and every link constraint passes between it and the robot of each connected
+   component already placed (checked once per pair of robots, memoised). Standbys are checked
+   against the actives of the connected components.
+4. Memory and CPU: a robot's metrics already count what runs there now, so an instance running
+   on the robot it is placed on adds only what it still lacks (its need minus its measured use).
+5. Cold standbys are placements the robot launches only when needed: they use nothing, so only
+   constraints with `cold = True` apply (battery, links, plugins), not CPU or memory.
+6. Any instance without a robot makes the result `Infeasible` (never a partial plan), listing
+   for every robot the constraint that ruled it out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+from sdrpeer.alloc.constraints import Need, RobotLoad, active_constraints
+from sdrpeer.alloc.order import adjacency, component_order
+from sdrpeer.alloc.result import AllocationResult, Infeasible, Unplaced
+from sdrpeer.alloc.strategies import STRATEGIES, Context, Peer
+from sdrpeer.alloc.view import ClusterView, RobotView
+from sdrpeer.plan import Placement, Plan
+from sdrpeer.record import InstanceInfo
+from sdrpeer.system.model import ComponentDef, SystemDef
+
+GONE_STATES = frozenset({"finalized", "stopping", "stopped"})
+"""Instance states that do not count as running (they are going or gone)."""
+NOT_IN_VIEW = "not in view (dead, left or unknown)"
+_NOTHING = Need()
+
+
+def allocate(
+    system: SystemDef,
+    view: ClusterView,
+    *,
+    epoch: int,
+    version: int,
+    allocator: str,
+    previous: Plan | None = None,
+) -> AllocationResult:
+    """Place every instance of `system` on the robots in `view` (see the module docstring)."""
+    return _Allocation(system, view, previous).run(epoch, version, allocator)
+
+
+def _first_fit_order(view: ClusterView) -> tuple[RobotView, ...]:
+    """The origin first, then the other robots in view order."""
+    first = [r for r in view.robots if r.name == view.origin]
+    return tuple(first + [r for r in view.robots if r.name != view.origin])
+
+
+class _Allocation:
+    """The state of one allocation (used once)."""
+
+    def __init__(self, system: SystemDef, view: ClusterView, previous: Plan | None) -> None:
+        self.system = system
+        self.t = system.allocation.thresholds
+        self.robots = _first_fit_order(view)
+        self.index = {r.name: i for i, r in enumerate(self.robots)}
+        self.loads = tuple(RobotLoad(r) for r in self.robots)
+        robot_cs, self.link_cs = active_constraints(system.allocation.constraints, self.t)
+        self.static_cs = [c for c in robot_cs if c.static]
+        self.hot_cs = [c for c in robot_cs if not c.static]
+        self.cold_cs = [c for c in self.hot_cs if c.cold]
+        self._static: dict[int, tuple[str | None, str | None]] = {}
+        self._pairs: dict[int, str | None] = {}
+        self.running: dict[tuple[int, str], InstanceInfo] = {}
+        self.running_at: dict[str, list[int]] = {}
+        self.running_standbys: dict[str, list[tuple[int, InstanceInfo]]] = {}
+        for k, r in enumerate(self.robots):
+            for inst in r.instances:
+                if inst.state.lower() in GONE_STATES:
+                    continue
+                self.running[(k, inst.name)] = inst
+                self.running_at.setdefault(inst.name, []).append(k)
+                if inst.role == "standby":
+                    self.running_standbys.setdefault(inst.component, []).append((k, inst))
+        self.adj = adjacency(system)
+        self.order = component_order(system, self.adj)
+        strategy = STRATEGIES.get(system.allocation.strategy)
+        self.ranker = strategy.ranker(Context(self.robots, self.loads, system.allocation))
+        self.previous: dict[str, list[Placement]] = {}
+        for p in previous.placements if previous is not None else ():
+            self.previous.setdefault(p.component, []).append(p)
+        self.active_at: dict[str, int] = {}
+        self.holders: dict[str, dict[int, str]] = {c.name: {} for c in system.components}
+        self.names: dict[str, set[str]] = {c.name: set() for c in system.components}
+        self.placements: list[Placement] = []
+        self.unplaced: list[Unplaced] = []
+        self.kept = 0
+
+    # -- checks ---------------------------------------------------------------------------
+
+    def _need(self, comp: ComponentDef, name: str, cold: bool, i: int) -> Need:
+        """What the instance adds to robot i (see the module docstring, points 4 and 5)."""
+        if cold:
+            return _NOTHING
+        req = comp.requires
+        inst = self.running.get((i, name))
+        if inst is None or inst.component != comp.name:
+            return Need(req.cpu_pct, req.mem_bytes)
+        return Need(max(0.0, req.cpu_pct - inst.cpu_pct), max(0, req.mem_bytes - inst.rss))
+
+    def _static_reason(self, i: int, comp: ComponentDef, cold: bool) -> str | None:
+        """The first static constraint robot i fails (for hot, or for cold instances)."""
+        cached = self._static.get(i)
+        if cached is None:
+            hot: str | None = None
+            cold_r: str | None = None
+            for c in self.static_cs:
+                why = c.check(self.loads[i], _NOTHING, comp, self.t)
+                if why is not None:
+                    hot = hot or f"{c.name}: {why}"
+                    if c.cold:
+                        cold_r = cold_r or f"{c.name}: {why}"
+            cached = self._static[i] = (hot, cold_r)
+        return cached[1] if cold else cached[0]
+
+    def _pair(self, i: int, q: int) -> str | None:
+        """The first link constraint robots i and q fail together (memoised per pair)."""
+        key = i * len(self.robots) + q if i < q else q * len(self.robots) + i
+        if key in self._pairs:
+            return self._pairs[key]
+        a, b = self.robots[i], self.robots[q]
+        link, dist = a.link_to(b), a.distance_to(b)
+        why: str | None = None
+        for c in self.link_cs:
+            r = c.check(a, b, link, dist, self.t)
+            if r is not None:
+                why = f"{c.name}: {r}"
+                break
+        self._pairs[key] = why
+        return why
+
+    def _reason(
+        self, comp: ComponentDef, name: str, cold: bool, i: int, peers: Sequence[Peer]
+    ) -> str | None:
+        """None when robot i may take the instance, else the first constraint it fails."""
+        why = self._static_reason(i, comp, cold)
+        if why is not None:
+            return why
+        load = self.loads[i]
+        need = self._need(comp, name, cold, i)
+        for c in self.cold_cs if cold else self.hot_cs:
+            r = c.check(load, need, comp, self.t)
+            if r is not None:
+                return f"{c.name}: {r}"
+        for p in peers:
+            if p.robot != i:
+                r = self._pair(i, p.robot)
+                if r is not None:
+                    return f"link to {p.component} on {self.robots[p.robot].name}: {r}"
+        return None
+
+    def _peers(self, comp: ComponentDef) -> list[Peer]:
+        """Connected components whose active is placed, with the traffic to each."""
+        at = self.active_at
+        return [Peer(at[p], rate, p) for p, rate in self.adj[comp.name].items() if p in at]
+
+    # -- placing --------------------------------------------------------------------------
+
+    def _place(self, comp: ComponentDef, name: str, role: str, cold: bool, i: int) -> None:
+        need = self._need(comp, name, cold, i)
+        load = self.loads[i]
+        load.cpu_pct += need.cpu_pct
+        load.mem_bytes += need.mem_bytes
+        self.ranker.placed(i)
+        mode = "cold" if cold else "hot"
+        self.placements.append(Placement(comp.name, name, self.robots[i].name, role, mode))
+        self.holders[comp.name][i] = name
+        self.names[comp.name].add(name)
+        if role == "active":
+            self.active_at[comp.name] = i
+
+    def _first(
+        self,
+        comp: ComponentDef,
+        name: str,
+        cold: bool,
+        candidates: Iterable[int],
+        peers: Sequence[Peer],
+    ) -> int | None:
+        """The first candidate robot (not holding this component yet) that takes the instance."""
+        held = self.holders[comp.name]
+        for i in candidates:
+            if i not in held and self._reason(comp, name, cold, i, peers) is None:
+                return i
+        return None
+
+    def _sticky(self, comp: ComponentDef, name: str) -> list[int]:
+        """Robots that already have this instance: the previous plan's, then running ones."""
+        out = [
+            self.index[p.robot]
+            for p in self.previous.get(comp.name, ())
+            if p.instance == name and p.robot in self.index
+        ]
+        out += [
+            i
+            for i in self.running_at.get(name, ())
+            if self.running[(i, name)].component == comp.name
+        ]
+        return list(dict.fromkeys(out))
+
+    def _candidates(self, comp: ComponentDef) -> Iterable[int]:
+        """`prefer` robots in view, then the strategy's order (repeats are re-checked cheaply)."""
+        prefer = [self.index[n] for n in comp.prefer if n in self.index]
+        yield from prefer
+        tried = set(prefer)
+        for i in self.ranker.order(comp, self._peers(comp)):
+            if i not in tried:
+                yield i
+
+    def _fail(self, comp: ComponentDef, name: str, role: str, cold: bool, only: int | None) -> None:
+        """Record that the instance found no robot, with every robot's reason."""
+        peers = self._peers(comp)
+        held = self.holders[comp.name]
+        reasons: list[tuple[str, str]] = []
+        for i, r in enumerate(self.robots):
+            if only is not None and i != only:
+                continue
+            if i in held:
+                why: str | None = f"already holds {held[i]}"
+            else:
+                why = self._reason(comp, name, cold, i, peers)
+            reasons.append((r.name, why or "ok, but another instance needed it first"))
+        missing = [p.robot for p in self.previous.get(comp.name, ()) if p.instance == name]
+        if role == "active" and comp.pin is not None:
+            missing.append(comp.pin)
+        for robot in dict.fromkeys(missing):
+            if robot not in self.index:
+                reasons.append((robot, NOT_IN_VIEW))
+        self.unplaced.append(Unplaced(comp.name, name, role, tuple(reasons)))
+
+    def _fresh_name(self, comp: ComponentDef) -> str:
+        """`<component>-s<k>` with the smallest k not used by this component."""
+        k = 1
+        while f"{comp.name}-s{k}" in self.names[comp.name]:
+            k += 1
+        return f"{comp.name}-s{k}"
+
+    def _actives(self) -> None:
+        """Place every active instance (module docstring, point 2)."""
+        names: dict[str, str] = {}
+        for comp in self.order:
+            prev = [p for p in self.previous.get(comp.name, ()) if p.role == "active"]
+            names[comp.name] = prev[0].instance if prev else comp.name
+            peers = self._peers(comp)
+            for i in self._sticky(comp, names[comp.name]):
+                if comp.pin not in (None, self.robots[i].name):
+                    continue
+                if self._reason(comp, names[comp.name], False, i, peers) is None:
+                    self._place(comp, names[comp.name], "active", False, i)
+                    self.kept += 1
+                    break
+        rest = [c for c in self.order if c.name not in self.active_at]
+        for comp in sorted(rest, key=lambda c: c.pin is None):
+            name = names[comp.name]
+            if comp.pin is not None:
+                pin = self.index.get(comp.pin)
+                if pin is None or self._first(comp, name, False, [pin], self._peers(comp)) is None:
+                    self._fail(comp, name, "active", False, pin if pin is not None else -1)
+                else:
+                    self._place(comp, name, "active", False, pin)
+                continue
+            if self._adopt(comp):
+                continue
+            got = self._first(comp, name, False, self._candidates(comp), self._peers(comp))
+            if got is None:
+                self._fail(comp, name, "active", False, None)
+            else:
+                self._place(comp, name, "active", False, got)
+
+    def _adopt(self, comp: ComponentDef) -> bool:
+        """Make a running standby of `comp` its active, if one fits (fresh deployments only)."""
+        if comp.name in self.previous:
+            return False
+        peers = self._peers(comp)
+        for i, inst in self.running_standbys.get(comp.name, ()):
+            if self._reason(comp, inst.name, False, i, peers) is None:
+                self._place(comp, inst.name, "active", False, i)
+                self.kept += 1
+                return True
+        return False
+
+    def _standbys(self) -> None:
+        """Place every standby (module docstring, point 2)."""
+        todo: list[tuple[ComponentDef, int, int]] = []
+        for comp in self.order:
+            at = self.active_at.get(comp.name)
+            spec = comp.standby
+            if at is None or spec.same_robot + spec.other_robots == 0:
+                continue
+            cold = spec.mode == "cold"
+            peers = self._peers(comp)
+            same = other = 0
+            for name, i in self._pool(comp):
+                fits = self._reason(comp, name, cold, i, peers) is None
+                if i == at and same < spec.same_robot and fits:
+                    same += 1
+                elif i not in self.holders[comp.name] and other < spec.other_robots and fits:
+                    other += 1
+                else:
+                    continue
+                self._place(comp, name, "standby", cold, i)
+                self.kept += 1
+            todo.append((comp, spec.same_robot - same, spec.other_robots - other))
+        for comp, same, other in todo:
+            at = self.active_at[comp.name]
+            cold = comp.standby.mode == "cold"
+            peers = self._peers(comp)
+            for n in range(same + other):
+                name = self._fresh_name(comp)
+                only = at if n < same else None
+                if only is not None:
+                    got = self._first_same(comp, name, cold, only, peers)
+                else:
+                    got = self._first(comp, name, cold, self._candidates(comp), peers)
+                if got is None:
+                    self._fail(comp, name, "standby", cold, only)
+                    self.names[comp.name].add(name)
+                else:
+                    self._place(comp, name, "standby", cold, got)
+
+    def _first_same(
+        self, comp: ComponentDef, name: str, cold: bool, at: int, peers: Sequence[Peer]
+    ) -> int | None:
+        """The active's robot, if it also takes this same-robot standby."""
+        return at if self._reason(comp, name, cold, at, peers) is None else None
+
+    def _pool(self, comp: ComponentDef) -> list[tuple[str, int]]:
+        """Standbys that exist already: the previous plan's, then running ones, by name."""
+        pool: dict[str, int] = {}
+        for p in self.previous.get(comp.name, ()):
+            if p.role == "standby" and p.robot in self.index:
+                pool.setdefault(p.instance, self.index[p.robot])
+        for i, inst in self.running_standbys.get(comp.name, ()):
+            pool.setdefault(inst.name, i)
+        used = self.names[comp.name]
+        return [(name, i) for name, i in pool.items() if name not in used]
+
+    def run(self, epoch: int, version: int, allocator: str) -> AllocationResult:
+        """Place everything; a Plan, or an Infeasible report."""
+        self._actives()
+        self._standbys()
+        if self.unplaced:
+            return AllocationResult(
+                infeasible=Infeasible(self.system.name, tuple(self.unplaced), len(self.robots))
+            )
+        declared = {c.name: k for k, c in enumerate(self.system.components)}
+        placements = sorted(
+            self.placements,
+            key=lambda p: (declared[p.component], p.role != "active", len(p.instance), p.instance),
+        )
+        plan = Plan(epoch, version, self.system, tuple(placements), allocator)
+        return AllocationResult(plan=plan, kept=self.kept)
