@@ -84,3 +84,18 @@ def test_many_small_frames_through_a_full_buffer() -> None:
     frames = [encode_frame(i, b"x" * 100) for i in range(1, 30001)]  # 3 MiB: buffer wraps
     got = receive(FrameReader(1 << 20), b"".join(frames), [READ_SIZE])
     assert [f[0] for f in got] == list(range(1, 30001))
+
+
+def test_one_frame_per_read_and_its_checks() -> None:
+    """A read that is exactly one small frame (the latency path) keeps every rule."""
+    reader = FrameReader(1000)
+    ping = encode_frame(7, b"p" * 100)
+    for _ in range(3):
+        assert receive(reader, ping, [len(ping)]) == [[7, b"p" * 100]]
+    assert receive(reader, ping + ping[:5], [len(ping) + 5]) == [[7, b"p" * 100]]
+    assert receive(reader, ping[5:], [1 << 20]) == [[7, b"p" * 100]]
+    for bad, reason in [(encode_frame(1, b"x" * 2000), "oversized"), (b"\x93\x01\x02\x03", "")]:
+        reader = FrameReader(1000)
+        with pytest.raises(FrameError) as info:
+            receive(reader, bad, [len(bad)])
+        assert info.value.reason == (reason or "malformed")

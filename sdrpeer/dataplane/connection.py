@@ -4,8 +4,9 @@ How it works: an asyncio shell around a `FrameWriter` (packing, policy queue, nu
 joining). `offer(value)` encodes the value at once (so an oversized or unencodable value is
 refused right there, with an error naming the connection) and queues it. Writing is not a task
 per frame: the first offer in a loop iteration writes its frame immediately when the link is
-idle (low latency) and schedules one `call_soon` flush that writes everything offered meanwhile
-in one `transport.write` (high throughput). The transport keeps no backlog of its own
+idle (low latency: with nothing pending, a small value skips the queue and is written as it is
+packed) and schedules one `call_soon` flush that writes everything offered meanwhile in one
+`transport.write` (high throughput). The transport keeps no backlog of its own
 (high-water mark 0): when the kernel's socket buffer is full, writing pauses until it drained
 and values wait in the queue, where the policy decides (so `new` really sends the newest value,
 not one stuck in a user-space buffer).
@@ -86,6 +87,7 @@ class Connection:
         self._wake = asyncio.Event()
         self._room = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
+        self._loop: asyncio.AbstractEventLoop  # set by start
 
     @property
     def dropped(self) -> int:
@@ -120,23 +122,27 @@ class Connection:
     def start(self) -> None:
         """Start dialing (needs a running event loop); `offer` may be called before or after."""
         if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run(), name=self.conn_id)
+            self._loop = asyncio.get_running_loop()
+            self._task = self._loop.create_task(self._run(), name=self.conn_id)
 
     def offer(self, value: object) -> bool:
         """Queue a value per the policy; False when dropped or (full=block) not queued yet."""
         if self._closing:
             return False
+        link = self._link
+        write = link.write if link is not None and not self._scheduled and not link.paused else None
         try:
-            if not self._writer_offer(value):
+            if not self._writer_offer(value, write):
                 return False
         except FrameError as exc:
             self.refused += 1
             where = f"connection {self.conn_id} ({self.from_} -> {self.in_port})"
             raise FrameError(exc.reason, f"{where}: {exc.detail}") from None
-        if not self._scheduled and self._link is not None:
+        if not self._scheduled and link is not None:
             self._scheduled = True
-            asyncio.get_running_loop().call_soon(self._flush_soon)
-            self._flush()  # idle link: this frame goes out now
+            if write is None or self._queue.items:
+                self._flush()  # an idle link: a value not written at once goes out now
+            self._loop.call_soon(self._flush_soon)  # what else is offered now goes out together
         return True
 
     async def drain(self) -> None:
@@ -277,6 +283,7 @@ class _Link(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
+        self.write = transport.write
         transport.set_write_buffer_limits(high=0)  # pause as soon as the kernel is full
 
     def data_received(self, data: bytes) -> None:

@@ -2,8 +2,9 @@
 
 How it works: one reused bytearray per connection (1 MiB, or the largest big frame seen) is what
 the transport reads into, so a read allocates nothing. (A larger buffer measured slower: the
-bytes are copied out while they are still in the CPU cache.) `frames()` then walks the bytes
-received:
+bytes are copied out while they are still in the CPU cache.) A read that is exactly one small
+frame (the latency case: a ping, a command) is decoded by one `msgpack.unpackb`; anything else
+that call cannot take alone goes the general way. `frames()` walks the bytes received:
 - at a frame boundary, a frame whose value is a bin of 64 KiB or more (an image, a point cloud)
   skips msgpack: its header is parsed here, and once all of it is in the buffer the value is
   copied out once into the delivered bytes (what a plain socket loop does). An incomplete one
@@ -21,6 +22,8 @@ from __future__ import annotations
 
 from typing import Any, Final
 
+import msgpack
+
 from sdrpeer.dataplane.frames import INCOMPLETE, FrameDecoder, FrameError, big_frame_header
 
 READ_SIZE: Final = 1024 * 1024
@@ -28,6 +31,7 @@ BIG: Final = 64 * 1024
 """Bin values at least this large skip msgpack on the way in."""
 _GROWN_MAX: Final = 32 * 1024 * 1024
 _PEEK: Final = 16  # the longest big-frame header is 15 bytes
+_unpackb: Final = msgpack.unpackb
 
 
 class FrameReader:
@@ -35,6 +39,7 @@ class FrameReader:
 
     def __init__(self, max_frame: int) -> None:
         self.decoder = FrameDecoder(max_frame)
+        self._one_max = min(BIG, max_frame + 1)
         self._array = bytearray(READ_SIZE)
         self._view = memoryview(self._array)
         self._start = 0  # first byte not yet consumed
@@ -66,8 +71,17 @@ class FrameReader:
         """Every complete frame received so far, each ``[seq, value]``, oldest first."""
         if self._error is not None:
             raise self._error
-        out: list[list[Any]] = []
         view, start, end, decoder = self._view, self._start, self._end, self.decoder
+        if not start and 0 < end < self._one_max and not self._need and decoder.at_boundary:
+            try:  # the latency path: one small frame received alone
+                obj = _unpackb(view[:end], raw=False, strict_map_key=False)
+            except Exception:  # more than one frame, part of one, a bad one: the walk below
+                pass
+            else:
+                if type(obj) is list and len(obj) == 2 and type(obj[0]) is int and obj[0] >= 0:
+                    self._end = 0
+                    return [obj]
+        out: list[list[Any]] = []
         look = end - start >= BIG or self._need > 0  # else a big frame cannot be complete yet
         self._need = 0
         try:

@@ -2,11 +2,12 @@
 
 How it works: `offer` packs a value once, when it is offered (a bytes value of 64 KiB or more
 is kept as it is, behind a 5-byte bin prefix: no copy) and queues it in `queue` (a
-`PendingQueue`, which applies the connector policy). `flush(write, paused)` numbers what is
-pending and writes it: many small values become one joined buffer (the headers and the join
-are C-level `map`s, no Python loop per frame); a big value is written as its header, then its
-bytes in 1 MiB slices, each only while `paused()` is false, so the socket's buffer, not ours,
-holds what the kernel has not taken. seq is given when a frame is written (starting at 1), so
+`PendingQueue`, which applies the connector policy); offered with the idle link's `write`
+while nothing is pending, a small value under all/fifo is numbered and written at once instead
+(the latency path). `flush(write, paused)` numbers what is pending and writes it: many small
+values become one joined buffer (the headers and the join are C-level `map`s, no Python loop per
+frame); a big value is written as its header, then its bytes in 1 MiB slices, each only while
+`paused()` is false, so the socket's buffer, not ours, holds what the kernel has not taken. seq is given when a frame is written (starting at 1), so
 values dropped by the policy leave no gap; frames lost with a broken link do.
 """
 
@@ -72,9 +73,10 @@ class FrameWriter:
         """Values not fully written yet (a big one half written counts)."""
         return len(self.queue) + len(self._taken) + (self._rest is not None)
 
-    def offer(self, value: object) -> bool:
+    def offer(self, value: object, write: Write | None = None) -> bool:
         """Encode a value and queue it per the policy (False: not queued); FrameError when it
-        cannot be encoded or its frame would be over the maximum."""
+        cannot be encoded or its frame would be over the maximum. Given `write` (an idle link)
+        and nothing pending, a small value under push all/fifo is written at once instead."""
         item: Item
         if type(value) is bytes and len(value) >= BIG:
             item = _Big(value)
@@ -88,6 +90,22 @@ class FrameWriter:
             detail = f"a frame of {size} bytes exceeds the maximum {self.max_frame}"
             raise FrameError("oversized", detail)
         queue = self.queue
+        if (
+            write is not None
+            and queue.simple
+            and not queue.items
+            and not self._taken
+            and self._rest is None
+            and type(item) is bytes
+            and len(item) < BIG
+            and self.seq + 1 < _SEQ32
+        ):  # the latency path: nothing waits, so this frame goes out now
+            seq = self.seq = self.seq + 1
+            data = _HEADER32(seq) + item
+            write(data)
+            self.frames_out += 1
+            self.bytes_out += len(data)
+            return True
         if queue.simple and len(queue.items) < queue.limit:  # the hot path, inlined
             queue.items.append(item)
             return True
