@@ -38,7 +38,7 @@ from sdrpeer.plan import Placement, Plan
 from sdrpeer.record import InstanceInfo
 from sdrpeer.system.model import ComponentDef, SystemDef
 
-GONE_STATES = frozenset({"finalized", "stopping", "stopped"})
+GONE_STATES = frozenset({"finalized", "stopping", "stopped", "failed"})
 """Instance states that do not count as running (they are going or gone)."""
 NOT_IN_VIEW = "not in view (dead, left or unknown)"
 _NOTHING = Need()
