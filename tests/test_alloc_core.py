@@ -226,6 +226,20 @@ def test_a_fresh_deployment_activates_a_running_standby():
     assert result.kept == 1
 
 
+def test_when_the_active_robot_dies_its_running_standby_takes_over():
+    system = SystemDef("s", (comp("A", standby=StandbySpec(other_robots=1)),), allocation=TABLE_V)
+    first = run(system, three())
+    assert where(first) == {"A": "robot-1", "A-s1": "robot-2"}
+    warm = InstanceInfo("A-s1", "A", "inactive", "standby", 0.5, 510 * MB)
+    view = cluster(robot("robot-2", free=1100 * MB, instances=(warm,)), robot("robot-3"))
+    result = run(system, view, previous=first.plan)
+    assert where(result) == {"A-s1": "robot-2", "A-s2": "robot-3"}
+    assert result.plan is not None
+    active = result.plan.active_of("A")
+    assert active is not None
+    assert active.instance == "A-s1"
+
+
 def test_gone_instances_are_not_reused():
     failed = InstanceInfo("A", "A", "failed", "active", 0.0, 0)
     view = cluster(robot("robot-1"), robot("robot-2", instances=(failed,)))

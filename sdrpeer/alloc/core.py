@@ -9,8 +9,9 @@ How it works (pure: no I/O, no clock; `allocate` is the whole API):
    running instance of the same name already has on a robot stays there if that robot still
    passes every constraint (smallest change); (b) pinned components, on their pin or nowhere;
    (c) the rest: a robot already running a standby of the component (the paper reuses started
-   standbys; the active takes over that instance and its name; only without a previous plan),
-   then `prefer`, then the strategy's order. Standbys follow in two passes: (a) kept where the
+   standbys: the active takes over that instance and its name, so a re-allocation after the
+   active's robot died activates a warm standby instead of starting a new instance), then
+   `prefer`, then the strategy's order. Standbys follow in two passes: (a) kept where the
    previous plan or a running instance has them, (b) the rest, named `<component>-s<k>` with the
    smallest free k (names held by the previous plan stay with their instance).
 3. A robot takes an instance when every enabled robot constraint passes with what the plan put
@@ -285,9 +286,7 @@ class _Allocation:
                 self._place(comp, name, "active", False, got)
 
     def _adopt(self, comp: ComponentDef) -> bool:
-        """Make a running standby of `comp` its active, if one fits (fresh deployments only)."""
-        if comp.name in self.previous:
-            return False
+        """Make a running standby of `comp` its active, if one fits (it keeps its name)."""
         peers = self._peers(comp)
         for i, inst in self.running_standbys.get(comp.name, ()):
             if self._reason(comp, inst.name, False, i, peers) is None:
