@@ -24,6 +24,9 @@ from typing import TYPE_CHECKING, Any
 from sdrpeer import agent_views
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
+from sdrpeer.deploy.coordinator import ClusterState, Coordinator
+from sdrpeer.deploy.peers import peer_token
+from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.gossip.config import preset
@@ -90,6 +93,7 @@ class Agent:
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
         self.instances = self._make_instances()
+        self.coordinator: Coordinator | None = None
 
     @property
     def name(self) -> str:
@@ -128,6 +132,15 @@ class Agent:
         )
         self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
         self.shell.attach(self.core)
+        self.coordinator = Coordinator(
+            cfg.name,
+            cfg.data_dir,
+            self.instances,
+            self._cluster_state,
+            token=peer_token(self.keyring),
+            events=self.events,
+            on_change=lambda: self._publish(force=True),
+        )
         await self._start_api(token)
         await self.instances.start()
         self._publish(force=True)
@@ -139,6 +152,7 @@ class Agent:
         if seeds:
             self.shell.join(seeds)
         self._tasks.append(asyncio.create_task(self._metrics_loop()))
+        self.coordinator.start()
         trim_heap()
         log.info(
             "agent %s up: gossip %s:%d, api %s, preset %s",
@@ -153,6 +167,10 @@ class Agent:
         """Leave the cluster gracefully, then close the API and the socket."""
         for task in self._tasks:
             task.cancel()
+        if self.coordinator is not None:
+            if leave:
+                self.coordinator.leave()
+            await self.coordinator.stop()
         await self.instances.stop()
         if self.shell is not None and self.core is not None and leave:
             self.shell.leave()
@@ -182,7 +200,9 @@ class Agent:
 
     async def _start_api(self, token: str) -> None:
         host, port = parse_hostport(self.config.api)
-        self._runner, self.api_url = await serve_api(self, token, host, port)
+        self._runner, self.api_url = await serve_api(
+            self, token, host, port, extra_routes=DEPLOY_ROUTES, peer_token=peer_token(self.keyring)
+        )
 
     def _write_agent_json(self, addr: tuple[str, int]) -> None:
         info = {
@@ -233,7 +253,17 @@ class Agent:
         self._update_rates(now)
         links = self.links.snapshot(now)
         infos = self.instances.infos()
-        record = RobotRecord(metrics, links, self.api_url, self.config.priority, infos, time.time())
+        coord = self.coordinator
+        record = RobotRecord(
+            metrics,
+            links,
+            self.api_url,
+            self.config.priority,
+            infos,
+            time.time(),
+            election=None if coord is None else coord.election.info(),
+            plan=None if coord is None else coord.store.info(),
+        )
         if (
             force
             or worth_publishing(self._published, record)
@@ -258,6 +288,30 @@ class Agent:
         config = SupervisorConfig(data_host=parse_hostport(self.config.bind)[0])
         return InstanceManager(self.config.data_dir, config, lambda: self._publish(force=True))
 
+    # ----------------------------------------------------------------- deployment
+    def _wake_coordinator(self) -> None:
+        if self.coordinator is not None:
+            self.coordinator.wake()
+
+    def _cluster_state(self) -> ClusterState:
+        """Alive robots (ALIVE or SUSPECT; this one included) with their latest records."""
+        alive: dict[str, RobotRecord] = {}
+        if self.core is not None:
+            for m in self.core.members():
+                if m.name != self.name and STATE_NAMES.get(m.state) in ("alive", "suspect"):
+                    rec = self.records.get(m.name)
+                    if rec is not None:
+                        alive[m.name] = rec[1]
+        if self._published is not None:
+            alive[self.name] = self._published
+        return ClusterState(alive, sorted(alive))
+
+    def allocator_api(self) -> str | None:
+        """API address of the robot this one believes holds the allocator role."""
+        leader = None if self.coordinator is None else self.coordinator.election.info().leader
+        rec = self._cluster_state().alive.get(leader or "")
+        return None if rec is None else rec.api
+
     # ----------------------------------------------------------------- core events
     def _on_core_event(self, event: CoreEvent) -> None:
         wall = time.time()
@@ -268,6 +322,7 @@ class Agent:
                 return
             try:
                 self.records[event.name] = (event.version, decode_record(event.payload))
+                self._wake_coordinator()
             except WireError as e:
                 self.events.add(wall, "record.malformed", event.name, error=str(e))
         elif isinstance(event, MemberChanged):
@@ -301,6 +356,7 @@ class Agent:
         if event.previous is not None and event.previous in STATE_NAMES:
             detail["previous"] = STATE_NAMES[event.previous]
         self.events.add(wall, kind, event.name, **detail)
+        self._wake_coordinator()
         if kind in ("member.dead", "member.suspect", "member.left"):
             log.info("%s is %s (incarnation %d)", event.name, kind[7:], event.incarnation)
 

@@ -194,6 +194,7 @@ def cmd_robot_set(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The whole `sdrpeer` argument parser."""
     from sdrpeer.cli_lab import add_lab_parsers  # noqa: PLC0415 - cli_lab imports this module
+    from sdrpeer.deploy.commands import add_deploy_parsers  # noqa: PLC0415 - same
     from sdrpeer.profile import add_profile_parser  # noqa: PLC0415 - heavy: only when parsing
     from sdrpeer.runtime.commands import add_instance_parsers  # noqa: PLC0415 - same
 
@@ -219,6 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot_set.add_argument("assignments", nargs="+", metavar="KEY=VALUE", help="e.g. battery=30%%")
     robot_set.set_defaults(func=cmd_robot_set)
     add_instance_parsers(sub, client, as_json)
+    add_deploy_parsers(sub, client, as_json)
     add_lab_parsers(sub)
     add_profile_parser(sub)  # `sdrpeer profile` (components issue; lives in sdrpeer.profile)
     return parser

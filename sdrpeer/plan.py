@@ -2,9 +2,9 @@
 
 How it works: the allocator turns (system, cluster view) into `Placement`s; a `Plan` bundles them
 with the system they came from, the allocator's `epoch` and a `version` that grows with every
-plan that epoch issues. Robots order plans by `(epoch, version)` and ignore anything older than
-what they hold (fencing): a stale allocator cannot undo a newer plan. `to_json`/`plan_from_json`
-are the form plans travel in between agents.
+plan that epoch issues. Robots order plans by `(epoch, allocator, version)` and ignore anything
+older than what they hold (fencing): a stale allocator cannot undo a newer plan.
+`to_json`/`plan_from_json` are the form plans travel in between agents.
 """
 
 from __future__ import annotations
@@ -44,9 +44,10 @@ class Plan:
     """The robot that issued the plan."""
 
     @property
-    def key(self) -> tuple[int, int]:
-        """Order of plans: a robot only applies a plan with a larger key than the one it holds."""
-        return (self.epoch, self.version)
+    def key(self) -> tuple[int, str, int]:
+        """Order of plans: (epoch, allocator, version). A robot only applies a plan with a larger
+        key than the one it holds; at one epoch the election keeps the higher name, so do plans."""
+        return (self.epoch, self.allocator, self.version)
 
     def on_robot(self, robot: str) -> list[Placement]:
         """The placements a robot must host."""

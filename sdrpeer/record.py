@@ -15,7 +15,7 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
     instances = [[component_index, shared_prefix_len, name_rest, state, role, cpu_dpct,
                   rss_kib, data_addr|nil], ...]
     election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
-    plan      = [epoch, version, digest] | nil       (the newest plan this robot holds)
+    plan      = [epoch, version, digest, allocator] | nil   (the newest plan this robot holds)
 
 Records of the first layout (8 fields, 7 per instance) are still accepted.
 
@@ -100,6 +100,12 @@ class PlanInfo:
     epoch: int
     version: int
     digest: str
+    allocator: str = ""
+
+    @property
+    def key(self) -> tuple[int, str, int]:
+        """The plan's order key (see `sdrpeer.plan.Plan.key`)."""
+        return (self.epoch, self.allocator, self.version)
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,7 +191,7 @@ def encode_record(r: RobotRecord) -> bytes:
         instances,
         float(r.ts),
         None if e is None else [e.epoch, e.leader, e.claiming],
-        None if p is None else [p.epoch, p.version, p.digest],
+        None if p is None else [p.epoch, p.version, p.digest, p.allocator],
     ]
     data: bytes = msgpack.packb(wire, use_bin_type=True)
     return data
@@ -301,11 +307,12 @@ def _election(x: object) -> ElectionInfo | None:
 def _plan(x: object) -> PlanInfo | None:
     if x is None:
         return None
-    epoch, version, digest = _list(x, "plan", 3)
+    epoch, version, digest, allocator = _list(x, "plan", 4)
     return PlanInfo(
         epoch=_int(epoch, "plan.epoch", 0, 2**62),
         version=_int(version, "plan.version", 0, 2**62),
         digest=_str(digest, "plan.digest", empty=True),
+        allocator=_str(allocator, "plan.allocator", empty=True),
     )
 
 
@@ -387,7 +394,12 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
         },
         "plan": None
         if r.plan is None
-        else {"epoch": r.plan.epoch, "version": r.plan.version, "digest": r.plan.digest},
+        else {
+            "epoch": r.plan.epoch,
+            "version": r.plan.version,
+            "digest": r.plan.digest,
+            "allocator": r.plan.allocator,
+        },
     }
 
 

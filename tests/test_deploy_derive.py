@@ -101,19 +101,21 @@ def test_plan_json_round_trip() -> None:
     assert plan_from_json(plan.to_json()) == plan
 
 
-def test_store_fences_older_epochs_and_persists(tmp_path: Path) -> None:
+def test_store_fences_older_allocators_and_persists(tmp_path: Path) -> None:
     system = _system()
     store = PlanStore(tmp_path / "plan.json")
     assert store.offer(Plan(2, 1, system, (), "a"))
     assert not store.offer(Plan(2, 1, system, (), "a"))  # not newer
     assert not store.offer(Plan(1, 9, system, (), "old"))  # stale allocator
-    store.see_epoch(5)
-    assert not store.offer(Plan(4, 1, system, (), "b"))  # an allocator of epoch 5 exists
+    assert store.offer(Plan(2, 1, system, (), "b"))  # same epoch, higher name: wins
+    assert not store.offer(Plan(2, 5, system, (), "a"))  # "a" lost epoch 2 to "b"
+    store.see_claim(5, "c")
+    assert not store.offer(Plan(4, 1, system, (), "z"))  # an allocator of epoch 5 exists
     assert store.offer(Plan(5, 1, None, (), "c"))
-    assert store.refused_stale == 3
+    assert store.refused_stale == 4
     info = store.info()
     assert info is not None
-    assert (info.epoch, info.version) == (5, 1)
+    assert (info.epoch, info.version, info.allocator) == (5, 1, "c")
     again = PlanStore(tmp_path / "plan.json")
     assert again.plan == Plan(5, 1, None, (), "c")
     assert again.highest_epoch == 5

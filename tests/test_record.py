@@ -194,11 +194,11 @@ def test_election_plan_and_data_address_round_trip() -> None:
         base,
         instances=(inst, *base.instances[1:]),
         election=ElectionInfo(epoch=7, leader="robot-2", claiming=False),
-        plan=PlanInfo(epoch=7, version=3, digest="ab12cd34ef56ab78"),
+        plan=PlanInfo(epoch=7, version=3, digest="ab12cd34ef56ab78", allocator="robot-2"),
     )
     back = decode_record(encode_record(r))
     assert back.election == ElectionInfo(7, "robot-2", False)
-    assert back.plan == PlanInfo(7, 3, "ab12cd34ef56ab78")
+    assert back.plan == PlanInfo(7, 3, "ab12cd34ef56ab78", "robot-2")
     assert back.instances[0].data == "tcp://10.0.0.7:40123"
     assert back.instances[1].data is None
 

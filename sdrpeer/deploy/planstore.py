@@ -1,11 +1,12 @@
-"""The plan one robot holds, fenced by epoch, kept on disk across agent restarts.
+"""The plan one robot holds, fenced by the allocator's (epoch, name), kept across restarts.
 
-How it works: `offer(plan)` accepts a plan only when its key `(epoch, version)` is larger than
-the held plan's and its epoch is not below the highest allocator epoch this robot has seen
-(`see_epoch`, fed by the election): a plan from a stale allocator is refused and counted, so it
-cannot undo a newer one. An accepted plan is written to `DATA_DIR/plan.json` (atomically) and
-read back when the agent starts, so a restarted robot still knows the system and can give it to a
-new allocator. `info()` is what the robot gossips about it (epoch, version, digest).
+How it works: `offer(plan)` accepts a plan only when its key `(epoch, allocator, version)` is
+larger than the held plan's and the election fence (`sdrpeer.election.fence.Fence`, raised by
+`see_claim` to every allocator claim this robot hears of) admits its `(epoch, allocator)`: a plan
+from a stale allocator is refused and counted, so it cannot undo a newer one. An accepted plan is
+written to `DATA_DIR/plan.json` (atomically) and read back when the agent starts, so a restarted
+robot still knows the system and can give it to a new allocator. `info()` is what the robot
+gossips about it.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import json
 import logging
 from pathlib import Path
 
+from sdrpeer.election.fence import Fence
 from sdrpeer.plan import Plan, plan_from_json
 from sdrpeer.record import PlanInfo
 
@@ -33,13 +35,20 @@ class PlanStore:
     def __init__(self, path: Path | None = None) -> None:
         self.path = path
         self.plan: Plan | None = None
-        self.highest_epoch = 0
-        """The highest allocator epoch this robot has seen (plans or election)."""
-        self.refused_stale = 0
-        """Plans refused because they came from an older epoch (or were not newer)."""
+        self.fence = Fence()
         self._digest = ""
         if path is not None and path.is_file():
             self._load(path)
+
+    @property
+    def highest_epoch(self) -> int:
+        """The highest allocator epoch this robot has seen (plans or election)."""
+        return self.fence.epoch
+
+    @property
+    def refused_stale(self) -> int:
+        """Plans refused because they were older than what this robot holds or has seen."""
+        return self.fence.refused
 
     def _load(self, path: Path) -> None:
         try:
@@ -49,26 +58,27 @@ class PlanStore:
             return
         self.plan = plan
         self._digest = plan_digest(plan)
-        self.highest_epoch = plan.epoch
+        self.fence.raise_to(plan.epoch, plan.allocator)
 
-    def see_epoch(self, epoch: int) -> None:
-        """The election announced an allocator with this epoch."""
-        self.highest_epoch = max(self.highest_epoch, epoch)
+    def see_claim(self, epoch: int, allocator: str) -> None:
+        """The election heard of an allocator claiming at this epoch."""
+        self.fence.raise_to(epoch, allocator)
 
-    def accepts(self, epoch: int, version: int) -> bool:
+    def accepts(self, key: tuple[int, str, int]) -> bool:
         """Whether a plan with this key would be taken (without taking it)."""
-        if epoch < self.highest_epoch:
+        epoch, allocator, _ = key
+        if not self.fence.accepts(epoch, allocator):
             return False
-        return self.plan is None or (epoch, version) > self.plan.key
+        return self.plan is None or key > self.plan.key
 
     def offer(self, plan: Plan) -> bool:
-        """Take `plan` if it is newer than ours and not from a fenced-off epoch."""
-        if not self.accepts(plan.epoch, plan.version):
-            self.refused_stale += 1
+        """Take `plan` if it is newer than ours and not from a fenced-off allocator."""
+        if not self.accepts(plan.key):
+            self.fence.refused += 1
             return False
+        self.fence.admit(plan.epoch, plan.allocator)
         self.plan = plan
         self._digest = plan_digest(plan)
-        self.highest_epoch = max(self.highest_epoch, plan.epoch)
         self._save(plan)
         return True
 
@@ -76,7 +86,8 @@ class PlanStore:
         """What the gossip record says about the plan held."""
         if self.plan is None:
             return None
-        return PlanInfo(self.plan.epoch, self.plan.version, self._digest)
+        p = self.plan
+        return PlanInfo(p.epoch, p.version, self._digest, p.allocator)
 
     def _save(self, plan: Plan) -> None:
         if self.path is None:

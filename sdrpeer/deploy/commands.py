@@ -1,0 +1,133 @@
+"""`sdrpeer deploy FILE [--wait]`, `sdrpeer status [--json]`, `sdrpeer undeploy [--wait]`.
+
+How it works: `deploy` loads and validates the system file here first (every problem with
+file:line; nothing is sent when one is found), then posts the system to an agent, which hands
+it to the allocator. `--wait` polls `GET /v1/status` on the same agent and prints each change of
+a component's robot or state until all are ACTIVE, or fails after `--timeout` naming the ones
+that are not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from sdrpeer.client import AgentClient
+from sdrpeer.deploy.status import all_active
+from sdrpeer.errors import SdrpeerError
+
+WAIT_POLL = 0.1
+
+
+def add_deploy_parsers(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+    client: argparse.ArgumentParser,
+    as_json: argparse.ArgumentParser,
+) -> None:
+    """Register deploy, status and undeploy."""
+    deploy = sub.add_parser("deploy", parents=[client, as_json], help="deploy a system file")
+    deploy.add_argument("file", type=Path, help="system file (YAML, docs/system-file.md)")
+    deploy.add_argument("--wait", action="store_true", help="return when all are ACTIVE")
+    deploy.add_argument("--timeout", type=float, default=120.0, metavar="S", help="for --wait")
+    deploy.set_defaults(func=cmd_deploy)
+    status = sub.add_parser("status", parents=[client, as_json], help="where each component runs")
+    status.set_defaults(func=cmd_status)
+    undeploy = sub.add_parser("undeploy", parents=[client, as_json], help="stop the system")
+    undeploy.set_defaults(func=cmd_undeploy)
+
+
+def _client(args: argparse.Namespace) -> AgentClient:
+    from sdrpeer.cli import client_for  # noqa: PLC0415 - cli imports this module
+
+    return client_for(args)
+
+
+def cmd_deploy(args: argparse.Namespace) -> int:
+    """Validate, send, and optionally wait for every component to be ACTIVE."""
+    from sdrpeer.system.loader import load_system  # noqa: PLC0415 - yaml + plugins: only here
+
+    system = load_system(args.file)
+    client = _client(args)
+    t0 = time.monotonic()
+    answer = client.post("/v1/deploy", {"system": system.to_json()})
+    plan = answer.get("plan", {}) if isinstance(answer, dict) else {}
+    if args.json and not args.wait:
+        print(json.dumps(answer, indent=2, sort_keys=True))
+        return 0
+    print(
+        f"deployed {system.name!r}: plan epoch {plan.get('epoch')} version {plan.get('version')}"
+        f" by {answer.get('allocator')}"
+    )
+    for comp, inst, robot, role, mode in plan.get("placements", []):
+        extra = f" ({mode})" if role == "standby" else ""
+        print(f"  {comp:<28} {inst:<32} -> {robot} {role}{extra}")
+    if not args.wait:
+        return 0
+    return _wait(client, t0, args.timeout, json_out=args.json)
+
+
+def _wait(client: AgentClient, t0: float, timeout: float, *, json_out: bool) -> int:
+    seen: dict[str, tuple[Any, Any]] = {}
+    doc: dict[str, Any] = {}
+    while time.monotonic() - t0 < timeout:
+        doc = client.get("/v1/status")
+        for c in doc.get("components", []):
+            now = (c.get("robot"), c.get("state"))
+            if seen.get(c["component"]) != now and not json_out:
+                print(f"  {time.monotonic() - t0:6.2f}s {c['component']:<28} {now[0]} {now[1]}")
+            seen[c["component"]] = now
+        if all_active(doc):
+            elapsed = time.monotonic() - t0
+            if json_out:
+                print(json.dumps({"elapsed_s": round(elapsed, 3), "status": doc}, indent=2))
+            else:
+                print(f"all {len(seen)} components ACTIVE after {elapsed:.2f}s")
+            return 0
+        time.sleep(WAIT_POLL)
+    waiting = [c["component"] for c in doc.get("components", []) if c.get("state") != "active"]
+    raise SdrpeerError(f"not ACTIVE after {timeout:.0f}s: {', '.join(waiting) or 'no plan yet'}")
+
+
+def format_status(doc: dict[str, Any]) -> str:
+    """The status table."""
+    alloc = doc.get("allocator") or {}
+    plan = doc.get("plan")
+    lines = [f"allocator: {alloc.get('name') or '(none yet)'} (epoch {alloc.get('epoch')})"]
+    if plan is None:
+        lines.append("no system deployed")
+        return "\n".join(lines)
+    lines.append(
+        f"system: {plan.get('system') or '(undeployed)'}  plan {plan['epoch']}.{plan['version']}"
+        f" by {plan.get('allocator')}"
+    )
+    lines.append(f"{'COMPONENT':<28} {'ROBOT':<12} {'STATE':<10} {'SINCE':<9} STANDBYS")
+    for c in doc.get("components", []):
+        since = c.get("since")
+        when = time.strftime("%H:%M:%S", time.localtime(since)) if since else "-"
+        standbys = ", ".join(
+            f"{s['robot']}:{s['state']}{'/cold' if s.get('mode') == 'cold' else ''}"
+            for s in c.get("standbys", [])
+        )
+        lines.append(
+            f"{c['component']:<28} {c.get('robot') or '-':<12} {c.get('state'):<10} {when:<9}"
+            f" {standbys or '-'}"
+        )
+    return "\n".join(lines)
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    """Print where each component runs."""
+    doc = _client(args).get("/v1/status")
+    print(json.dumps(doc, indent=2, sort_keys=True) if args.json else format_status(doc))
+    return 0
+
+
+def cmd_undeploy(args: argparse.Namespace) -> int:
+    """Ask the allocator for an empty plan."""
+    answer = _client(args).post("/v1/undeploy", {})
+    plan = answer.get("plan", {}) if isinstance(answer, dict) else {}
+    print(f"undeployed: plan epoch {plan.get('epoch')} version {plan.get('version')}")
+    return 0

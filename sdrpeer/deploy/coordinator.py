@@ -1,0 +1,355 @@
+"""The deployment side of one agent: plan sync, applying the plan, and the allocator role.
+
+How it works: `step()` runs whenever gossip changes something (and every `tick` seconds):
+1. the election shell is fed this robot's view and says who the allocator is, with its epoch;
+   the plan store's fence rises to every epoch seen;
+2. plan sync: if an alive robot gossips a plan newer than ours (and not fenced off), fetch it
+   from that robot's API (one fetch in flight); plans pushed to `POST /v1/plan` go the same way;
+3. apply: the plan's placements on this robot become the instance manager's desired set (only
+   the names the plan owns; instances added by hand through the API are left alone);
+4. if this robot is the allocator: once it has caught up with the newest plan it can hear of
+   (`adopt_after` seconds after winning, or at once when no robot gossips a newer one), it
+   re-issues that plan under its own epoch — losing the allocator loses nothing — and from then
+   on re-allocates (smallest change) when a placement's robot is no longer alive.
+`deploy()` / `undeploy()` run on the allocator (other agents forward them to it); a new plan is
+stored, gossiped (its key is in our record) and pushed to every alive robot.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sdrpeer.alloc.view import ClusterView, RobotView
+from sdrpeer.deploy import peers
+from sdrpeer.deploy.derive import Remote, specs_for_robot
+from sdrpeer.deploy.election_shell import ElectionShell
+from sdrpeer.deploy.placer import Infeasible, place
+from sdrpeer.deploy.planstore import PlanStore
+from sdrpeer.deploy.status import SinceTracker, status_doc
+from sdrpeer.election.config import ElectionConfig
+from sdrpeer.errors import ApiError
+from sdrpeer.eventlog import EventLog
+from sdrpeer.plan import Plan
+from sdrpeer.record import RobotRecord
+from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.system.model import SystemDef, Thresholds
+
+log = logging.getLogger(__name__)
+
+
+class NotAllocator(Exception):
+    """This robot is not the allocator; `leader` is the one it believes in (or None)."""
+
+    def __init__(self, leader: str | None) -> None:
+        super().__init__(leader)
+        self.leader = leader
+
+
+@dataclass
+class ClusterState:
+    """What the agent hands the coordinator on every step."""
+
+    alive: dict[str, RobotRecord]
+    """Every alive robot (this one included) with its latest record."""
+    order: list[str] = field(default_factory=list)
+    """Robot names in the order first_fit tries them after the origin."""
+
+
+class Coordinator:
+    """Plans in, instance specs out; allocates when this robot holds the role."""
+
+    def __init__(
+        self,
+        name: str,
+        data_dir: Path,
+        manager: InstanceManager,
+        cluster: Callable[[], ClusterState],
+        *,
+        token: str,
+        events: EventLog,
+        on_change: Callable[[], None],
+        tick: float = 0.2,
+        adopt_after: float = 1.0,
+        election: ElectionConfig | None = None,
+    ) -> None:
+        self.name = name
+        self.manager = manager
+        self.cluster = cluster
+        self.token = token
+        self.events = events
+        self.on_change = on_change
+        self.tick = tick
+        self.adopt_after = adopt_after
+        self.store = PlanStore(data_dir / "plan.json")
+        self.election = ElectionShell(name, election)
+        self._owned: set[str] = set()
+        self._fetching: tuple[int, str, int] | None = None
+        self._elected_at: float | None = None
+        self._adopted_epoch = 0
+        self._wake = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+        self._bg: set[asyncio.Task[Any]] = set()
+        self._since = SinceTracker()
+        self._last_alive: dict[str, RobotRecord] = {}
+        self._lock = asyncio.Lock()
+
+    # ----------------------------------------------------------------- loop
+    def start(self) -> None:
+        """Start the step loop."""
+        self._task = asyncio.create_task(self._loop())
+
+    def leave(self) -> None:
+        """Abdicate the allocator role for good (before a graceful leave) and publish that."""
+        self.election.leave(asyncio.get_running_loop().time())
+        self.on_change()
+
+    async def stop(self) -> None:
+        """Stop the loop and any call in flight."""
+        for t in [self._task, *self._bg]:
+            if t is not None:
+                t.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await t
+
+    def wake(self) -> None:
+        """Something changed (gossip, a member, an instance): step soon."""
+        self._wake.set()
+
+    async def _loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            wait = min(self.tick, max(0.0, self.election.next_timer() - loop.time()))
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), wait)
+            self._wake.clear()
+            try:
+                self.step()
+            except Exception:
+                log.exception("deployment step failed")
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.create_task(coro)
+        self._bg.add(task)
+        task.add_done_callback(self._bg.discard)
+
+    # ----------------------------------------------------------------- one step
+    def step(self) -> None:
+        """Election, plan sync, apply, and the allocator's duties (see the module docstring)."""
+        now = asyncio.get_running_loop().time()
+        state = self.cluster()
+        self._last_alive = state.alive
+        before = self.election.info()
+        self.election.update(now, state.alive, self._thresholds())
+        info = self.election.info()
+        for rec in state.alive.values():
+            e = rec.election
+            if e is not None and e.claiming and e.leader is not None:
+                self.store.see_claim(e.epoch, e.leader)
+        if info != before:
+            self.events.add(
+                time.time(), "election", self.name, epoch=info.epoch, leader=info.leader
+            )
+            self.on_change()
+        self._sync(state)
+        self._apply(state)
+        if self.election.is_allocator():
+            if self._elected_at is None:
+                self._elected_at = now
+            self._allocator_duties(now, state)
+        else:
+            self._elected_at = None
+
+    def _thresholds(self) -> Thresholds | None:
+        plan = self.store.plan
+        return None if plan is None or plan.system is None else plan.system.allocation.thresholds
+
+    def _newest_offer(self, state: ClusterState) -> tuple[str, tuple[int, str, int]] | None:
+        best: tuple[str, tuple[int, str, int]] | None = None
+        for robot, rec in state.alive.items():
+            p = rec.plan
+            if robot == self.name or p is None or rec.api is None:
+                continue
+            if self.store.accepts(p.key) and (best is None or p.key > best[1]):
+                best = (robot, p.key)
+        return best
+
+    def _sync(self, state: ClusterState) -> None:
+        offer = self._newest_offer(state)
+        if offer is None or self._fetching is not None:
+            return
+        robot, key = offer
+        api = state.alive[robot].api
+        assert api is not None
+        self._fetching = key
+        self._spawn(self._fetch(robot, api))
+
+    async def _fetch(self, robot: str, api: str) -> None:
+        try:
+            plan = await peers.fetch_plan(api, self.token)
+            self.accept(plan, source=robot)
+        except ApiError as e:
+            log.info("cannot fetch the plan from %s: %s", robot, e)
+        finally:
+            self._fetching = None
+            self.wake()
+
+    def accept(self, plan: Plan, source: str) -> bool:
+        """Offer a plan (fetched, pushed, or our own); True if it is now the one we hold."""
+        ok = self.store.offer(plan)
+        if ok:
+            self.events.add(
+                time.time(),
+                "plan.accepted",
+                self.name,
+                epoch=plan.epoch,
+                version=plan.version,
+                allocator=plan.allocator,
+                source=source,
+            )
+            self.on_change()
+            self.wake()
+        else:
+            self.events.add(
+                time.time(),
+                "plan.refused",
+                self.name,
+                epoch=plan.epoch,
+                version=plan.version,
+                allocator=plan.allocator,
+                fence=self.store.highest_epoch,
+                source=source,
+            )
+        return ok
+
+    def _apply(self, state: ClusterState) -> None:
+        plan = self.store.plan
+        if plan is None:
+            return
+        remote: dict[str, Remote] = {}
+        for robot, rec in state.alive.items():
+            if robot == self.name:
+                continue
+            for inst in rec.instances:
+                remote[inst.name] = Remote(robot, inst.state, inst.data)
+        active_here = {s["name"] for s in self.manager.status() if s.get("state") == "ACTIVE"}
+        specs = specs_for_robot(plan, self.name, remote, active_here)
+        names = {s.name for s in specs}
+        current = self.manager.desired()
+        for gone in sorted(self._owned - names):
+            self.manager.remove(gone)
+        changed = [s for s in specs if current.get(s.name) != s]
+        if changed:
+            self.manager.set_desired(changed)
+        self._owned = names
+
+    def status(self, now_wall: float) -> dict[str, Any]:
+        """GET /v1/status: the plan's components with their robots and states."""
+        info = self.election.info()
+        allocator = {"name": info.leader, "epoch": info.epoch}
+        return status_doc(self.store.plan, self._last_alive, allocator, self._since, now_wall)
+
+    # ----------------------------------------------------------------- the allocator
+    def view(self, state: ClusterState, origin: str | None) -> ClusterView:
+        """The allocator's view: every alive robot with a record, in first-fit order."""
+        names = [n for n in state.order if n in state.alive] or sorted(state.alive)
+        robots = tuple(
+            RobotView(n, state.alive[n].metrics, state.alive[n].links, state.alive[n].instances)
+            for n in names
+        )
+        return ClusterView(robots, origin)
+
+    def _allocator_duties(self, now: float, state: ClusterState) -> None:
+        epoch = self.election.info().epoch
+        plan = self.store.plan
+        if self._adopted_epoch != epoch:
+            caught_up = self._newest_offer(state) is None and self._fetching is None
+            assert self._elected_at is not None
+            if not caught_up and now - self._elected_at < self.adopt_after:
+                return
+            self._adopted_epoch = epoch
+            if plan is not None and plan.epoch < epoch:
+                self._reissue(plan, epoch, state, reason="new allocator")
+            return
+        if plan is None or plan.system is None:
+            return
+        lost = {p.robot for p in plan.placements} - set(state.alive)
+        if lost and not self._lock.locked():
+            self._reissue(plan, epoch, state, reason=f"robots gone: {', '.join(sorted(lost))}")
+
+    def _reissue(self, plan: Plan, epoch: int, state: ClusterState, reason: str) -> None:
+        version = plan.version + 1 if plan.epoch == epoch else 1
+        if plan.system is None:
+            new = Plan(epoch, version, None, (), self.name)
+        else:
+            result = place(
+                plan.system,
+                self.view(state, None),
+                epoch=epoch,
+                version=version,
+                allocator=self.name,
+                previous=plan,
+            )
+            if isinstance(result, Infeasible):
+                self.events.add(time.time(), "allocation.infeasible", self.name, report=str(result))
+                # keep what still runs: re-issue the old placements under our epoch
+                new = Plan(epoch, version, plan.system, plan.placements, self.name)
+            else:
+                new = result
+        self.events.add(time.time(), "allocation", self.name, reason=reason, epoch=epoch)
+        self._publish_plan(new, state)
+
+    def _publish_plan(self, plan: Plan, state: ClusterState) -> None:
+        if not self.accept(plan, source=self.name):
+            return
+        for robot, rec in state.alive.items():
+            if robot != self.name and rec.api is not None:
+                self._spawn(self._push(robot, rec.api, plan))
+
+    async def _push(self, robot: str, api: str, plan: Plan) -> None:
+        try:
+            await peers.push_plan(api, self.token, plan)
+        except ApiError as e:
+            log.info("cannot push the plan to %s (it will fetch it): %s", robot, e)
+
+    async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
+        """Allocate `system` (None: undeploy) and publish the plan. Allocator only."""
+        if not self.election.is_allocator():
+            raise NotAllocator(self.election.info().leader)
+        async with self._lock:
+            state = self.cluster()
+            epoch = self.election.info().epoch
+            current = self.store.plan
+            version = current.version + 1 if current is not None and current.epoch == epoch else 1
+            if system is None:
+                plan: Plan | Infeasible = Plan(epoch, version, None, (), self.name)
+            else:
+                previous = current if current is not None and current.system is not None else None
+                plan = place(
+                    system,
+                    self.view(state, origin),
+                    epoch=epoch,
+                    version=version,
+                    allocator=self.name,
+                    previous=previous,
+                )
+            if isinstance(plan, Infeasible):
+                self.events.add(time.time(), "allocation.infeasible", self.name, report=str(plan))
+                return plan
+            self._adopted_epoch = epoch
+            self.events.add(
+                time.time(),
+                "allocation",
+                self.name,
+                reason="deploy",
+                epoch=epoch,
+                system=None if system is None else system.name,
+            )
+            self._publish_plan(plan, state)
+            return plan

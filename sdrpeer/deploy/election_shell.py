@@ -1,0 +1,79 @@
+"""Feeds the pure election core (`sdrpeer.election`) from this robot's gossip view.
+
+How it works: on every step the coordinator hands over the alive robots' records; each becomes a
+`Candidate` — eligible and coarse health from its battery, RSSI and worst measured link loss
+against the deployed system's allocation thresholds (none deployed: every alive robot is
+eligible), priority and published election state from its record. Robots not alive are left out
+of the view (the core treats a missing robot as gone). The core's timers are run here too.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from sdrpeer.election.config import ElectionConfig, lan
+from sdrpeer.election.core import Election
+from sdrpeer.election.health import eligible, health_bucket
+from sdrpeer.election.state import Candidate, ElectionState
+from sdrpeer.record import ElectionInfo, RobotRecord
+from sdrpeer.system.model import Thresholds
+
+
+def candidate(rec: RobotRecord, thresholds: Thresholds) -> Candidate:
+    """What the election needs to know of one alive robot."""
+    m = rec.metrics
+    loss = max((link.loss for link in rec.links.values()), default=None)
+    e = rec.election
+    return Candidate(
+        alive=True,
+        eligible=eligible(
+            thresholds, battery_pct=m.battery_pct, rssi_dbm=m.rssi_dbm, link_loss=loss
+        ),
+        priority=rec.priority,
+        health=health_bucket(battery_pct=m.battery_pct, rssi_dbm=m.rssi_dbm, link_loss=loss),
+        state=None if e is None else ElectionState(e.epoch, e.leader, e.claiming),
+    )
+
+
+class ElectionShell:
+    """One robot's election, driven by the coordinator's steps."""
+
+    def __init__(self, name: str, config: ElectionConfig | None = None) -> None:
+        self.name = name
+        self.config = config or lan()
+        self.core: Election | None = None
+
+    def update(
+        self, now: float, alive: Mapping[str, RobotRecord], thresholds: Thresholds | None
+    ) -> None:
+        """Feed the current view; runs a due timer too."""
+        if self.core is None:
+            self.core = Election(self.name, self.config, now)
+        t = thresholds or Thresholds()
+        view = {name: candidate(rec, t) for name, rec in alive.items()}
+        self.core.update(now, view)
+        if self.core.next_timer() <= now:
+            self.core.handle_timer(now)
+        while self.core.next_event() is not None:
+            pass
+
+    def next_timer(self) -> float:
+        """When the core wants to be woken (inf: nothing pending)."""
+        return math.inf if self.core is None else self.core.next_timer()
+
+    def leave(self, now: float) -> None:
+        """Abdicate for good (graceful leave)."""
+        if self.core is not None:
+            self.core.leave(now)
+
+    def info(self) -> ElectionInfo:
+        """What this robot publishes in its record."""
+        if self.core is None:
+            return ElectionInfo(0, None, False)
+        s = self.core.state()
+        return ElectionInfo(s.epoch, s.leader, s.claiming)
+
+    def is_allocator(self) -> bool:
+        """Whether this robot holds the allocator role now."""
+        return self.core is not None and self.core.is_leader

@@ -1,0 +1,50 @@
+"""Agent-to-agent HTTP calls: fetch a plan, push a plan, hand a system to the allocator.
+
+How it works: agents authenticate to each other with a *peer token* derived from the cluster
+key (HMAC-SHA256 of a fixed label), so no per-agent API token has to be shared; every key of the
+keyring yields one, and an agent accepts the token of its signing key (peers rotate keys in
+step with gossip). Without a key (`--insecure`) the token is derived from an empty key: as open as
+gossip itself. Each call has a short timeout and turns every failure into `ApiError`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from typing import Any
+
+from sdrpeer.api.peer_client import call
+from sdrpeer.errors import ApiError
+from sdrpeer.keyring import Keyring
+from sdrpeer.plan import Plan, plan_from_json
+
+_LABEL = b"sdrpeer peer api v1"
+
+
+def peer_token(keyring: Keyring | None) -> str:
+    """The bearer token agents present to each other."""
+    key = b"" if keyring is None else keyring.signing_key
+    return hmac.new(key, _LABEL, hashlib.sha256).hexdigest()
+
+
+async def fetch_plan(api: str, token: str) -> Plan:
+    """The plan another agent holds."""
+    status, doc = await call(api, "GET", "/v1/plan", token)
+    if status != 200 or not isinstance(doc, dict) or doc.get("plan") is None:
+        raise ApiError(f"{api}/v1/plan: status {status}: {_error(doc)}")
+    try:
+        return plan_from_json(doc["plan"])
+    except ValueError as e:
+        raise ApiError(f"{api}/v1/plan: {e}") from None
+
+
+async def push_plan(api: str, token: str, plan: Plan) -> bool:
+    """Offer a plan to another agent; True if it took it."""
+    status, doc = await call(api, "POST", "/v1/plan", token, body={"plan": plan.to_json()})
+    return status == 200 and isinstance(doc, dict) and bool(doc.get("accepted"))
+
+
+def _error(doc: Any) -> str:
+    if isinstance(doc, dict) and "error" in doc:
+        return str(doc["error"])
+    return "unexpected answer"

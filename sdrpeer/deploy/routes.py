@@ -1,0 +1,124 @@
+"""HTTP routes of deployment: deploy, undeploy, status, and the plan exchanged between agents.
+
+How it works: `POST /v1/deploy` takes a system (the JSON of a `SystemDef`, validated by the
+CLI's loader; re-checked here by rebuilding it) and gives it to the allocator: this agent if it
+holds the role, else it forwards the request to the allocator's API with the peer token. The
+answer is the plan (200), an infeasible report (409: which constraint ruled out each robot), or
+503 when no allocator is known yet. `GET/POST /v1/plan` are how agents fetch and push plans.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from aiohttp import web
+
+from sdrpeer.api.app import Route, json_error, require_token, view_of
+from sdrpeer.api.peer_client import call
+from sdrpeer.deploy.coordinator import Coordinator, NotAllocator
+from sdrpeer.deploy.placer import Infeasible
+from sdrpeer.errors import ApiError
+from sdrpeer.plan import plan_from_json
+from sdrpeer.system.model import SystemDef, system_from_json
+
+
+def _coord(request: web.Request) -> Coordinator:
+    coord = getattr(view_of(request), "coordinator", None)
+    if not isinstance(coord, Coordinator):
+        raise web.HTTPNotFound(reason="this agent does not deploy systems")
+    return coord
+
+
+async def _body(request: web.Request) -> dict[str, Any]:
+    try:
+        body = await request.json()
+    except json.JSONDecodeError as exc:
+        raise web.HTTPBadRequest(reason=f"body is not JSON: {exc}") from None
+    if not isinstance(body, dict):
+        raise web.HTTPBadRequest(reason="body must be a JSON object")
+    return body
+
+
+async def _allocate(
+    request: web.Request, system: SystemDef | None, body: dict[str, Any]
+) -> web.Response:
+    coord = _coord(request)
+    origin = str(body.get("origin") or coord.name)
+    try:
+        result = await coord.deploy(system, origin)
+    except NotAllocator as e:
+        return await _forward(request, e.leader, {**body, "origin": origin})
+    if isinstance(result, Infeasible):
+        return web.json_response(
+            {"error": f"the system cannot be placed:\n{result}", "report": str(result)}, status=409
+        )
+    return web.json_response({"plan": result.to_json(), "allocator": coord.name})
+
+
+async def _forward(request: web.Request, leader: str | None, body: dict[str, Any]) -> web.Response:
+    view = view_of(request)
+    if body.get("forwarded"):
+        return json_error(503, f"{leader or 'no robot'} is not the allocator either; retry")
+    api = getattr(view, "allocator_api", lambda: None)()
+    if leader is None or api is None:
+        return json_error(503, "no allocator elected yet; retry in a moment")
+    try:
+        status, doc = await call(
+            api,
+            request.method,
+            request.path,
+            _coord(request).token,
+            body={**body, "forwarded": True},
+        )
+    except ApiError as e:
+        return json_error(502, f"the allocator {leader} cannot be reached: {e}")
+    return web.json_response(doc, status=status)
+
+
+async def post_deploy(request: web.Request) -> web.Response:
+    """POST /v1/deploy {"system": {...}, "origin": robot?}: allocate and publish a plan."""
+    body = await _body(request)
+    try:
+        system = system_from_json(body["system"])
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        return json_error(400, f"field 'system': not a system document ({type(e).__name__}: {e})")
+    return await _allocate(request, system, body)
+
+
+async def post_undeploy(request: web.Request) -> web.Response:
+    """POST /v1/undeploy: a plan with no system (every robot stops what the plan ran)."""
+    return await _allocate(request, None, await _body(request))
+
+
+async def get_status(request: web.Request) -> web.Response:
+    """GET /v1/status: each component with its robot, state, standbys and since when."""
+    return web.json_response(_coord(request).status(time.time()))
+
+
+@require_token
+async def get_plan(request: web.Request) -> web.Response:
+    """GET /v1/plan (token): the plan this robot holds."""
+    plan = _coord(request).store.plan
+    return web.json_response({"plan": None if plan is None else plan.to_json()})
+
+
+async def post_plan(request: web.Request) -> web.Response:
+    """POST /v1/plan {"plan": {...}} (token): an allocator pushes its plan; fenced by epoch."""
+    body = await _body(request)
+    try:
+        plan = plan_from_json(body.get("plan"))
+    except ValueError as e:
+        return json_error(400, str(e))
+    accepted = _coord(request).accept(plan, source=plan.allocator or "push")
+    return web.json_response({"accepted": accepted})
+
+
+ROUTES = [
+    Route("POST", "/v1/deploy", post_deploy),
+    Route("POST", "/v1/undeploy", post_undeploy),
+    Route("GET", "/v1/status", get_status),
+    Route("GET", "/v1/plan", get_plan),
+    Route("POST", "/v1/plan", post_plan),
+]

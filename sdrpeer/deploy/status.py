@@ -1,0 +1,97 @@
+"""`sdrpeer status`: each component with its robot, state, standbys and since when (pure).
+
+How it works: the plan says where every instance should be; the gossip records say what each
+robot actually runs. `SinceTracker.observe(now_wall, rows)` remembers when each (instance, robot)
+pair was first seen in its current state, so status can say "ACTIVE since 12:03:04" without the
+robots gossiping timestamps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from sdrpeer.plan import Plan
+from sdrpeer.record import RobotRecord
+
+
+class SinceTracker:
+    """First time each (instance, robot) was seen in its current state."""
+
+    def __init__(self) -> None:
+        self._seen: dict[tuple[str, str], tuple[str, float]] = {}
+
+    def since(self, instance: str, robot: str, state: str, now: float) -> float:
+        """When the pair entered `state` (now, if this is news)."""
+        key = (instance, robot)
+        old = self._seen.get(key)
+        if old is None or old[0] != state:
+            self._seen[key] = (state, now)
+            return now
+        return old[1]
+
+
+def instance_state(alive: Mapping[str, RobotRecord], robot: str, instance: str) -> str:
+    """What gossip says of one instance: its state, 'pending' (not running yet) or 'robot down'."""
+    rec = alive.get(robot)
+    if rec is None:
+        return "robot down"
+    for inst in rec.instances:
+        if inst.name == instance:
+            return inst.state
+    return "pending"
+
+
+def status_doc(
+    plan: Plan | None,
+    alive: Mapping[str, RobotRecord],
+    allocator: Mapping[str, Any],
+    since: SinceTracker,
+    now_wall: float,
+) -> dict[str, Any]:
+    """The JSON of GET /v1/status."""
+    if plan is None:
+        return {"allocator": dict(allocator), "plan": None, "components": []}
+    comps: dict[str, dict[str, Any]] = {}
+    order = [] if plan.system is None else [c.name for c in plan.system.components]
+    for name in order:
+        comps[name] = {
+            "component": name,
+            "instance": None,
+            "robot": None,
+            "state": "unplaced",
+            "since": None,
+            "standbys": [],
+        }
+    for p in plan.placements:
+        state = instance_state(alive, p.robot, p.instance)
+        if p.role == "standby" and p.mode == "cold" and state == "pending":
+            state = "cold"
+        row = {
+            "instance": p.instance,
+            "robot": p.robot,
+            "state": state,
+            "since": round(since.since(p.instance, p.robot, state, now_wall), 3),
+        }
+        entry = comps.setdefault(p.component, {"component": p.component, "standbys": []})
+        if p.role == "active":
+            entry.update(row)
+        else:
+            entry["standbys"].append({**row, "mode": p.mode})
+    return {
+        "allocator": dict(allocator),
+        "plan": {
+            "epoch": plan.epoch,
+            "version": plan.version,
+            "allocator": plan.allocator,
+            "system": None if plan.system is None else plan.system.name,
+            "digest": None if plan.system is None else plan.system.digest(),
+        },
+        "components": list(comps.values()),
+    }
+
+
+def all_active(doc: Mapping[str, Any]) -> bool:
+    """Whether every component's active instance is ACTIVE (what `deploy --wait` waits for)."""
+    comps = doc.get("components") or []
+    return bool(comps) and all(c.get("state") == "active" for c in comps)
