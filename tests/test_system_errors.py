@@ -411,3 +411,18 @@ def test_one_problem_is_the_whole_message(profiles: Path) -> None:
 def test_unreadable_file(tmp_path: Path) -> None:
     with pytest.raises(SystemFileError, match=r"nope\.yaml: cannot read"):
         load_system(tmp_path / "nope.yaml")
+
+
+def test_a_bad_component_name_is_reported_once(profiles: Path) -> None:
+    text = f"name: s\ncomponents:\n  - {{name: 'a b', target: {CAM}}}\n"
+    text += f"  - {{name: D, target: {DET}}}\nconnections:\n  - {{from: a b.image, to: D.image}}\n"
+    with pytest.raises(SystemFileError) as info:
+        parse_system(text, "sys.yaml", base_dir=profiles)
+    assert len(info.value.problems) == 1
+    assert info.value.problems[0].startswith("sys.yaml:3: field 'components[0].name'")
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n", "null\n"])
+def test_empty_file(text: str) -> None:
+    with pytest.raises(SystemFileError, match=r"^sys\.yaml(:1)?: expected a mapping with version"):
+        parse_system(text, "sys.yaml")

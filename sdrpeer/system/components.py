@@ -121,6 +121,9 @@ def _component(
             pin=pin,
             prefer=prefer,
         )
+    if not name and "name" in fields:  # a bad name still names it for the connections
+        raw = p.f.value(fields["name"])
+        name = raw if isinstance(raw, str) else MISSING
     return name, ComponentEntry(node, where, info, definition)
 
 
