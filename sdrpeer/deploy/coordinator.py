@@ -97,7 +97,6 @@ class Coordinator:
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
         self._since = SinceTracker()
-        self._last_alive: dict[str, RobotRecord] = {}
         self._lock = asyncio.Lock()
 
     # ----------------------------------------------------------------- loop
@@ -144,7 +143,6 @@ class Coordinator:
         """Election, plan sync, apply, and the allocator's duties (see the module docstring)."""
         now = asyncio.get_running_loop().time()
         state = self.cluster()
-        self._last_alive = state.alive
         before = self.election.info()
         self.election.update(now, state.alive, self._thresholds())
         info = self.election.info()
@@ -202,6 +200,9 @@ class Coordinator:
 
     def accept(self, plan: Plan, source: str) -> bool:
         """Offer a plan (fetched, pushed, or our own); True if it is now the one we hold."""
+        held = self.store.plan
+        if held is not None and held.key == plan.key:
+            return True  # the same plan again (a push and a fetch crossed): nothing to do
         ok = self.store.offer(plan)
         if ok:
             self.events.add(
@@ -253,7 +254,8 @@ class Coordinator:
         """GET /v1/status: the plan's components with their robots and states."""
         info = self.election.info()
         allocator = {"name": info.leader, "epoch": info.epoch}
-        return status_doc(self.store.plan, self._last_alive, allocator, self._since, now_wall)
+        alive = self.cluster().alive
+        return status_doc(self.store.plan, alive, allocator, self._since, now_wall)
 
     # ----------------------------------------------------------------- the allocator
     def view(self, state: ClusterState, origin: str | None) -> ClusterView:
