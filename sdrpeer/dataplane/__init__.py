@@ -1,7 +1,9 @@
 """The data plane: msgpack streams from OutPorts to InPorts (docs/protocol.md section 2).
 
-`Connection` is the sending side (an OutPort's sink), `DataServer` the receiving side (one per
-host), `frames` the codec both share, `pending` the sender's policy queue.
+`Connection` is the sending side (an OutPort's sink; `link` is one of its sockets), `DataServer`
+the receiving side (one per host), `frames` the codec both share, `pending` the sender's policy
+queue, `writer`/`reader` the two ends' buffers, `shm` the shared-memory ring big values take
+between two processes on one machine.
 """
 
 from sdrpeer.dataplane.connection import Connection

@@ -24,23 +24,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import socket
-from typing import Final
 
 from sdrpeer.dataplane.address import parse_address
-from sdrpeer.dataplane.frames import (
-    DEFAULT_MAX_FRAME,
-    FrameDecoder,
-    FrameError,
-    Hello,
-    encode_hello,
-    parse_reply,
-)
+from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, FrameError, Hello
+from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.pending import PolicyLike
+from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.writer import FrameWriter
 
 log = logging.getLogger("sdrpeer.dataplane")
-_SNDBUF: Final = 4 * 1024 * 1024
 
 
 def next_backoff(delay: float, initial: float, cap: float) -> float:
@@ -62,6 +54,7 @@ class Connection:
         max_frame: int = DEFAULT_MAX_FRAME,
         backoff: tuple[float, float] = (0.05, 2.0),
         hello_timeout: float = 5.0,
+        shm_size: int = DEFAULT_SIZE,
     ) -> None:
         parse_address(to)
         self.conn_id = conn_id
@@ -72,6 +65,8 @@ class Connection:
         self.max_frame = max_frame
         self.backoff = backoff
         self.hello_timeout = hello_timeout
+        self.shm_size = shm_size
+        """Bytes of the shared-memory ring offered on a Unix socket (0: none)."""
         self.reconnects = 0
         """Successful redials after a dropped link."""
         self.refused = 0
@@ -81,7 +76,7 @@ class Connection:
         self._writer = FrameWriter(policy, max_frame)
         self._queue = self._writer.queue
         self._writer_offer = self._writer.offer
-        self._link: _Link | None = None
+        self._link: Link | None = None
         self._scheduled = False
         self._closing = False
         self._wake = asyncio.Event()
@@ -157,8 +152,8 @@ class Connection:
         self.to = to
         link, self._link = self._link, None
         if link is not None:
-            self._writer.finish_frame(link.transport.write)  # the old receiver gets all of it
-            link.transport.close()
+            self._writer.finish_frame(link.write)  # the old receiver gets all of it
+            link.shut()
         self._wake.set()
 
     async def wait_connected(self) -> None:
@@ -188,10 +183,12 @@ class Connection:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
         if link is not None:
-            link.transport.close()
+            link.shut()
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(linger):
                     await link.closed
+            if not link.closed.done():
+                link.transport.abort()
 
     def _flush_soon(self) -> None:
         self._scheduled = False
@@ -200,14 +197,14 @@ class Connection:
     def _flush(self) -> None:
         link = self._link
         if link is not None:
-            self._writer.flush(link.transport.write, link.is_paused)
+            self._writer.flush(link.write, link.is_paused, link.ring)
             self._room.set()  # wakes `drain` and `flushed`, which recheck
 
-    def _resume(self, link: _Link) -> None:
+    def _resume(self, link: Link) -> None:
         if link is self._link:
             self._flush()
 
-    def _lost(self, link: _Link) -> None:
+    def _lost(self, link: Link) -> None:
         if link is self._link:
             self._link = None
             self._writer.drop_frame()  # the frame being written is lost with the link
@@ -217,10 +214,12 @@ class Connection:
         initial, cap = self.backoff
         delay = initial
         dropped = False
+        hello = Hello(self.conn_id, self.in_port, self.from_, self.policy.to_map())
         while not self._closing:
             to = self.to
             try:
-                link = await self._dial(to)
+                async with asyncio.timeout(self.hello_timeout):
+                    link = await dial(to, hello, self._resume, self._lost, shm_size=self.shm_size)
             except (OSError, TimeoutError, FrameError, ValueError) as exc:
                 self.last_error = f"{to}: {exc}"
                 log.debug("data connection %s: dial failed: %s", self.conn_id, self.last_error)
@@ -231,7 +230,7 @@ class Connection:
                 delay = next_backoff(delay, initial, cap)
                 continue
             if self.to != to or self._closing:  # repointed while dialing
-                link.transport.close()
+                link.shut()
                 continue
             delay = initial
             if dropped:
@@ -243,77 +242,3 @@ class Connection:
                 self._wake.clear()
                 await self._wake.wait()
             dropped = self.to == to
-
-    async def _dial(self, to: str) -> _Link:
-        kind, host, port = parse_address(to)
-        loop = asyncio.get_running_loop()
-        async with asyncio.timeout(self.hello_timeout):
-            if kind == "tcp":
-                _, link = await loop.create_connection(lambda: _Link(self), host, port)
-            else:
-                _, link = await loop.create_unix_connection(lambda: _Link(self), host)
-                sock = link.transport.get_extra_info("socket")
-                with contextlib.suppress(OSError):
-                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, _SNDBUF)
-            hello = Hello(self.conn_id, self.in_port, self.from_, self.policy.to_map())
-            link.transport.write(encode_hello(hello))
-            try:
-                error = await link.reply
-            except BaseException:
-                link.transport.abort()
-                raise
-        if error is not None:
-            link.transport.close()
-            raise FrameError("refused", error)
-        return link
-
-
-class _Link(asyncio.Protocol):
-    """One socket of a Connection."""
-
-    def __init__(self, owner: Connection) -> None:
-        self.owner = owner
-        loop = asyncio.get_running_loop()
-        self.reply: asyncio.Future[str | None] = loop.create_future()
-        self.closed: asyncio.Future[None] = loop.create_future()
-        self.paused = False
-        self.transport: asyncio.Transport
-        self._decoder: FrameDecoder | None = FrameDecoder(4096)
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        self.write = transport.write
-        transport.set_write_buffer_limits(high=0)  # pause as soon as the kernel is full
-
-    def data_received(self, data: bytes) -> None:
-        if self._decoder is None:
-            return  # nothing is expected after the reply
-        try:
-            self._decoder.feed(data)
-            obj = self._decoder.next_map()
-            if obj is None:
-                return
-            self.reply.set_result(parse_reply(obj))
-        except FrameError as exc:
-            self.reply.set_exception(exc)
-        self._decoder = None
-
-    def is_paused(self) -> bool:
-        """True while the kernel's buffer is full."""
-        return self.paused
-
-    def pause_writing(self) -> None:
-        self.paused = True
-
-    def resume_writing(self) -> None:
-        self.paused = False
-        self.owner._resume(self)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if not self.reply.done():
-            self.reply.set_exception(exc or ConnectionError("closed before the reply"))
-            self.reply.exception()  # retrieved: nobody may be waiting any more
-        if not self.closed.done():
-            self.closed.set_result(None)
-        self.owner._lost(self)

@@ -9,13 +9,16 @@ is offered, and numbers it only when it is written.
 `FrameDecoder` wraps a `msgpack.Unpacker` with strict limits: the unpacker's buffer is capped
 (a frame cannot grow it past `max_frame` plus one read), every frame's encoded size is checked
 against `max_frame` (a frame still arriving too: the unpacker parses incrementally and `tell()`
-counts what it consumed), and every frame must be ``[uint, value]``. Whatever goes wrong raises
-`FrameError("oversized" | "malformed")`; no other exception escapes the decoder.
+counts what it consumed), and every frame must be ``[uint, value]`` (or, when its `refs` hook
+is set, ``[seq, pos, length]``: a value in a shared-memory ring, which the hook resolves).
+Whatever goes wrong raises `FrameError("oversized" | "malformed")`; no other exception escapes
+the decoder.
 """
 
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Final, cast
 
@@ -58,19 +61,22 @@ class Hello:
     """The connector policy map, for the receiver's information."""
     version: int = PROTOCOL_VERSION
     """The data stream protocol version."""
+    shm: object = None
+    """A shared-memory ring the sender offers (sdrpeer.dataplane.shm), or None."""
 
 
 def encode_hello(hello: Hello) -> bytes:
     """The hello map's encoding."""
-    return _packb(
-        {
-            "v": hello.version,
-            "conn": hello.conn,
-            "in": hello.in_port,
-            "from": hello.from_,
-            "policy": hello.policy,
-        }
-    )
+    obj = {
+        "v": hello.version,
+        "conn": hello.conn,
+        "in": hello.in_port,
+        "from": hello.from_,
+        "policy": hello.policy,
+    }
+    if hello.shm is not None:
+        obj["shm"] = hello.shm
+    return _packb(obj)
 
 
 def parse_hello(obj: object) -> Hello:
@@ -86,12 +92,15 @@ def parse_hello(obj: object) -> Hello:
     policy = obj.get("policy", {})
     if not isinstance(policy, dict):
         raise FrameError("malformed", "hello: 'policy' must be a map")
-    return Hello(obj["conn"], obj["in"], obj["from"], policy, version)
+    return Hello(obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"))
 
 
-def encode_reply(error: str | None) -> bytes:
-    """The receiver's answer to a hello: ok, or the error that closes the connection."""
-    return _packb({"ok": True} if error is None else {"ok": False, "error": error})
+def encode_reply(error: str | None, *, shm: bool = False) -> bytes:
+    """The receiver's answer to a hello: ok (saying whether it took the offered ring), or the
+    error that closes the connection."""
+    if error is not None:
+        return _packb({"ok": False, "error": error})
+    return _packb({"ok": True, "shm": True} if shm else {"ok": True})
 
 
 def parse_reply(obj: object) -> str | None:
@@ -159,10 +168,13 @@ def big_frame_header(data: bytes | memoryview, min_size: int) -> tuple[int, int,
 class FrameDecoder:
     """Decodes one connection's byte stream: optionally a first map, then frames."""
 
-    __slots__ = ("_end", "_error", "_fed", "_unpacker", "max_frame")
+    __slots__ = ("_end", "_error", "_fed", "_unpacker", "max_frame", "refs")
 
     def __init__(self, max_frame: int = DEFAULT_MAX_FRAME) -> None:
         self.max_frame = max_frame
+        self.refs: Callable[[list[Any]], list[Any]] | None = None
+        """Turns a three-element frame (a value held elsewhere: sdrpeer.dataplane.shm) into
+        ``[seq, value]``; None: such frames are malformed."""
         self._unpacker = self._new_unpacker()
         self._fed = 0  # bytes fed so far
         self._end = 0  # stream offset where the last complete object ended
@@ -231,15 +243,19 @@ class FrameDecoder:
         tell = unpacker.tell
         limit = self.max_frame
         end = self._end
+        refs = self.refs
         out: list[list[Any]] = []
         try:
             for obj in unpacker:
+                frame = obj
                 if type(obj) is not list or len(obj) != 2 or type(obj[0]) is not int or obj[0] < 0:
-                    raise FrameError("malformed", f"frame is not [uint, value]: {_brief(obj)}")
+                    if refs is None or type(obj) is not list or len(obj) != 3:
+                        raise FrameError("malformed", f"frame is not [uint, value]: {_brief(obj)}")
+                    frame = refs(obj)
                 start, end = end, tell()
                 if end - start > limit:
                     raise FrameError("oversized", f"frame of {end - start} bytes, max {limit}")
-                out.append(obj)
+                out.append(frame)
             if tell() - end > limit:
                 raise FrameError("oversized", f"frame over {limit} bytes (still arriving)")
         except FrameError as exc:

@@ -81,6 +81,13 @@ class FrameReader:
                 if type(obj) is list and len(obj) == 2 and type(obj[0]) is int and obj[0] >= 0:
                     self._end = 0
                     return [obj]
+                if type(obj) is list and len(obj) == 3 and decoder.refs is not None:
+                    self._end = 0
+                    try:
+                        return [decoder.refs(obj)]
+                    except FrameError as exc:
+                        self._error = exc
+                        raise
         out: list[list[Any]] = []
         look = end - start >= BIG or self._need > 0  # else a big frame cannot be complete yet
         self._need = 0

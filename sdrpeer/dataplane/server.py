@@ -10,6 +10,9 @@ values taken out without msgpack) is decoded and each frame goes to
 malformed) calls ``port.refuse()``, is counted by reason, logged (first time per reason, then at
 most every ten seconds) and closes that connection only. Connections beyond `max_connections`
 are answered with an error and closed; a hello must arrive within `hello_timeout` seconds.
+A hello that offers a shared-memory ring (sdrpeer.dataplane.shm) gets it mapped (and its name
+unlinked); then a ``[seq, pos, length]`` frame's value is copied out of the ring just before it
+is delivered, and after each read the position consumed is written back as the sender's credit.
 """
 
 from __future__ import annotations
@@ -21,7 +24,9 @@ import os
 import socket
 from collections import Counter
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any, Final, Protocol
+
+import msgpack
 
 from sdrpeer.dataplane.address import format_tcp
 from sdrpeer.dataplane.frames import (
@@ -32,10 +37,12 @@ from sdrpeer.dataplane.frames import (
     parse_hello,
 )
 from sdrpeer.dataplane.reader import FrameReader
+from sdrpeer.dataplane.shm import ReceiverRing
 
 log = logging.getLogger("sdrpeer.dataplane")
 _LOG_EVERY = 10.0
 _RCVBUF = 4 * 1024 * 1024
+_packb: Final = msgpack.packb
 
 
 class InPortLike(Protocol):
@@ -61,6 +68,7 @@ class DataServer:
         max_frame: int = DEFAULT_MAX_FRAME,
         max_connections: int = 256,
         hello_timeout: float = 10.0,
+        shm: bool = True,
     ) -> None:
         self.resolve = resolve
         self.tcp_host = tcp_host
@@ -69,8 +77,11 @@ class DataServer:
         self.max_frame = max_frame
         self.max_connections = max_connections
         self.hello_timeout = hello_timeout
+        self.shm = shm
+        """Take the shared-memory rings senders on this machine offer."""
         self.counters: Counter[str] = Counter()
-        """accepted, rejected (hello refused or over the limit), refused_<reason>, deliver_error."""
+        """accepted, rejected (hello refused or over the limit), refused_<reason>, deliver_error,
+        shm (connections that took a shared-memory ring)."""
         self.bytes_in: Counter[str] = Counter()
         """Bytes received after the hello, by in-port name (for the port's `bytes_in`)."""
         self._servers: list[asyncio.Server] = []
@@ -136,6 +147,8 @@ class _Receiver(asyncio.BufferedProtocol):
         self.port: InPortLike | None = None
         self.conn = "?"
         self.in_port = ""
+        self.ring: ReceiverRing | None = None
+        self._credited = 0
         self._timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -173,6 +186,11 @@ class _Receiver(asyncio.BufferedProtocol):
             self._bad(exc)
             return
         self._deliver(frames)
+        ring = self.ring
+        if ring is not None and ring.consumed != self._credited and self.port is not None:
+            self._credited = ring.consumed
+            assert self.transport is not None
+            self.transport.write(_packb(ring.consumed))  # room for the sender
         if reader.failed:
             try:
                 reader.frames()
@@ -182,6 +200,9 @@ class _Receiver(asyncio.BufferedProtocol):
     def _deliver(self, frames: list[list[Any]]) -> None:
         if self.port is None:
             return
+        if self.ring is not None:
+            self._deliver_from_ring(frames)
+            return
         deliver = self.port.deliver
         conn = self.conn
         for seq, value in frames:
@@ -190,6 +211,30 @@ class _Receiver(asyncio.BufferedProtocol):
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
                 self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+
+    def _deliver_from_ring(self, frames: list[list[Any]]) -> None:
+        """Deliver frames, taking each ``[seq, pos, length]`` value out of the ring just before
+        (counted in bytes_in like the socket's bytes)."""
+        ring, port, conn = self.ring, self.port, self.conn
+        assert ring is not None
+        assert port is not None
+        bytes_in = self.server.bytes_in
+        for frame in frames:
+            if len(frame) == 3:
+                try:
+                    value = ring.take(frame)
+                except FrameError as exc:
+                    self._bad(exc)
+                    return
+                bytes_in[self.in_port] += frame[2]
+            else:
+                value = frame[1]
+            try:
+                port.deliver(value, frame[0], conn)
+            except Exception as exc:
+                self.server.counters["deliver_error"] += 1
+                self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+            del value  # the next value may reuse its memory
 
     def _hello(self) -> bool:
         """Handle the hello if it has arrived; True when frames may follow."""
@@ -209,7 +254,9 @@ class _Receiver(asyncio.BufferedProtocol):
             if port is None:
                 error = f"unknown in-port {hello.in_port!r}"
         assert self.transport is not None
-        self.transport.write(encode_reply(error))
+        if error is None and hello.shm is not None and self.server.shm:
+            self._attach(hello.shm)
+        self.transport.write(encode_reply(error, shm=self.ring is not None))
         if error is not None or port is None:
             self.server.counters["rejected"] += 1
             self.server._report("rejected", hello.conn, error or "")
@@ -218,6 +265,16 @@ class _Receiver(asyncio.BufferedProtocol):
         self.port = port
         self.in_port = hello.in_port
         return True
+
+    def _attach(self, offer: object) -> None:
+        """Map the ring the sender offered; without it the stream carries every value."""
+        try:
+            self.ring = ReceiverRing.attach(offer, self.server.max_frame)
+        except (OSError, ValueError) as exc:
+            log.info("data connection %s: no shared memory (%s)", self.conn, exc)
+            return
+        self.server.counters["shm"] += 1
+        self.reader.decoder.refs = self.ring.check
 
     def _bad(self, exc: FrameError) -> None:
         server = self.server
@@ -250,3 +307,6 @@ class _Receiver(asyncio.BufferedProtocol):
             self._timer.cancel()
         self.port = None
         self.server._receivers.discard(self)
+        if self.ring is not None:
+            self.ring.close()
+            self.ring = None

@@ -4,12 +4,14 @@ How it works: `offer` packs a value once, when it is offered (a bytes value of 6
 is kept as it is, behind a 5-byte bin prefix: no copy) and queues it in `queue` (a
 `PendingQueue`, which applies the connector policy); offered with the idle link's `write`
 while nothing is pending, a small value under all/fifo is numbered and written at once instead
-(the latency path). `flush(write, paused)` numbers what is pending and writes it: many small
-values become one joined buffer (the headers and the join are C-level `map`s, no Python loop per
-frame); a big value is written as its header, then its bytes in 1 MiB slices, each only while
-`paused()` is false, so the socket's buffer, not ours, holds what the kernel has not taken. seq is given when a frame is written (starting at 1), so
-values dropped by the policy leave no gap; frames lost with a broken link do.
-"""
+(the latency path). `flush(write, paused, ring)` numbers what is pending and writes it: many
+small values become one joined buffer (the headers and the join are C-level `map`s, no Python
+loop per frame); a big value is copied into the link's shared-memory ring when it has one (the
+socket gets a small ``[seq, pos, length]`` frame; when the ring is full the value and those
+after it wait, unnumbered, for a credit), else written as its header, then its bytes in 1 MiB
+slices, each only while `paused()` is false, so the socket's buffer, not ours, holds what the
+kernel has not taken. seq is given when a frame is written (starting at 1), so values dropped
+by the policy leave no gap; frames lost with a broken link do."""
 
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ import msgpack
 
 from sdrpeer.dataplane.frames import FRAME_OVERHEAD, FrameError, frame_header
 from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
+from sdrpeer.dataplane.shm import SenderRing, ref_frame
 
 BIG: Final = 64 * 1024
 """Bytes values at least this large are queued and written without a copy."""
@@ -111,8 +114,11 @@ class FrameWriter:
             return True
         return self._queue_offer(item)
 
-    def flush(self, write: Write, paused: Callable[[], bool]) -> None:
-        """Write everything pending, as long as `paused()` is false."""
+    def flush(
+        self, write: Write, paused: Callable[[], bool], ring: SenderRing | None = None
+    ) -> None:
+        """Write everything pending, as long as `paused()` is false (big values into `ring`
+        when there is one and they fit)."""
         while not paused():
             rest = self._rest
             if rest is not None:
@@ -121,9 +127,9 @@ class FrameWriter:
             elif self._taken:
                 items = list(self._taken)
                 self._taken.clear()
-                self._write(write, items)
+                self._write(write, items, ring)
             elif len(self.queue):
-                self._write(write, self.queue.take())
+                self._write(write, self.queue.take(), ring)
             else:
                 return
 
@@ -137,7 +143,7 @@ class FrameWriter:
         """Forget the rest of a big value (its link broke: the frame is lost)."""
         self._rest = None
 
-    def _write(self, write: Write, items: list[Item]) -> None:
+    def _write(self, write: Write, items: list[Item], ring: SenderRing | None) -> None:
         """Number and write `items`, stopping after the first big one (its tail in _rest)."""
         seq, n = self.seq, len(items)
         if n == 1 and seq + 1 < _SEQ32 and type(items[0]) is bytes and len(items[0]) < BIG:
@@ -148,7 +154,7 @@ class FrameWriter:
             parts[1::2] = items  # type: ignore[assignment]
             data = b"".join(parts)
         else:
-            self._write_slowly(write, items)
+            self._write_slowly(write, items, ring)
             return
         write(data)
         self.seq, self.frames_out, self.bytes_out = (
@@ -157,10 +163,21 @@ class FrameWriter:
             self.bytes_out + len(data),
         )
 
-    def _write_slowly(self, write: Write, items: list[Item]) -> None:
+    def _write_slowly(self, write: Write, items: list[Item], ring: SenderRing | None) -> None:
         seq, size, parts = self.seq, 0, []
         n = len(items)
         for index, item in enumerate(items):
+            if ring is not None and BIG <= len(item) <= ring.size:
+                head, body = (item.prefix, item.data) if isinstance(item, _Big) else (b"", item)
+                pos = ring.place(head, body)
+                if pos is None:  # the ring is full: this value and the rest wait for credit
+                    self._taken.extend(items[index:])
+                    n = index
+                    break
+                seq += 1
+                parts.append(ref_frame(seq, pos, len(item)))
+                size += len(parts[-1]) + len(item)
+                continue
             seq += 1
             parts.append(frame_header(seq))
             size += len(parts[-1]) + len(item)
