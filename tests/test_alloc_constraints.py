@@ -94,8 +94,14 @@ def test_mem_free_reason_names_after_need_and_limit():
     t = Thresholds(mem_free_above_bytes=500 * MB)
     why = check_robot(MemFreeAbove(), robot(free=900 * MB), t, mem=520 * MB)
     assert why == "free memory 380MB after adding 520MB would not be above 500MB"
-    assert not MemFreeAbove().enabled(Thresholds())
-    assert check_robot(MemFreeAbove(), robot(free=0), Thresholds(), mem=10**12) is None
+
+
+def test_memory_without_a_threshold_still_needs_room():
+    assert MemFreeAbove().enabled(Thresholds())
+    r = robot(free=3000 * MB)
+    assert check_robot(MemFreeAbove(), r, Thresholds(), mem_added=1000 * MB, mem=2000 * MB) is None
+    why = check_robot(MemFreeAbove(), r, Thresholds(), mem_added=1000 * MB, mem=64_000 * MB)
+    assert why == "needs 64GB, only 2GB free"
 
 
 @pytest.mark.parametrize(
@@ -235,12 +241,12 @@ def test_entry_points_name_every_builtin():
 
 
 def test_active_constraints_follow_thresholds():
-    robot_cs, link_cs = active_constraints(
-        (), Thresholds(mem_free_above_bytes=1, rssi_above_dbm=-60)
-    )
-    assert [c.name for c in robot_cs] == ["memory"]
+    robot_cs, link_cs = active_constraints((), Thresholds(battery_above_pct=1, rssi_above_dbm=-60))
+    assert [c.name for c in robot_cs] == ["memory", "battery"]
     assert [c.name for c in link_cs] == ["rssi"]
-    assert active_constraints((), Thresholds()) == ([], [])
+    robot_cs, link_cs = active_constraints((), Thresholds())
+    assert [c.name for c in robot_cs] == ["memory"]  # a capacity: always checked
+    assert link_cs == []
 
 
 def test_unknown_plugin_names_the_known_ones():
@@ -265,8 +271,8 @@ def test_register_a_plugin_in_process():
     try:
         assert "gpu" in CONSTRAINTS.names()
         robot_cs, _ = active_constraints(("gpu",), Thresholds())
-        assert [c.name for c in robot_cs] == ["gpu"]
-        assert check_robot(robot_cs[0], robot("r1"), Thresholds()) == "no GPU"
+        assert [c.name for c in robot_cs] == ["memory", "gpu"]
+        assert check_robot(robot_cs[1], robot("r1"), Thresholds()) == "no GPU"
     finally:
         CONSTRAINTS.unregister("gpu")
     assert "gpu" not in CONSTRAINTS.names()

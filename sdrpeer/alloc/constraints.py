@@ -10,7 +10,10 @@ How it works: there are two kinds of constraint.
   checked once per pair of robots for every connection whose two ends land on different robots,
   with the link measured between them (the worse direction) and their distance.
 Each `check` returns None when the constraint holds and otherwise a short reason for a person.
-A constraint whose threshold is None is not `enabled` and is never called.
+A constraint whose threshold is None is not `enabled` and is never called, with one exception:
+memory is a capacity, so without a threshold an instance must still fit in the free memory
+(nothing may be left, but not less than nothing); CPU has no such floor (too much CPU only slows
+everything down, too much memory gets processes killed).
 
 Unknown metrics: a robot that reports no battery (mains power), no RSSI (wired) or no position
 passes the battery, RSSI and distance constraints; they describe hardware it does not have. A
@@ -120,20 +123,22 @@ class CpuBelow(RobotConstraint):
 
 
 class MemFreeAbove(RobotConstraint):
-    """Free memory after adding the instance above `mem_free_above_bytes`."""
+    """Free memory after adding the instance above `mem_free_above_bytes` (without one: >= 0)."""
 
     name = "memory"
     cold = False
-
-    def enabled(self, t: Thresholds) -> bool:
-        return t.mem_free_above_bytes is not None
 
     def check(
         self, load: RobotLoad, need: Need, component: ComponentDef, t: Thresholds
     ) -> str | None:
         limit = t.mem_free_above_bytes
-        after = load.robot.metrics.mem_free - load.mem_bytes - need.mem_bytes
-        if limit is None or after > limit:
+        free = load.robot.metrics.mem_free - load.mem_bytes
+        after = free - need.mem_bytes
+        if limit is None:
+            if after >= 0:
+                return None
+            return f"needs {format_size(need.mem_bytes)}, only {format_size(free)} free"
+        if after > limit:
             return None
         return (
             f"free memory {format_size(after)} after adding {format_size(need.mem_bytes)} "
