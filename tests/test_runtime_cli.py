@@ -1,4 +1,4 @@
-"""The instance commands' pure parts: the minimal system file, the table, log tail/follow, specs
+"""The instance commands' pure parts: `run` on one robot, the table, log tail/follow, specs
 built from flags."""
 
 from __future__ import annotations
@@ -11,19 +11,20 @@ import pytest
 
 from sdrpeer.cli import build_parser
 from sdrpeer.cli_format import format_instances
+from sdrpeer.deploy.one_robot import load_on_one_robot
 from sdrpeer.errors import ConfigError
 from sdrpeer.runtime.commands import instance_doc
 from sdrpeer.runtime.logfile import Follower, tail
-from sdrpeer.runtime.simple_system import load_simple_system
 
 GOOD = """\
+name: two
 components:
-  - name: Cam
-    target: pkg.cam:Camera
-    params: {fps: 10}
-  - {name: View, target: pkg.view:Viewer, launcher: python}
+  - name: Pub
+    target: tests.components_fixture:Counter
+    params: {rate: 10}
+  - {name: Rec, target: "tests.components_fixture:Recorder", launcher: python}
 connections:
-  - {from: Cam.image, to: View.image, policy: {buffer: 4, full: drop}}
+  - {from: Pub.out, to: Rec.inp, policy: {buffer: 4, full: drop}}
 """
 
 
@@ -33,52 +34,33 @@ def write(tmp_path: Path, text: str) -> Path:
     return path
 
 
-def test_simple_system(tmp_path):
-    cam, view = load_simple_system(write(tmp_path, GOOD))
-    assert (cam.name, cam.component, cam.params_map()) == ("Cam", "Camera", {"fps": 10})
-    assert view.connections == ()
-    (conn,) = cam.connections
-    assert (conn.id, conn.out_port, conn.to_instance, conn.in_port) == (
-        "Cam.image->View.image",
-        "image",
-        "View",
-        "image",
+def test_run_places_a_whole_system_on_one_robot(tmp_path):
+    pub, rec = load_on_one_robot(write(tmp_path, GOOD), "robot-1")
+    assert (pub.name, pub.component, pub.params_map()) == ("Pub", "Pub", {"rate": 10.0})
+    assert rec.connections == ()
+    (conn,) = pub.connections
+    assert (conn.id, conn.out_port, conn.to_instance, conn.in_port, conn.to_addr) == (
+        "Pub.out->Rec.inp",
+        "out",
+        "Rec",
+        "inp",
+        None,
     )
     assert conn.policy_map() == {"buffer": 4, "full": "drop"}
 
 
-@pytest.mark.parametrize(
-    ("text", "where"),
-    [
-        ("components: [{name: A}]\n", ":1: field 'components[0].target': missing"),
-        ("components:\n  - {name: A, target: nocolon}\n", ":2: field 'components[0].target'"),
-        ("components:\n  - {name: A, target: m:C, x: 1}\n", ":2: field 'components[0].x'"),
-        (
-            "components:\n  - {name: A, target: m:C}\n  - {name: A, target: m:C}\n",
-            ":3: field 'components[1].name': 'A' given twice",
-        ),
-        (
-            "components:\n  - {name: A, target: m:C}\nconnections:\n  - {from: A, to: A.i}\n",
-            ":4: field 'connections[0].from': expected Component.port",
-        ),
-        (
-            "components:\n  - {name: A, target: m:C}\nconnections:\n  - {from: A.o, to: B.i}\n",
-            ":4: field 'connections[0].to': no component 'B'",
-        ),
-        (
-            "components:\n  - {name: A, target: m:C}\nconnections:\n"
-            "  - from: A.o\n    to: A.i\n    policy: {buffer: 0}\n",
-            ":6: field 'connections[0].policy.buffer'",
-        ),
-        ("components: [\n", ": not valid YAML"),
-    ],
-)
-def test_simple_system_errors_say_where(tmp_path, text, where):
-    path = write(tmp_path, text)
+def test_paper_one_robot_file_loads():
+    specs = load_on_one_robot(Path(__file__).parent.parent / "examples/paper/one-robot.yaml", "r")
+    assert len(specs) == 5
+    assert sum(len(s.connections) for s in specs) == 4
+
+
+def test_run_refuses_a_broken_file_naming_the_line(tmp_path):
+    path = write(tmp_path, GOOD.replace("Rec.inp", "Rec.nope"))
     with pytest.raises(ConfigError) as info:
-        load_simple_system(path)
-    assert str(info.value).startswith(str(path))
-    assert where in str(info.value)
+        load_on_one_robot(path, "robot-1")
+    assert f"{path}:8" in str(info.value)
+    assert "nope" in str(info.value)
 
 
 def test_format_instances():

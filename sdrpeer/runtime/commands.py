@@ -22,7 +22,6 @@ from sdrpeer.cli import _print_json, client_for, endpoint, parse_assignment, rob
 from sdrpeer.cli_format import format_instances, want_color
 from sdrpeer.client import unreachable_message
 from sdrpeer.errors import ApiError
-from sdrpeer.runtime.simple_system import load_simple_system
 from sdrpeer.runtime.spec import LAUNCHERS, InstanceSpec
 
 
@@ -83,8 +82,10 @@ def cmd_start_instance(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """Run a minimal system file on one robot (replaces that robot's desired set)."""
-    specs = load_simple_system(args.file)
+    """Run a whole system file on one robot, no allocator (replaces that robot's desired set)."""
+    from sdrpeer.deploy.one_robot import load_on_one_robot  # noqa: PLC0415 - imports plugins
+
+    specs = load_on_one_robot(args.file, args.robot)
     body = {"instances": [s.to_json() for s in specs], "replace": True}
     answer = robot_client(args).post("/v1/instances", body)
     if args.json:
