@@ -16,8 +16,8 @@ How it works (pure: no I/O, no clock; `allocate` is the whole API):
    smallest free k (names held by the previous plan stay with their instance).
 3. A robot takes an instance when every enabled robot constraint passes with what the plan put
    there so far, and every link constraint passes between it and the robot of each connected
-   component already placed (checked once per pair of robots, memoised). Standbys are checked
-   against the actives of the connected components.
+   component already placed (`feasibility.py`: once per pair of robots, memoised). Standbys are
+   checked against the actives of the connected components.
 4. Memory and CPU: a robot's metrics already count what runs there now, so an instance running
    on the robot it is placed on adds only what it still lacks (its need minus its measured use).
 5. Cold standbys are placements the robot launches only when needed: they use nothing, so only
@@ -30,7 +30,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 
-from sdrpeer.alloc.constraints import Need, RobotLoad, active_constraints
+from sdrpeer.alloc.constraints import RobotLoad
+from sdrpeer.alloc.feasibility import Feasibility
 from sdrpeer.alloc.order import adjacency, component_order
 from sdrpeer.alloc.result import AllocationResult, Infeasible, Unplaced
 from sdrpeer.alloc.strategies import STRATEGIES, Context, Peer
@@ -39,10 +40,7 @@ from sdrpeer.plan import Placement, Plan
 from sdrpeer.record import InstanceInfo
 from sdrpeer.system.model import ComponentDef, SystemDef
 
-GONE_STATES = frozenset({"finalized", "stopping", "stopped", "failed"})
-"""Instance states that do not count as running (they are going or gone)."""
 NOT_IN_VIEW = "not in view (dead, left or unknown)"
-_NOTHING = Need()
 
 
 def allocate(
@@ -73,23 +71,11 @@ class _Allocation:
         self.robots = _first_fit_order(view)
         self.index = {r.name: i for i, r in enumerate(self.robots)}
         self.loads = tuple(RobotLoad(r) for r in self.robots)
-        robot_cs, self.link_cs = active_constraints(system.allocation.constraints, self.t)
-        self.static_cs = [c for c in robot_cs if c.static]
-        self.hot_cs = [c for c in robot_cs if not c.static]
-        self.cold_cs = [c for c in self.hot_cs if c.cold]
-        self._static: dict[int, tuple[str | None, str | None]] = {}
-        self._pairs: dict[int, str | None] = {}
-        self.running: dict[tuple[int, str], InstanceInfo] = {}
-        self.running_at: dict[str, list[int]] = {}
+        self.check = Feasibility(self.robots, self.loads, system.allocation)
         self.running_standbys: dict[str, list[tuple[int, InstanceInfo]]] = {}
-        for k, r in enumerate(self.robots):
-            for inst in r.instances:
-                if inst.state.lower() in GONE_STATES:
-                    continue
-                self.running[(k, inst.name)] = inst
-                self.running_at.setdefault(inst.name, []).append(k)
-                if inst.role == "standby":
-                    self.running_standbys.setdefault(inst.component, []).append((k, inst))
+        for i, inst in self.check.running.items():
+            if inst.role == "standby":
+                self.running_standbys.setdefault(inst.component, []).append((i[0], inst))
         self.adj = adjacency(system)
         self.order = component_order(system, self.adj)
         strategy = STRATEGIES.get(system.allocation.strategy)
@@ -104,69 +90,6 @@ class _Allocation:
         self.unplaced: list[Unplaced] = []
         self.kept = 0
 
-    # -- checks ---------------------------------------------------------------------------
-
-    def _need(self, comp: ComponentDef, name: str, cold: bool, i: int) -> Need:
-        """What the instance adds to robot i (see the module docstring, points 4 and 5)."""
-        if cold:
-            return _NOTHING
-        req = comp.requires
-        inst = self.running.get((i, name))
-        if inst is None or inst.component != comp.name:
-            return Need(req.cpu_pct, req.mem_bytes)
-        return Need(max(0.0, req.cpu_pct - inst.cpu_pct), max(0, req.mem_bytes - inst.rss))
-
-    def _static_reason(self, i: int, comp: ComponentDef, cold: bool) -> str | None:
-        """The first static constraint robot i fails (for hot, or for cold instances)."""
-        cached = self._static.get(i)
-        if cached is None:
-            hot: str | None = None
-            cold_r: str | None = None
-            for c in self.static_cs:
-                why = c.check(self.loads[i], _NOTHING, comp, self.t)
-                if why is not None:
-                    hot = hot or f"{c.name}: {why}"
-                    if c.cold:
-                        cold_r = cold_r or f"{c.name}: {why}"
-            cached = self._static[i] = (hot, cold_r)
-        return cached[1] if cold else cached[0]
-
-    def _pair(self, i: int, q: int) -> str | None:
-        """The first link constraint robots i and q fail together (memoised per pair)."""
-        key = i * len(self.robots) + q if i < q else q * len(self.robots) + i
-        if key in self._pairs:
-            return self._pairs[key]
-        a, b = self.robots[i], self.robots[q]
-        link, dist = a.link_to(b), a.distance_to(b)
-        why: str | None = None
-        for c in self.link_cs:
-            r = c.check(a, b, link, dist, self.t)
-            if r is not None:
-                why = f"{c.name}: {r}"
-                break
-        self._pairs[key] = why
-        return why
-
-    def _reason(
-        self, comp: ComponentDef, name: str, cold: bool, i: int, peers: Sequence[Peer]
-    ) -> str | None:
-        """None when robot i may take the instance, else the first constraint it fails."""
-        why = self._static_reason(i, comp, cold)
-        if why is not None:
-            return why
-        load = self.loads[i]
-        need = self._need(comp, name, cold, i)
-        for c in self.cold_cs if cold else self.hot_cs:
-            r = c.check(load, need, comp, self.t)
-            if r is not None:
-                return f"{c.name}: {r}"
-        for p in peers:
-            if p.robot != i:
-                r = self._pair(i, p.robot)
-                if r is not None:
-                    return f"link to {p.component} on {self.robots[p.robot].name}: {r}"
-        return None
-
     def _peers(self, comp: ComponentDef) -> list[Peer]:
         """Connected components whose active is placed, with the traffic to each."""
         at = self.active_at
@@ -175,7 +98,7 @@ class _Allocation:
     # -- placing --------------------------------------------------------------------------
 
     def _place(self, comp: ComponentDef, name: str, role: str, cold: bool, i: int) -> None:
-        need = self._need(comp, name, cold, i)
+        need = self.check.need(comp, name, cold, i)
         load = self.loads[i]
         load.cpu_pct += need.cpu_pct
         load.mem_bytes += need.mem_bytes
@@ -198,7 +121,7 @@ class _Allocation:
         """The first candidate robot (not holding this component yet) that takes the instance."""
         held = self.holders[comp.name]
         for i in candidates:
-            if i not in held and self._reason(comp, name, cold, i, peers) is None:
+            if i not in held and self.check.reason(comp, name, cold, i, peers) is None:
                 return i
         return None
 
@@ -211,8 +134,8 @@ class _Allocation:
         ]
         out += [
             i
-            for i in self.running_at.get(name, ())
-            if self.running[(i, name)].component == comp.name
+            for i in self.check.running_at.get(name, ())
+            if self.check.running[(i, name)].component == comp.name
         ]
         return list(dict.fromkeys(out))
 
@@ -236,7 +159,7 @@ class _Allocation:
             if i in held:
                 why: str | None = f"already holds {held[i]}"
             else:
-                why = self._reason(comp, name, cold, i, peers)
+                why = self.check.reason(comp, name, cold, i, peers)
             reasons.append((r.name, why or "ok, but another instance needed it first"))
         missing = [p.robot for p in self.previous.get(comp.name, ()) if p.instance == name]
         if role == "active" and comp.pin is not None:
@@ -263,7 +186,7 @@ class _Allocation:
             for i in self._sticky(comp, names[comp.name]):
                 if comp.pin not in (None, self.robots[i].name):
                     continue
-                if self._reason(comp, names[comp.name], False, i, peers) is None:
+                if self.check.reason(comp, names[comp.name], False, i, peers) is None:
                     self._place(comp, names[comp.name], "active", False, i)
                     self.kept += 1
                     break
@@ -289,7 +212,7 @@ class _Allocation:
         """Make a running standby of `comp` its active, if one fits (it keeps its name)."""
         peers = self._peers(comp)
         for i, inst in self.running_standbys.get(comp.name, ()):
-            if self._reason(comp, inst.name, False, i, peers) is None:
+            if self.check.reason(comp, inst.name, False, i, peers) is None:
                 self._place(comp, inst.name, "active", False, i)
                 self.kept += 1
                 return True
@@ -307,7 +230,7 @@ class _Allocation:
             peers = self._peers(comp)
             same = other = 0
             for name, i in self._pool(comp):
-                fits = self._reason(comp, name, cold, i, peers) is None
+                fits = self.check.reason(comp, name, cold, i, peers) is None
                 if i == at and same < spec.same_robot and fits:
                     same += 1
                 elif i not in self.holders[comp.name] and other < spec.other_robots and fits:
@@ -338,7 +261,7 @@ class _Allocation:
         self, comp: ComponentDef, name: str, cold: bool, at: int, peers: Sequence[Peer]
     ) -> int | None:
         """The active's robot, if it also takes this same-robot standby."""
-        return at if self._reason(comp, name, cold, at, peers) is None else None
+        return at if self.check.reason(comp, name, cold, at, peers) is None else None
 
     def _pool(self, comp: ComponentDef) -> list[tuple[str, int]]:
         """Standbys that exist already: the previous plan's, then running ones, by name."""
