@@ -197,6 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     from sdrpeer.deploy.commands import add_deploy_parsers  # noqa: PLC0415 - same
     from sdrpeer.profile import add_profile_parser  # noqa: PLC0415 - heavy: only when parsing
     from sdrpeer.runtime.commands import add_instance_parsers  # noqa: PLC0415 - same
+    from sdrpeer.system.commands import add_system_parser  # noqa: PLC0415 - same
 
     parser = argparse.ArgumentParser(prog="sdrpeer", description="A leaderless robot platform.")
     parser.add_argument("--version", action="version", version=f"sdrpeer {__version__}")
@@ -221,6 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot_set.set_defaults(func=cmd_robot_set)
     add_instance_parsers(sub, client, as_json)
     add_deploy_parsers(sub, client, as_json)
+    add_system_parser(sub)
     add_lab_parsers(sub)
     add_profile_parser(sub)  # `sdrpeer profile` (components issue; lives in sdrpeer.profile)
     return parser
