@@ -273,13 +273,43 @@ def test_partition_heal_the_higher_epoch_wins() -> None:
     assert high.state() == claim(7, "b")
 
 
-def test_an_allocator_that_hears_of_a_newer_epoch_claims_past_it() -> None:
+def test_an_allocator_whose_follower_knows_a_newer_epoch_claims_past_it() -> None:
     e = Election("a", CONFIG, 0.0)
     e.update(0.0, {"a": cand()})
     drain(e)
-    e.update(1.0, {"a": cand(), "b": cand(state=follows(9, "x")), "x": cand(alive=False)})
+    view = {"a": cand(), "b": cand(state=follows(9, "x")), "x": cand(alive=False)}
+    e.update(1.0, view)
+    assert e.state() == claim(1, "a")  # b still follows x: not our business yet
+    view["b"] = cand(state=follows(9, "a"))  # b follows us, fenced at 9
+    e.update(2.0, view)
     assert e.state() == claim(10, "a")
-    assert drain(e) == [Elected(10, 1, 1.0), LeaderChanged(10, "a", "a", 1.0)]
+    assert drain(e) == [Elected(10, 1, 2.0), LeaderChanged(10, "a", "a", 2.0)]
+
+
+def test_an_allocator_holds_while_others_name_a_newer_one_it_cannot_see_yet() -> None:
+    e = Election("a", CONFIG, 0.0)
+    e.update(0.0, {"a": cand(priority=9)})
+    view = {"a": cand(priority=9), "b": cand(state=follows(5, "c")), "c": cand(alive=False)}
+    e.update(1.0, view)  # just healed: c is still dead here, its follower b already heard
+    assert e.state() == claim(1, "a")
+    view["c"] = cand(state=claim(5, "c"))
+    e.update(1.5, view)
+    assert e.state() == follows(5, "c")
+
+
+def test_a_follower_publishes_the_highest_epoch_it_followed() -> None:
+    e = Election("b", CONFIG, 0.0)
+    view = {"a": cand(priority=9, state=claim(3, "a")), "b": cand(), "x": cand(state=claim(8, "x"))}
+    e.update(0.0, view)
+    assert e.state() == follows(8, "x")
+    view["x"] = cand(alive=False, state=claim(8, "x"))
+    e.update(1.0, view)
+    assert (e.epoch, e.leader) == (3, "a")
+    assert e.state() == follows(8, "a")  # its fence stays at 8: a must claim past it
+    assert e.adopted_epoch == 8
+    e.update(2.0, {**view, "z": cand(alive=False, state=claim(11, "z"))})
+    assert e.state() == follows(8, "a")  # only heard of: not published
+    assert e.max_epoch == 11
 
 
 def test_known_epoch_survives_a_restart_and_own_stale_record_is_ignored() -> None:

@@ -11,8 +11,14 @@ How it works:
   once, the next only if the top one has not claimed within a grace period (a bully whose higher
   peers do not answer), and so on. A claim takes epoch = the highest epoch ever seen + 1;
 - a claimer that sees a higher valid claim steps down; one that becomes ineligible or leaves
-  abdicates (publishes claiming=False) and the others elect the next; one that hears of an epoch
-  above its claim claims again past it (the moves are the table in `rules.py`);
+  abdicates (publishes claiming=False) and the others elect the next (the moves are the table in
+  `rules.py`);
+- a follower publishes the highest epoch it has followed (its fence), which may be above its
+  allocator's: it followed an allocator of a newer epoch that died, and refuses older plans. An
+  allocator that sees a follower fenced above its claim claims again past it. Epochs a robot has
+  only heard of do not count: right after a heal they arrive before the other side's claim, and
+  re-claiming past them would let the stale side win. Every epoch heard of still raises the
+  next claim, so a new claim passes the fence of every robot whose record it has heard;
 - without `preempt`, a valid allocator keeps the role whoever returns; with it, a robot ranked
   above the allocator starts the same grace countdown and claims at a higher epoch;
 - `state()` is what to publish in the robot's gossip record; `next_event()` drains what changed.
@@ -46,6 +52,7 @@ class Election:
         """FOLLOWER, WAITING or LEADER (see `rules.py`)."""
         self._started = now
         self._max_epoch = known_epoch
+        self._adopted = known_epoch
         self._claim_epoch = 0
         self._leader: ClaimKey | None = None
         self._waiting_since = math.inf
@@ -77,9 +84,7 @@ class Election:
         """What to publish in this robot's gossip record now."""
         if self.role is Role.LEADER:
             return ElectionState(self._claim_epoch, self.name, True)
-        if self._leader is not None:
-            return ElectionState(self._leader[0], self._leader[1], False)
-        return ElectionState(self._max_epoch, None, False)
+        return ElectionState(self._adopted, self.leader, False)
 
     def next_timer(self) -> float:
         """When to call `handle_timer` (inf: nothing pending)."""
@@ -96,7 +101,7 @@ class Election:
 
     @property
     def epoch(self) -> int:
-        """The epoch of that allocator (the highest epoch known while vacant)."""
+        """The epoch of that allocator's claim (the highest epoch known while vacant)."""
         return self._max_epoch if self._leader is None else self._leader[0]
 
     @property
@@ -106,8 +111,14 @@ class Election:
 
     @property
     def max_epoch(self) -> int:
-        """The highest epoch this robot has seen (persist it with the fence across restarts)."""
+        """The highest epoch this robot has heard of."""
         return self._max_epoch
+
+    @property
+    def adopted_epoch(self) -> int:
+        """The highest epoch this robot has followed (or claimed): persist it across restarts
+        and pass it back as `known_epoch`."""
+        return self._adopted
 
     # -- the rules ----------------------------------------------------------------------------
 
@@ -117,13 +128,19 @@ class Election:
         able = not self._left and me is not None and me.alive and me.eligible
         best: ClaimKey | None = None
         top = self._max_epoch
+        fenced_above = 0  # the highest epoch known by an alive robot that follows us
         for other, c in view.items():
             s = c.state
             if s is None or other == name:
                 continue
             top = max(top, s.epoch)
-            if s.claiming and c.alive and c.eligible and (best is None or (s.epoch, other) > best):
-                best = (s.epoch, other)
+            if not c.alive:
+                continue
+            if s.claiming:
+                if c.eligible and (best is None or (s.epoch, other) > best):
+                    best = (s.epoch, other)
+            elif s.leader == name:
+                fenced_above = max(fenced_above, s.epoch)
         self._max_epoch = top
         before = self._leader
 
@@ -132,7 +149,7 @@ class Election:
                 self._step_down(now, "left" if self._left else "ineligible")
             elif best is not None and best > (self._claim_epoch, name):
                 self._step_down(now, "outranked")
-            elif top > self._claim_epoch:
+            elif fenced_above > self._claim_epoch:
                 self._move("newer_epoch")
                 self._claim(now, previous=self._claim_epoch)
         if self.role is not Role.LEADER:
@@ -144,6 +161,8 @@ class Election:
                 self._move("settled")
                 self._waiting_since = math.inf
         if self._leader != before:
+            if self._leader is not None:
+                self._adopted = max(self._adopted, self._leader[0])
             epoch, leader = self._leader or (self._max_epoch, None)
             previous = None if before is None else before[1]
             self._events.append(LeaderChanged(epoch, leader, previous, now))

@@ -14,9 +14,9 @@ trigger applies and asks `next_role` for the new role:
     LEADER    outranked    -> FOLLOWER  a valid claim with a higher (epoch, name) than ours
     LEADER    ineligible   -> FOLLOWER  we left the allocation thresholds (abdication)
     LEADER    left         -> FOLLOWER  we are leaving the cluster (abdication)
-    LEADER    newer_epoch  -> LEADER    some record carries an epoch above our claim's and no claim
-                                        beats ours: we claim again at max epoch + 1, so that robots
-                                        fenced at that epoch accept our plans
+    LEADER    newer_epoch  -> LEADER    a robot that follows us knows an epoch above our claim's
+                                        (its fence would refuse our plans) and no claim beats ours:
+                                        we claim again at max epoch + 1
 
 A claim is valid when its robot is alive (ALIVE or SUSPECT: a suspect allocator is not replaced
 before it is confirmed dead), eligible and publishes claiming=True. A new claim always takes the

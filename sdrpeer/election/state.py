@@ -39,7 +39,8 @@ class ElectionState:
     """What one robot publishes about the allocator role."""
 
     epoch: int
-    """The epoch of the allocator it believes in (the highest epoch it knows, if none)."""
+    """A claimer: the epoch of its claim. Anyone else: the highest epoch it has followed (usually
+    its allocator's; higher when it followed a newer allocator that died, see `core.py`)."""
     leader: str | None
     """The allocator it believes in, or None while the role is vacant."""
     claiming: bool
