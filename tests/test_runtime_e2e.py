@@ -18,6 +18,7 @@ from tests.realnet import Agent, RealCluster, http
 pytestmark = pytest.mark.realnet
 
 SYSTEM = """\
+name: two
 components:
   - {name: Pub, target: "tests.components_fixture:Counter", params: {rate: 200}}
   - {name: Rec, target: "tests.components_fixture:Recorder"}

@@ -89,11 +89,13 @@ def wait_for(probe: Callable[[], T], ok: Callable[[T], bool], what: str, timeout
     last: Any = None
     while time.monotonic() < deadline:
         try:
-            last = probe()
-            if ok(last):
-                return last
+            value = probe()
         except ApiError as e:
             last = str(e)
+        else:
+            if ok(value):
+                return value
+            last = value
         time.sleep(POLL)
     raise SdrpeerError(f"timed out waiting for {what}; last: {last!r:.300}")
 
