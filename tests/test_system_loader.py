@@ -54,7 +54,7 @@ def test_paper_system() -> None:
     ]
     for c in s.components:
         assert c.params_map() == {"reserve_mb": 500}
-        assert c.standby == StandbySpec(same_robot=0, other_robots=1, mode="hot")
+        assert c.standby == StandbySpec(same_robot=0, other_robots=1, mode="cold")
         assert c.launcher == "python"
     cam = s.component("CameraRTC")
     assert cam.requires.mem_bytes == 549625856  # profiled with the reserve
