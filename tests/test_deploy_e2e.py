@@ -7,6 +7,7 @@ flows between robots, and a SIGKILLed allocator is replaced with the plan intact
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -37,15 +38,19 @@ allocation:
 """
 
 
-def system_file(tmp_path: Path) -> Path:
+def system_file(tmp_path: Path, rate: int = 5) -> Path:
     lines = ["version: 1", "name: paper-fig3", "components:"]
     for name, target in COMPONENTS.items():
         lines += [
             f"  - name: {name}",
             f"    target: {target}",
-            "    params: {reserve_mb: 0, rate: 5}" if "Camera" in name else "    params: {}",
+            f"    params: {{reserve_mb: 0, rate: {rate}}}"
+            if "Camera" in name
+            else "    params: {}",
             "    requires: {cpu: 5%, memory: 500MB}",
         ]
+        if name == "PositionEstimationRTC":
+            lines.append("    standby: {other_robots: 1, mode: hot}")
     path = tmp_path / "system.yaml"
     path.write_text("\n".join(lines) + "\n" + CONNECTIONS)
     return path
@@ -63,6 +68,10 @@ def start_lab(cluster: RealCluster) -> list[Agent]:
 def status(agent: Agent) -> dict[str, Any]:
     doc: dict[str, Any] = agent.get("/v1/status")
     return doc
+
+
+def plan_digest(agent: Agent) -> str:
+    return str(status(agent)["plan"]["digest"])
 
 
 def placed(doc: dict[str, Any]) -> dict[str, tuple[str, str]]:
@@ -118,9 +127,49 @@ def test_paper_system_split_by_memory_flows_and_survives_allocator_kill(
     n = cluster.wait_until(pose_frames, lambda v: v > 0, "poses reaching the controller")
     cluster.wait_until(pose_frames, lambda v: v > n, "more poses")
 
+    # the hot standby runs INACTIVE on another robot
+    (standby,) = next(c for c in doc["components"] if c["component"] == "PositionEstimationRTC")[
+        "standbys"
+    ]
+    assert standby["robot"] != where["PositionEstimationRTC"][0]
+    cluster.wait_until(
+        lambda: status(entry)["components"][-1]["standbys"][0]["state"],
+        lambda s: s == "inactive",
+        "the hot standby INACTIVE",
+    )
+
+    # a changed system is applied with the smallest change: only the cameras' hosts restart
+    def pids() -> dict[str, int]:
+        return {i["name"]: i["pid"] for a in agents for i in a.get("/v1/instances")}
+
+    before = pids()
+    code = cli_main(
+        [
+            "deploy",
+            str(system_file(tmp_path, rate=4)),
+            "--wait",
+            "--timeout",
+            "60",
+            "--api",
+            entry.api,
+            "--token",
+            entry.token,
+        ]
+    )
+    assert code == 0, capsys.readouterr().out
+    doc = status(entry)
+    assert placed(doc) == where
+    after_change = cluster.wait_until(
+        pids, lambda p: set(p) == set(before) and all(p.values()), "hosts after the change"
+    )
+    changed = {n for n in before if before[n] != after_change[n]}
+    assert changed == {"OmnidirectionalCameraRTC", "CameraRTC"}
+
     # every agent sees the same plan
     for a in agents:
-        assert status(a)["plan"]["digest"] == doc["plan"]["digest"]
+        cluster.wait_until(
+            partial(plan_digest, a), lambda d: d == doc["plan"]["digest"], f"{a.name}'s plan"
+        )
 
     # kill -9 the allocator's agent: another robot takes over with a higher epoch, same system
     allocator = doc["allocator"]["name"]
