@@ -66,14 +66,22 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         print(f"  {comp:<28} {inst:<32} -> {robot} {role}{extra}")
     if not args.wait:
         return 0
-    return _wait(client, t0, args.timeout, json_out=args.json)
+    key = (plan.get("epoch", 0), plan.get("version", 0))
+    return _wait(client, t0, args.timeout, key, json_out=args.json)
 
 
-def _wait(client: AgentClient, t0: float, timeout: float, *, json_out: bool) -> int:
+def _wait(
+    client: AgentClient, t0: float, timeout: float, key: tuple[int, int], *, json_out: bool
+) -> int:
+    """Poll status until the deployed plan (or a newer one) is all ACTIVE."""
     seen: dict[str, tuple[Any, Any]] = {}
     doc: dict[str, Any] = {}
     while time.monotonic() - t0 < timeout:
         doc = client.get("/v1/status")
+        held = doc.get("plan") or {}
+        if (held.get("epoch", 0), held.get("version", 0)) < key:
+            time.sleep(WAIT_POLL)  # this agent has not received the deployed plan yet
+            continue
         for c in doc.get("components", []):
             now = (c.get("robot"), c.get("state"))
             if seen.get(c["component"]) != now and not json_out:

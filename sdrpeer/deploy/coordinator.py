@@ -214,7 +214,8 @@ class Coordinator:
                 allocator=plan.allocator,
                 source=source,
             )
-            self.on_change()
+            self._apply(self.cluster())  # before publishing: the record never shows the new
+            self.on_change()  # plan's key next to instance states from the old one
             self.wake()
         else:
             self.events.add(

@@ -31,11 +31,16 @@ class SinceTracker:
         return old[1]
 
 
-def instance_state(alive: Mapping[str, RobotRecord], robot: str, instance: str) -> str:
-    """What gossip says of one instance: its state, 'pending' (not running yet) or 'robot down'."""
+def instance_state(
+    alive: Mapping[str, RobotRecord], robot: str, instance: str, plan: Plan | None = None
+) -> str:
+    """What gossip says of one instance: its state, 'pending' (not running yet, or its robot
+    has not applied `plan` yet) or 'robot down'."""
     rec = alive.get(robot)
     if rec is None:
         return "robot down"
+    if plan is not None and (rec.plan is None or rec.plan.key != plan.key):
+        return "pending"
     for inst in rec.instances:
         if inst.name == instance:
             return inst.state
@@ -64,7 +69,7 @@ def status_doc(
             "standbys": [],
         }
     for p in plan.placements:
-        state = instance_state(alive, p.robot, p.instance)
+        state = instance_state(alive, p.robot, p.instance, plan)
         if p.role == "standby" and p.mode == "cold" and state == "pending":
             state = "cold"
         row = {

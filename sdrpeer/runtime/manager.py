@@ -240,7 +240,7 @@ class InstanceManager:
             InstanceInfo(
                 name=sup.name,
                 component=sup.spec.component,
-                state=sup.state.lower(),
+                state=_record_state(sup, self._desired.get(sup.name)),
                 role=sup.spec.role,
                 cpu_pct=round(sup.cpu_pct, 1),
                 rss=sup.rss,
@@ -248,6 +248,13 @@ class InstanceManager:
             )
             for _, sup in sorted(self._sups.items())
         )
+
+
+def _record_state(sup: Supervisor, desired: InstanceSpec | None) -> str:
+    """The state gossip shows: 'updating' while the running host has an outdated spec."""
+    if desired is not None and not desired.same_process(sup.spec):
+        return "updating"
+    return sup.state.lower()
 
 
 def observe(sup: Supervisor) -> Observed:

@@ -1,0 +1,74 @@
+"""`sdrpeer status`: the status document from a plan and records, and its table."""
+
+from __future__ import annotations
+
+from sdrpeer.deploy.commands import format_status
+from sdrpeer.deploy.status import SinceTracker, all_active, status_doc
+from sdrpeer.plan import Placement, Plan
+from sdrpeer.record import InstanceInfo, Metrics, PlanInfo, RobotRecord
+from sdrpeer.system.model import ComponentDef, SystemDef
+
+SYSTEM = SystemDef(
+    name="s",
+    components=(
+        ComponentDef("A", "python", "m:A"),
+        ComponentDef("B", "python", "m:B"),
+    ),
+)
+PLAN = Plan(
+    3,
+    2,
+    SYSTEM,
+    (
+        Placement("A", "A", "r1"),
+        Placement("A", "A-s1", "r2", "standby", "hot"),
+        Placement("A", "A-s2", "r2", "standby", "cold"),
+        Placement("B", "B", "r2"),
+    ),
+    "r1",
+)
+
+
+def record(instances: list[tuple[str, str]], key: tuple[int, int] | None = (3, 2)) -> RobotRecord:
+    infos = tuple(InstanceInfo(n, n[0], st, "active", 0.0, 0) for n, st in instances)
+    plan = None if key is None else PlanInfo(key[0], key[1], "d", "r1")
+    return RobotRecord(Metrics(0, 1, 1, None, None, None), {}, None, 0, infos, 0.0, plan=plan)
+
+
+def test_states_from_records_standbys_and_since() -> None:
+    since = SinceTracker()
+    alive = {
+        "r1": record([("A", "active")]),
+        "r2": record([("A-s1", "inactive"), ("B", "active")]),
+    }
+    doc = status_doc(PLAN, alive, {"name": "r1", "epoch": 3}, since, 100.0)
+    a, b = doc["components"]
+    assert (a["robot"], a["state"], a["since"]) == ("r1", "active", 100.0)
+    assert [(s["instance"], s["state"], s["mode"]) for s in a["standbys"]] == [
+        ("A-s1", "inactive", "hot"),
+        ("A-s2", "cold", "cold"),
+    ]
+    assert (b["robot"], b["state"]) == ("r2", "active")
+    assert all_active(doc)
+    again = status_doc(PLAN, alive, {"name": "r1", "epoch": 3}, since, 130.0)
+    assert again["components"][0]["since"] == 100.0  # still ACTIVE since 100
+    table = format_status(again)
+    assert "allocator: r1 (epoch 3)" in table
+    assert "plan 3.2 by r1" in table
+    assert "r2:inactive, r2:cold/cold" in table
+
+
+def test_robot_behind_the_plan_or_down_is_not_active() -> None:
+    alive = {"r1": record([("A", "active")], key=(3, 1))}
+    doc = status_doc(PLAN, alive, {"name": "r1", "epoch": 3}, SinceTracker(), 0.0)
+    a, b = doc["components"]
+    assert a["state"] == "pending"  # r1 has not applied plan 3.2 yet
+    assert b["state"] == "robot down"
+    assert not all_active(doc)
+
+
+def test_no_plan() -> None:
+    doc = status_doc(None, {}, {"name": None, "epoch": 0}, SinceTracker(), 0.0)
+    assert doc["plan"] is None
+    assert not all_active(doc)
+    assert "no system deployed" in format_status(doc)
