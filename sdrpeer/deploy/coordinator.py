@@ -88,7 +88,7 @@ class Coordinator:
         self.tick = tick
         self.adopt_after = adopt_after
         self.store = PlanStore(data_dir / "plan.json")
-        self.election = ElectionShell(name, election)
+        self.election = ElectionShell(name, election, self.store.highest_epoch)
         self._owned: set[str] = set()
         self._fetching: tuple[int, str, int] | None = None
         self._elected_at: float | None = None

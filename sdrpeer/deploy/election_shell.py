@@ -39,9 +39,13 @@ def candidate(rec: RobotRecord, thresholds: Thresholds) -> Candidate:
 class ElectionShell:
     """One robot's election, driven by the coordinator's steps."""
 
-    def __init__(self, name: str, config: ElectionConfig | None = None) -> None:
+    def __init__(
+        self, name: str, config: ElectionConfig | None = None, known_epoch: int = 0
+    ) -> None:
+        """`known_epoch`: the highest epoch this robot followed before a restart (its plan's)."""
         self.name = name
         self.config = config or lan()
+        self.known_epoch = known_epoch
         self.core: Election | None = None
 
     def update(
@@ -49,7 +53,7 @@ class ElectionShell:
     ) -> None:
         """Feed the current view; runs a due timer too."""
         if self.core is None:
-            self.core = Election(self.name, self.config, now)
+            self.core = Election(self.name, self.config, now, known_epoch=self.known_epoch)
         t = thresholds or Thresholds()
         view = {name: candidate(rec, t) for name, rec in alive.items()}
         self.core.update(now, view)
