@@ -9,7 +9,8 @@ paper's five components 2 + 2 + 1, as in the paper's Fig. 3). For each `reserve_
 paper's system (the five components of `components/`, wired as in Fig. 3, `requires: memory:
 500MB`) is deployed `--runs` times: the clock starts when `POST /v1/deploy` is sent to robot-2
 and stops when robot-2's `GET /v1/status` (polled every 10 ms) shows all five ACTIVE; then the
-system is undeployed and the next run waits until every host has exited. With `reserve_mb: 500`
+system is undeployed and the next run waits until every host has exited and every robot's
+record shows its memory free again. With `reserve_mb: 500`
 each component really allocates and touches 500 MB on activation (the paper: ~16 s on Raspberry
 Pi 4s). Election: `--kills` times a fresh lab elects an allocator, the allocator's agent is
 SIGKILLed, and the clock stops when every surviving agent names the same new allocator with a
@@ -39,6 +40,7 @@ from sdrpeer.system.loader import parse_system
 T = TypeVar("T")
 POLL = 0.01
 TARGET_DEPLOY_S = 1.0
+MEM_BACK = 1_400_000_000  # bytes free per 1700MB robot once its hosts are gone
 COMPONENTS = {
     "OmnidirectionalCameraRTC": "components.camera:OmnidirectionalCamera",
     "AnomalyDetectionRTC": "components.anomaly_detection:AnomalyDetection",
@@ -128,6 +130,12 @@ def deploy_runs(lab: RunningLab, reserve_mb: int, runs: int) -> list[float]:
             lambda rows: rows == [],
             "hosts stopped",
             60,
+        )
+        wait_for(  # the robots' records show the memory back (sampled every second)
+            lambda: entry.get("/v1/members"),
+            lambda ms: all((m.get("metrics") or {}).get("mem_free", 0) > MEM_BACK for m in ms),
+            "free memory back in every record",
+            30,
         )
     return times
 
