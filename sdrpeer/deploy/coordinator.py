@@ -77,6 +77,7 @@ class Coordinator:
         on_change: Callable[[], None],
         tick: float = 0.2,
         adopt_after: float = 1.0,
+        retry_every: float = 5.0,
         election: ElectionConfig | None = None,
     ) -> None:
         self.name = name
@@ -87,6 +88,9 @@ class Coordinator:
         self.on_change = on_change
         self.tick = tick
         self.adopt_after = adopt_after
+        self.retry_every = retry_every
+        self._last_attempt: tuple[tuple[int, str, int], frozenset[str]] | None = None
+        self._last_attempt_at = 0.0
         self.store = PlanStore(data_dir / "plan.json")
         self.election = ElectionShell(name, election, self.store.highest_epoch)
         self._owned: set[str] = set()
@@ -283,10 +287,17 @@ class Coordinator:
         if plan is None or plan.system is None:
             return
         lost = {p.robot for p in plan.placements} - set(state.alive)
-        if lost and not self._lock.locked():
-            self._reissue(plan, epoch, state, reason=f"robots gone: {', '.join(sorted(lost))}")
+        if not lost or self._lock.locked():
+            return
+        attempt = (plan.key, frozenset(state.alive))
+        if attempt == self._last_attempt and now - self._last_attempt_at < self.retry_every:
+            return  # the same plan and robots failed to place already: wait or for a change
+        self._last_attempt, self._last_attempt_at = attempt, now
+        self._reissue(plan, epoch, state, reason=f"robots gone: {', '.join(sorted(lost))}")
 
     def _reissue(self, plan: Plan, epoch: int, state: ClusterState, reason: str) -> None:
+        """Re-allocate `plan` (smallest change) under our epoch; when that is infeasible keep the
+        placements as they are (re-issued only when the epoch is new: adopting a plan)."""
         version = plan.version + 1 if plan.epoch == epoch else 1
         if plan.system is None:
             new = Plan(epoch, version, None, (), self.name)
@@ -301,7 +312,8 @@ class Coordinator:
             )
             if isinstance(result, Infeasible):
                 self.events.add(time.time(), "allocation.infeasible", self.name, report=str(result))
-                # keep what still runs: re-issue the old placements under our epoch
+                if plan.epoch == epoch and plan.allocator == self.name:
+                    return  # nothing better to issue: keep the plan we hold
                 new = Plan(epoch, version, plan.system, plan.placements, self.name)
             else:
                 new = result
