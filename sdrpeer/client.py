@@ -56,7 +56,7 @@ class AgentClient:
                 raw = response.read()
         except urllib.error.HTTPError as exc:
             message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
-            raise ApiError(message) from None
+            raise ApiError(message, exc.code) from None
         except urllib.error.URLError as exc:
             raise ApiError(unreachable_message(self.base, exc.reason)) from None
         except (TimeoutError, ConnectionError) as exc:

@@ -30,3 +30,8 @@ class ScenarioError(ConfigError):
 
 class ApiError(SdrpeerError):
     """A call to an agent's HTTP API failed (the message says which agent and why)."""
+
+    def __init__(self, message: str, status: int | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+        """The HTTP status the agent answered with, None when it could not be reached."""

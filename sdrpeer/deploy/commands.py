@@ -17,9 +17,23 @@ from typing import Any
 
 from sdrpeer.client import AgentClient
 from sdrpeer.deploy.status import all_active
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import ApiError, SdrpeerError
 
 WAIT_POLL = 0.1
+ELECTION_WAIT = 15.0
+"""How long deploy/undeploy retry while no allocator is elected yet (a lab just started)."""
+
+
+def post_when_elected(client: AgentClient, path: str, body: Any, timeout: float) -> Any:
+    """POST, retrying while the agents answer 503 (no allocator yet), for at most `timeout` s."""
+    deadline = time.monotonic() + min(timeout, ELECTION_WAIT)
+    while True:
+        try:
+            return client.post(path, body)
+        except ApiError as e:
+            if e.status != 503 or time.monotonic() > deadline:
+                raise
+        time.sleep(0.2)
 
 
 def add_deploy_parsers(
@@ -52,7 +66,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     system = load_system(args.file)
     client = _client(args)
     t0 = time.monotonic()
-    answer = client.post("/v1/deploy", {"system": system.to_json()})
+    answer = post_when_elected(client, "/v1/deploy", {"system": system.to_json()}, args.timeout)
     plan = answer.get("plan", {}) if isinstance(answer, dict) else {}
     if args.json and not args.wait:
         print(json.dumps(answer, indent=2, sort_keys=True))
@@ -135,7 +149,7 @@ def cmd_status(args: argparse.Namespace) -> int:
 
 def cmd_undeploy(args: argparse.Namespace) -> int:
     """Ask the allocator for an empty plan."""
-    answer = _client(args).post("/v1/undeploy", {})
+    answer = post_when_elected(_client(args), "/v1/undeploy", {}, ELECTION_WAIT)
     plan = answer.get("plan", {}) if isinstance(answer, dict) else {}
     print(f"undeployed: plan epoch {plan.get('epoch')} version {plan.get('version')}")
     return 0
