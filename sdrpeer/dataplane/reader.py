@@ -52,6 +52,11 @@ class FrameReader:
         arriving (so the next one starts at the front, where it fits), else all of it."""
         return self._view[self._end : self._need or None]
 
+    @property
+    def awaiting(self) -> int:
+        """Bytes still to come of a big frame that is arriving (0 between frames)."""
+        return self._need - self._end if self._need else 0
+
     def received(self, nbytes: int) -> None:
         """`nbytes` were written into the start of the last `buffer()`."""
         self._end += nbytes
