@@ -124,21 +124,30 @@ class Connection:
         """Queue a value per the policy; False when dropped or (full=block) not queued yet."""
         if self._closing:
             return False
+        if self._scheduled:  # the hot path: a flush comes this loop iteration
+            try:
+                return self._writer_offer(value)
+            except FrameError as exc:
+                raise self._refused(exc) from None
         link = self._link
-        write = link.write if link is not None and not self._scheduled and not link.paused else None
         try:
-            if not self._writer_offer(value, write):
-                return False
+            if link is None or link.paused:
+                queued = self._writer_offer(value)
+            else:  # an idle link: a small value goes out at once
+                queued = self._writer.offer_now(value, link.write)
         except FrameError as exc:
-            self.refused += 1
-            where = f"connection {self.conn_id} ({self.from_} -> {self.in_port})"
-            raise FrameError(exc.reason, f"{where}: {exc.detail}") from None
-        if not self._scheduled and link is not None:
+            raise self._refused(exc) from None
+        if queued and link is not None:
             self._scheduled = True
-            if write is None or self._queue.items:
-                self._flush()  # an idle link: a value not written at once goes out now
+            if self._queue.items:
+                self._flush()  # an idle link: what was queued goes out now
             self._loop.call_soon(self._flush_soon)  # what else is offered now goes out together
-        return True
+        return queued
+
+    def _refused(self, exc: FrameError) -> FrameError:
+        self.refused += 1
+        where = f"connection {self.conn_id} ({self.from_} -> {self.in_port})"
+        return FrameError(exc.reason, f"{where}: {exc.detail}")
 
     async def drain(self) -> None:
         """Wait until the queue has room (returns at once when it has, or when closing)."""

@@ -247,15 +247,14 @@ class FrameDecoder:
         out: list[list[Any]] = []
         try:
             for obj in unpacker:
-                frame = obj
                 if type(obj) is not list or len(obj) != 2 or type(obj[0]) is not int or obj[0] < 0:
                     if refs is None or type(obj) is not list or len(obj) != 3:
                         raise FrameError("malformed", f"frame is not [uint, value]: {_brief(obj)}")
-                    frame = refs(obj)
+                    obj = refs(obj)  # noqa: PLW2901 - the hot loop stays one name
                 start, end = end, tell()
                 if end - start > limit:
                     raise FrameError("oversized", f"frame of {end - start} bytes, max {limit}")
-                out.append(frame)
+                out.append(obj)
             if tell() - end > limit:
                 raise FrameError("oversized", f"frame over {limit} bytes (still arriving)")
         except FrameError as exc:

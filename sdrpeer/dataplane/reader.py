@@ -32,6 +32,8 @@ BIG: Final = 64 * 1024
 _GROWN_MAX: Final = 32 * 1024 * 1024
 _PEEK: Final = 16  # the longest big-frame header is 15 bytes
 _unpackb: Final = msgpack.unpackb
+_ONE: Final = 4096
+"""A read shorter than this may be one small frame alone (the latency path tries it)."""
 
 
 class FrameReader:
@@ -39,7 +41,7 @@ class FrameReader:
 
     def __init__(self, max_frame: int) -> None:
         self.decoder = FrameDecoder(max_frame)
-        self._one_max = min(BIG, max_frame + 1)
+        self._one_max = min(_ONE, max_frame + 1)
         self._array = bytearray(READ_SIZE)
         self._view = memoryview(self._array)
         self._start = 0  # first byte not yet consumed

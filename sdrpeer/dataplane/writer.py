@@ -76,10 +76,9 @@ class FrameWriter:
         """Values not fully written yet (a big one half written counts)."""
         return len(self.queue) + len(self._taken) + (self._rest is not None)
 
-    def offer(self, value: object, write: Write | None = None) -> bool:
+    def offer(self, value: object) -> bool:
         """Encode a value and queue it per the policy (False: not queued); FrameError when it
-        cannot be encoded or its frame would be over the maximum. Given `write` (an idle link)
-        and nothing pending, a small value under push all/fifo is written at once instead."""
+        cannot be encoded or its frame would be over the maximum."""
         item: Item
         if type(value) is bytes and len(value) >= BIG:
             item = _Big(value)
@@ -89,30 +88,46 @@ class FrameWriter:
             except (TypeError, ValueError, OverflowError) as exc:
                 raise FrameError("unencodable", f"{type(value).__name__}: {exc}") from None
         if len(item) > self._max_value:
-            size = len(item) + FRAME_OVERHEAD
-            detail = f"a frame of {size} bytes exceeds the maximum {self.max_frame}"
-            raise FrameError("oversized", detail)
+            raise self._oversized(len(item))
         queue = self.queue
-        if (
-            write is not None
-            and queue.simple
-            and not queue.items
-            and not self._taken
-            and self._rest is None
-            and type(item) is bytes
-            and len(item) < BIG
-            and self.seq + 1 < _SEQ32
-        ):  # the latency path: nothing waits, so this frame goes out now
-            seq = self.seq = self.seq + 1
-            data = _HEADER32(seq) + item
-            write(data)
-            self.frames_out += 1
-            self.bytes_out += len(data)
-            return True
         if queue.simple and len(queue.items) < queue.limit:  # the hot path, inlined
             queue.items.append(item)
             return True
         return self._queue_offer(item)
+
+    def offer_now(self, value: object, write: Write) -> bool:
+        """`offer`, except that with nothing pending under push all/fifo a small value is
+        numbered and written at once (the latency path: `write` is an idle link's)."""
+        queue = self.queue
+        if (
+            not queue.simple
+            or queue.items
+            or self._taken
+            or self._rest is not None
+            or self.seq + 1 >= _SEQ32
+            or (type(value) is bytes and len(value) >= BIG)
+        ):
+            return self.offer(value)
+        try:
+            item = self._pack(value)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise FrameError("unencodable", f"{type(value).__name__}: {exc}") from None
+        if len(item) > self._max_value:
+            raise self._oversized(len(item))
+        if len(item) >= BIG:
+            queue.items.append(item)  # the queue is empty: room for one at least
+            return True
+        seq = self.seq = self.seq + 1
+        data = _HEADER32(seq) + item
+        write(data)
+        self.frames_out += 1
+        self.bytes_out += len(data)
+        return True
+
+    def _oversized(self, encoded: int) -> FrameError:
+        size = encoded + FRAME_OVERHEAD
+        detail = f"a frame of {size} bytes exceeds the maximum {self.max_frame}"
+        return FrameError("oversized", detail)
 
     def flush(
         self, write: Write, paused: Callable[[], bool], ring: SenderRing | None = None
