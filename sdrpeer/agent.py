@@ -12,16 +12,15 @@ a second signal: immediate exit.
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import os
 import random
-import secrets
 import signal
 import time
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_views
+from sdrpeer.agent_files import load_token, write_agent_json
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.deploy.coordinator import ClusterState, Coordinator
@@ -50,6 +49,7 @@ from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
 from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
 from sdrpeer.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.record import (
+    InstanceInfo,
     Metrics,
     RobotRecord,
     decode_record,
@@ -89,6 +89,7 @@ class Agent:
         self._started_wall = time.time()
         self._started = 0.0
         self._published: RobotRecord | None = None
+        self._states: dict[str, tuple[str, str]] = {}
         self._last_publish = -1e9
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
@@ -112,7 +113,7 @@ class Agent:
         else:
             assert cfg.key_file is not None
             self.keyring = Keyring.from_file(cfg.key_file)
-        token = self._load_token()
+        token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
             robot_file = RobotFile.load(cfg.robot_file)
             if robot_file.name != cfg.name:
@@ -144,7 +145,7 @@ class Agent:
         await self._start_api(token)
         await self.instances.start()
         self._publish(force=True)
-        self._write_agent_json(addr)
+        write_agent_json(cfg.data_dir, self.name, addr, self.api_url)
         self.events.add(
             time.time(), "agent.start", cfg.name, gossip=f"{addr[0]}:{addr[1]}", api=self.api_url
         )
@@ -182,39 +183,11 @@ class Agent:
         (self.config.data_dir / "agent.json").unlink(missing_ok=True)
         log.info("agent %s stopped", self.name)
 
-    def _load_token(self) -> str:
-        cfg = self.config
-        path = cfg.token_file or cfg.data_dir / "token"
-        if path.is_file():
-            token = path.read_text().strip()
-            if not token:
-                raise ConfigError(f"{path}: the token file is empty")
-            return token
-        if cfg.token_file is not None:
-            raise ConfigError(f"{path}: token file not found")
-        token = secrets.token_urlsafe(32)
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w") as f:
-            f.write(token + "\n")
-        return token
-
     async def _start_api(self, token: str) -> None:
         host, port = parse_hostport(self.config.api)
         self._runner, self.api_url = await serve_api(
             self, token, host, port, extra_routes=DEPLOY_ROUTES, peer_token=peer_token(self.keyring)
         )
-
-    def _write_agent_json(self, addr: tuple[str, int]) -> None:
-        info = {
-            "name": self.name,
-            "gossip": f"{addr[0]}:{addr[1]}",
-            "api": self.api_url,
-            "pid": os.getpid(),
-        }
-        path = self.config.data_dir / "agent.json"
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(info))
-        tmp.replace(path)
 
     # ----------------------------------------------------------------- monitoring
     async def _metrics_loop(self) -> None:
@@ -253,6 +226,7 @@ class Agent:
         self._update_rates(now)
         links = self.links.snapshot(now)
         infos = self.instances.infos()
+        self._log_states(infos)
         coord = self.coordinator
         record = RobotRecord(
             metrics,
@@ -272,6 +246,25 @@ class Agent:
             self._published = record
             self._last_publish = now
             self.shell.set_record(encode_record(record))
+
+    def _log_states(self, infos: tuple[InstanceInfo, ...]) -> None:
+        """An `instance.state` event for every instance whose state or role changed."""
+        now = {i.name: (i.state, i.role) for i in infos}
+        for name, (state, role) in now.items():
+            if self._states.get(name) != (state, role):
+                comp = next(i.component for i in infos if i.name == name)
+                self.events.add(
+                    time.time(),
+                    "instance.state",
+                    self.name,
+                    instance=name,
+                    component=comp,
+                    state=state,
+                    role=role,
+                )
+        for gone in set(self._states) - set(now):
+            self.events.add(time.time(), "instance.state", self.name, instance=gone, state="gone")
+        self._states = now
 
     def _update_rates(self, now: float) -> None:
         assert self.shell is not None

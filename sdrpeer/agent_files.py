@@ -1,0 +1,41 @@
+"""The agent's files in its data directory: the API token and agent.json.
+
+How it works: the token is read from `--token-file` (which must exist) or `DATA_DIR/token`,
+generated (mode 0600) when absent. `agent.json` (name, gossip and API addresses, pid) is written
+atomically once both sockets are bound, so a lab or a person can find the agent.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+from pathlib import Path
+
+from sdrpeer.errors import ConfigError
+
+
+def load_token(data_dir: Path, token_file: Path | None) -> str:
+    """The API token: from `token_file`, else DATA_DIR/token (generated when absent)."""
+    path = token_file or data_dir / "token"
+    if path.is_file():
+        token = path.read_text().strip()
+        if not token:
+            raise ConfigError(f"{path}: the token file is empty")
+        return token
+    if token_file is not None:
+        raise ConfigError(f"{path}: token file not found")
+    token = secrets.token_urlsafe(32)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(token + "\n")
+    return token
+
+
+def write_agent_json(data_dir: Path, name: str, addr: tuple[str, int], api: str | None) -> None:
+    """DATA_DIR/agent.json, atomically."""
+    info = {"name": name, "gossip": f"{addr[0]}:{addr[1]}", "api": api, "pid": os.getpid()}
+    path = data_dir / "agent.json"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(info))
+    tmp.replace(path)
