@@ -1,12 +1,13 @@
 """Shared-memory rings: big values between two processes on one machine, outside the socket.
 
 How it works: on a ``unix://`` connection the sender creates a segment (a file in /dev/shm,
-``sdrpeer-dp-<pid>-<token>``, mapped with every page faulted in up front) and names it in its
-hello. A receiver that can map it answers ``{"ok": true, "shm": true}`` and unlinks the file at
-once; the sender unlinks it too when the reply comes, whatever it says. From then on the segment
-has no name: it lives exactly as long as one of the two processes maps it, so a crash of either
-side leaks nothing. (A sender killed between creating the file and the receiver mapping it
-leaves a name behind: `sweep` removes names whose pid is dead, each time a sender creates one.)
+``sdrpeer-dp-<pid>-<token>``) and names it in its hello (its pages are allocated, all at once,
+only when the first big value takes the ring: a connection of small values costs no memory).
+A receiver that can map it answers ``{"ok": true, "shm": true}`` and unlinks the file at once;
+the sender unlinks it too when the reply comes, whatever it says. From then on the segment has
+no name: it lives exactly as long as one of the two processes maps it, so a crash of either side
+leaks nothing. (A sender killed between creating the file and the receiver mapping it leaves a
+name behind: `sweep` removes names whose pid is dead, each time a sender creates one.)
 
 The segment is a byte ring of `size` bytes, positions counted from 0 forever (offset = position
 mod size). The sender copies a value's msgpack encoding in one piece (never across the wrap:
@@ -38,6 +39,8 @@ DEFAULT_SIZE: Final = 8 * 1024 * 1024
 _PREFIX: Final = "sdrpeer-dp-"
 _NAME: Final = re.compile(r"^sdrpeer-dp-(\d+)-[0-9a-f]{16}$")
 _REF32: Final = struct.Struct(">BBIBQBI")
+_MADV_POPULATE_READ: Final = 22  # Linux 5.14
+_MADV_POPULATE_WRITE: Final = 23
 _unpackb: Final = msgpack.unpackb
 
 
@@ -73,8 +76,13 @@ def _alive(pid: int) -> bool:
 
 
 def _map(fd: int, size: int) -> mmap.mmap:
-    flags = mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0)
-    return mmap.mmap(fd, size, flags=flags)
+    return mmap.mmap(fd, size, flags=mmap.MAP_SHARED)
+
+
+def _populate(mapping: mmap.mmap, advice: int) -> None:
+    """Fault every page of the ring in at once (one call, not a fault per page per lap)."""
+    with contextlib.suppress(OSError, ValueError):  # older kernels: pages come one by one
+        mapping.madvise(advice)
 
 
 class SenderRing:
@@ -89,6 +97,7 @@ class SenderRing:
         self._map = mapping
         self._view = memoryview(mapping)
         self._head = 0  # where the next value goes (absolute)
+        self._populated = False
         self._tail = 0  # what the receiver consumed (absolute)
 
     @classmethod
@@ -128,6 +137,9 @@ class SenderRing:
             self.blocked = True
             return None
         view = self._view
+        if not self._populated:  # the first big value: the ring is used, give it its pages
+            self._populated = True
+            _populate(self._map, _MADV_POPULATE_WRITE)
         if head:
             view[offset : offset + len(head)] = head
         view[offset + len(head) : offset + n] = body
@@ -165,6 +177,7 @@ class ReceiverRing:
         self.consumed = 0
         """Everything before this position was taken out."""
         self._checked = 0
+        self._populated = False
         self._map = mapping
         self._view = memoryview(mapping)
 
@@ -208,6 +221,9 @@ class ReceiverRing:
         bytes at once); FrameError when it is not one msgpack value."""
         _, pos, n = frame
         offset = pos % self.size
+        if not self._populated:
+            self._populated = True
+            _populate(self._map, _MADV_POPULATE_READ)
         try:
             value = _unpackb(self._view[offset : offset + n], raw=False, strict_map_key=False)
         except Exception as exc:
