@@ -113,8 +113,13 @@ def test_fig3_from_the_paper_system_file():
     placed = where(run(actives_only, three(1700 * MB)))
     per_robot = sorted(list(placed.values()).count(r) for r in ("robot-1", "robot-2", "robot-3"))
     assert per_robot == [1, 2, 2]
-    assert placed["OmnidirectionalCameraRTC"] == placed["AnomalyDetectionRTC"] == "robot-1"
-    assert placed["REDControllerRTC"] == placed["PositionEstimationRTC"]  # they talk to each other
+    assert placed == {  # the paper's Fig. 3 exactly
+        "OmnidirectionalCameraRTC": "robot-1",
+        "AnomalyDetectionRTC": "robot-1",
+        "CameraRTC": "robot-2",
+        "REDControllerRTC": "robot-2",
+        "PositionEstimationRTC": "robot-3",
+    }
 
     # with the file's hot standby on another robot each: ten 550MB instances need more room
     with_standbys = run(
