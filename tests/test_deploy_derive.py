@@ -5,8 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from sdrpeer.deploy.derive import Remote, reachable, specs_for_robot
+from sdrpeer.deploy.placer import relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.plan import Placement, Plan, plan_from_json
+from sdrpeer.system.loader import load_system
 from sdrpeer.system.model import ComponentDef, ConnectionDef, StandbySpec, SystemDef
 
 
@@ -125,3 +127,14 @@ def test_store_fences_older_allocators_and_persists(tmp_path: Path) -> None:
 def test_store_ignores_a_corrupt_file(tmp_path: Path) -> None:
     (tmp_path / "plan.json").write_text("{not json")
     assert PlanStore(tmp_path / "plan.json").plan is None
+
+
+def test_recovery_relaxes_only_the_free_memory_threshold() -> None:
+    paper = load_system(Path(__file__).parent.parent / "examples/paper/system.yaml")
+    t = paper.allocation.thresholds
+    assert t.mem_free_above_bytes == 500_000_000
+    relaxed = relaxed_for_recovery(paper)
+    assert relaxed.allocation.thresholds.mem_free_above_bytes == 250_000_000  # shortage clears
+    assert relaxed.components == paper.components
+    bare = relaxed_for_recovery(_system())
+    assert bare.allocation.thresholds.mem_free_above_bytes is None

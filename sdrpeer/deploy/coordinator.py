@@ -22,7 +22,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,7 @@ from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.derive import Remote, specs_for_robot
 from sdrpeer.deploy.election_shell import ElectionShell
-from sdrpeer.deploy.placer import Infeasible, place
+from sdrpeer.deploy.placer import Infeasible, place, relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
 from sdrpeer.election.config import ElectionConfig
@@ -79,6 +79,7 @@ class Coordinator:
         adopt_after: float = 1.0,
         retry_every: float = 5.0,
         election: ElectionConfig | None = None,
+        sick: Callable[[float], set[str]] = lambda now: set(),
     ) -> None:
         self.name = name
         self.manager = manager
@@ -89,7 +90,11 @@ class Coordinator:
         self.tick = tick
         self.adopt_after = adopt_after
         self.retry_every = retry_every
-        self._last_attempt: tuple[tuple[int, str, int], frozenset[str]] | None = None
+        self.sick = sick
+        """Robots that must give up their components now (degraded: low battery, bad link)."""
+        self._last_attempt: tuple[tuple[int, str, int], frozenset[str], frozenset[str]] | None = (
+            None
+        )
         self._last_attempt_at = 0.0
         self.store = PlanStore(data_dir / "plan.json")
         self.election = ElectionShell(name, election, self.store.highest_epoch)
@@ -263,9 +268,13 @@ class Coordinator:
         return status_doc(self.store.plan, alive, allocator, self._since, now_wall)
 
     # ----------------------------------------------------------------- the allocator
-    def view(self, state: ClusterState, origin: str | None) -> ClusterView:
-        """The allocator's view: every alive robot with a record, in first-fit order."""
+    def view(
+        self, state: ClusterState, origin: str | None, exclude: frozenset[str] = frozenset()
+    ) -> ClusterView:
+        """The allocator's view: every alive robot with a record, in first-fit order, except
+        `exclude` (robots that must not receive components: degraded, or being left)."""
         names = [n for n in state.order if n in state.alive] or sorted(state.alive)
+        names = [n for n in names if n not in exclude]
         robots = tuple(
             RobotView(n, state.alive[n].metrics, state.alive[n].links, state.alive[n].instances)
             for n in names
@@ -286,30 +295,51 @@ class Coordinator:
             return
         if plan is None or plan.system is None:
             return
-        lost = {p.robot for p in plan.placements} - set(state.alive)
-        if not lost or self._lock.locked():
+        placed_on = {p.robot for p in plan.placements}
+        lost = placed_on - set(state.alive)
+        sick = frozenset(self.sick(now))
+        if not (lost or placed_on & sick) or self._lock.locked():
             return
-        attempt = (plan.key, frozenset(state.alive))
+        attempt = (plan.key, frozenset(state.alive), sick)
         if attempt == self._last_attempt and now - self._last_attempt_at < self.retry_every:
             return  # the same plan and robots failed to place already: wait or for a change
         self._last_attempt, self._last_attempt_at = attempt, now
-        self._reissue(plan, epoch, state, reason=f"robots gone: {', '.join(sorted(lost))}")
+        why = [f"robots gone: {', '.join(sorted(lost))}"] if lost else []
+        if placed_on & sick:
+            why.append(f"robots degraded: {', '.join(sorted(placed_on & sick))}")
+        self._reissue(plan, epoch, state, reason="; ".join(why), exclude=sick, recovery=True)
 
-    def _reissue(self, plan: Plan, epoch: int, state: ClusterState, reason: str) -> None:
+    def _reissue(
+        self,
+        plan: Plan,
+        epoch: int,
+        state: ClusterState,
+        reason: str,
+        *,
+        exclude: frozenset[str] = frozenset(),
+        recovery: bool = False,
+    ) -> None:
         """Re-allocate `plan` (smallest change) under our epoch; when that is infeasible keep the
-        placements as they are (re-issued only when the epoch is new: adopting a plan)."""
+        placements as they are (re-issued only when the epoch is new: adopting a plan).
+
+        `recovery`: components are moving because of a failure; the robots receiving them only
+        need to stay out of the recovery rules' memory shortage, not above the allocation's
+        free-memory threshold (as in the paper, where robot-3 ends below Table V's 500MB)."""
         version = plan.version + 1 if plan.epoch == epoch else 1
         if plan.system is None:
             new = Plan(epoch, version, None, (), self.name)
         else:
+            system = relaxed_for_recovery(plan.system) if recovery else plan.system
             result = place(
-                plan.system,
-                self.view(state, None),
+                system,
+                self.view(state, None, exclude),
                 epoch=epoch,
                 version=version,
                 allocator=self.name,
                 previous=plan,
             )
+            if not isinstance(result, Infeasible):
+                result = replace(result, system=plan.system)
             if isinstance(result, Infeasible):
                 self.events.add(time.time(), "allocation.infeasible", self.name, report=str(result))
                 if plan.epoch == epoch and plan.allocator == self.name:

@@ -6,13 +6,33 @@ returns either the new `Plan` or the `Infeasible` report (never a partial plan).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.result import Infeasible
 from sdrpeer.alloc.view import ClusterView
 from sdrpeer.plan import Plan
 from sdrpeer.system.model import SystemDef
 
-__all__ = ["Infeasible", "place"]
+RECOVERY_MEMORY_CAUSE = "memory_shortage"
+
+
+def relaxed_for_recovery(system: SystemDef) -> SystemDef:
+    """`system` with the free-memory threshold of allocation (Table V) replaced by the level at
+    which the recovery rules see a memory shortage (Table VI's 200MB; its clearing level if
+    set): components moved by recovery may leave a robot below the allocation threshold, but
+    must not cause a shortage there. Without a memory_shortage rule: only capacity."""
+    level: float | None = None
+    for rule in system.recovery.rules:
+        if rule.cause == RECOVERY_MEMORY_CAUSE and rule.metric == "mem_free":
+            level = rule.clear if rule.clear is not None else rule.threshold
+    t = replace(
+        system.allocation.thresholds, mem_free_above_bytes=None if level is None else int(level)
+    )
+    return replace(system, allocation=replace(system.allocation, thresholds=t))
+
+
+__all__ = ["Infeasible", "place", "relaxed_for_recovery"]
 
 
 def place(
