@@ -15,8 +15,9 @@ A supervisor task owns the socket: it dials `to`, writes the hello, waits for th
 until the link drops, `repoint` changes the address, or `close` is called. A drop is redialed
 with exponential backoff (pending values stay queued, up to the buffer; frames lost inside the
 dead socket show up as a gap in seq at the receiver). `repoint` detaches the link at once, so
-later frames wait for the new peer, and closes the old transport, which still flushes what it
-was handed. seq counts frames written to this connection, starting at 1, across redials.
+later frames wait for the new peer, and shuts the old link, which still delivers what it was
+handed. seq counts frames written to this connection, starting at 1, across redials. The socket
+itself (and, on a Unix socket, the shared-memory ring big values take) is `link.Link`'s.
 """
 
 from __future__ import annotations
