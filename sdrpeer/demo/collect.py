@@ -87,7 +87,7 @@ class Collector:
         return self._cursor.get(agent, 0)
 
     def _t(self, wall: float) -> float:
-        return round(wall - self.start, 3)
+        return round(wall - self.start, 3) + 0.0  # never -0.0
 
     def round(self, answers: Sequence[Answer]) -> list[Line]:
         """The lines one poll round adds, given every agent's answer (or failure)."""
