@@ -55,6 +55,11 @@ class FrameReader:
         return self._view[self._end : self._need or None]
 
     @property
+    def big_frame(self) -> bool:
+        """True while a big frame is arriving."""
+        return self._need > 0
+
+    @property
     def awaiting(self) -> int:
         """Bytes still to come of a big frame that is arriving (0 between frames)."""
         return self._need - self._end if self._need else 0

@@ -194,7 +194,7 @@ class _Receiver(asyncio.BufferedProtocol):
             self._bad(exc)
             return
         self._deliver(frames)
-        if self._sock is not None:
+        if self._sock is not None and (reader.big_frame or self._lowat != 1):
             self._wake_later(reader.awaiting)
         ring = self.ring
         if ring is not None and ring.consumed != self._credited and self.port is not None:
