@@ -4,10 +4,12 @@ How it works: subclass `Component`, declare `OutPort`/`InPort`/`Param` attribute
 execution context (`Periodic` or `OnInput`), override the `on_*` callbacks (sync or async).
 The host (`python -m sdrpeer.host`) wraps the instance in a `ComponentRunner`, which drives the
 lifecycle of sdrpeer.sdk.lifecycle and reports every state change at once; the data plane
-attaches sinks to OutPorts and delivers received frames to InPorts (docs/protocol.md).
+attaches sinks to OutPorts and delivers received frames to InPorts (docs/protocol.md). Faults a
+component detects (`report_fault`) follow sdrpeer.sdk.faults; its working state moves to a new
+instance through `on_snapshot`/`on_restore` (sdrpeer.sdk.handoff).
 """
 
-from sdrpeer.sdk.component import FAULT_KINDS, Component
+from sdrpeer.sdk.component import Component
 from sdrpeer.sdk.errors import (
     CallbackError,
     ComponentError,
@@ -17,6 +19,8 @@ from sdrpeer.sdk.errors import (
     PortError,
 )
 from sdrpeer.sdk.execution import OnInput, Periodic
+from sdrpeer.sdk.faults import FAULT_EFFECTS, FAULT_KINDS, FaultEffect
+from sdrpeer.sdk.handoff import HANDOFF_STATES
 from sdrpeer.sdk.lifecycle import LifecycleState
 from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.policy import ConnectorPolicy
@@ -24,12 +28,15 @@ from sdrpeer.sdk.ports import FrameSink, InPort, InPortRuntime, OutPort, OutPort
 from sdrpeer.sdk.runner import ComponentRunner
 
 __all__ = [
+    "FAULT_EFFECTS",
     "FAULT_KINDS",
+    "HANDOFF_STATES",
     "CallbackError",
     "Component",
     "ComponentError",
     "ComponentRunner",
     "ConnectorPolicy",
+    "FaultEffect",
     "FrameSink",
     "InPort",
     "InPortRuntime",

@@ -5,25 +5,25 @@ How it works: a subclass declares `OutPort`/`InPort`/`Param` class attributes an
 first) and checks the declaration, so a mistake fails at import with the class and attribute
 named. Each instance gets its own runtime ports and param values. The callbacks below are no-ops
 to override, each either a plain method or `async def`; `ComponentRunner` (sdrpeer.sdk.runner)
-calls them around the lifecycle transitions of sdrpeer.sdk.lifecycle.
+calls them around the lifecycle transitions of sdrpeer.sdk.lifecycle. `report_fault` and its
+three shorthands hand a fault to the runner (sdrpeer.sdk.faults: which kinds also move to ERROR);
+`on_snapshot`/`on_restore` carry the working state to a new instance (sdrpeer.sdk.handoff).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, ClassVar, Final
 
 from sdrpeer.sdk.errors import ComponentError, ParamError, PortError
 from sdrpeer.sdk.execution import ExecutionContext, OnInput, Periodic
+from sdrpeer.sdk.faults import FAULT_KINDS, FaultHook, check_kind
 from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.ports import InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
 
-__all__ = ["FAULT_KINDS", "Component"]
+__all__ = ["FAULT_KINDS", "Component", "FaultHook"]
 
-FAULT_KINDS: Final = ("hardware_failure", "abnormal_behavior", "emergency_stop")
-
-FaultHook = Callable[[str, str], None]
 _INSTANCE_ATTRS: Final = frozenset({"instance_name", "log", "last_error"})
 
 
@@ -152,13 +152,26 @@ class Component:
         """Port name -> counters, as sent in the control channel's `heartbeat`."""
         return {n: p.counters() for n, p in self._ports.items()}
 
+    # -- faults (sdrpeer.sdk.faults): callable from any callback or thread --------------------
+
     def report_fault(self, kind: str, detail: str = "") -> None:
-        """Tell the agent about a fault (kinds in FAULT_KINDS); logged if no runner listens."""
-        if kind not in FAULT_KINDS:
-            raise ValueError(f"report_fault: kind {kind!r} not in {', '.join(FAULT_KINDS)}")
+        """Tell the agent about a fault (kinds in FAULT_KINDS); some also move to ERROR."""
+        check_kind(kind)
         self.log.warning("fault %s: %s", kind, detail)
         if self._fault_hook is not None:
-            self._fault_hook(kind, detail)
+            self._fault_hook(kind, str(detail))
+
+    def hardware_failure(self, detail: str = "") -> None:
+        """A device failed or disconnected: report it and move to ERROR (through on_aborting)."""
+        self.report_fault("hardware_failure", detail)
+
+    def abnormal_behaviour(self, detail: str = "") -> None:
+        """The robot behaves abnormally: report it; the component keeps its state."""
+        self.report_fault("abnormal_behaviour", detail)
+
+    def emergency_stop(self, detail: str = "") -> None:
+        """Emergency stop: report it and move to ERROR (on_aborting makes the hardware safe)."""
+        self.report_fault("emergency_stop", detail)
 
     def _names(self, kind: str) -> str:
         return ", ".join(type(self).port_names()[kind]) or "none"
@@ -191,3 +204,12 @@ class Component:
 
     def on_params_changed(self, changed: dict[str, Any]) -> Any:
         """Params changed while running; `changed` maps each changed name to its new value."""
+
+    # -- state handoff (sdrpeer.sdk.handoff) -------------------------------------------------
+
+    def on_snapshot(self) -> Any:
+        """The working state a new instance needs to continue (msgpack-able); None: nothing."""
+        return None
+
+    def on_restore(self, state: Any) -> Any:
+        """Take over `state` from an earlier instance's `on_snapshot`; raise to refuse it."""

@@ -12,7 +12,10 @@ ahead when it falls a whole period behind) and sleeps on a future that state and
 wake early; `OnInput` runs once per frame accepted by the port and not yet consumed. While
 ACTIVE it calls `on_execute`; while in ERROR `on_error` (a failure there is logged once).
 Because a transition waits for a running `on_execute`, an async `on_execute` must return
-(read with `read()`/`get_nowait()`, not an endless `async for`).
+(read with `read()`/`get_nowait()`, not an endless `async for`). Faults (sdrpeer.sdk.faults) reach
+the `on_fault` hooks at once; a move to ERROR they ask for is applied by `_settle`, the first
+thing everything does under the lock. `snapshot`/`restore` (sdrpeer.sdk.handoff) run
+`on_snapshot`/`on_restore` under the lock too; their failures are refusals, not ERROR.
 """
 
 from __future__ import annotations
@@ -24,9 +27,11 @@ import inspect
 from collections.abc import Callable, Mapping
 from typing import Any, Final
 
-from sdrpeer.sdk.component import Component, FaultHook
+from sdrpeer.sdk.component import Component
 from sdrpeer.sdk.errors import CallbackError, LifecycleError
 from sdrpeer.sdk.execution import OnInput, Periodic
+from sdrpeer.sdk.faults import FaultHook, FaultRelay
+from sdrpeer.sdk.handoff import call_restore, call_snapshot, check_handoff
 from sdrpeer.sdk.inport import InPortRuntime
 from sdrpeer.sdk.lifecycle import LifecycleState, next_state
 
@@ -52,14 +57,16 @@ class ComponentRunner:
         """How many times `on_execute` was called."""
         self._state = S.CREATED
         self._state_hooks: list[StateHook] = []
-        self._fault_hooks: list[FaultHook] = []
+        self.fault: str | None = None
+        """The fault kind that put the component in ERROR (None: a callback failed, or no ERROR)."""
+        self._faults = FaultRelay(self._apply_fault)
         self._lock = asyncio.Lock()
         self._task: asyncio.Task[None] | None = None
         self._waiter: asyncio.Future[None] | None = None
         self._pending = 0
         self._initialized = False
         self._on_error_failed = False
-        component._fault_hook = self._fault
+        component._fault_hook = self._faults.report
         ex = type(component).execution
         self._input: InPortRuntime | None = None
         if isinstance(ex, OnInput):
@@ -83,14 +90,16 @@ class ComponentRunner:
         self._state_hooks.append(callback)
 
     def on_fault(self, callback: FaultHook) -> None:
-        """Call `callback(kind, detail)` when the component calls `report_fault`."""
-        self._fault_hooks.append(callback)
+        """Call `callback(kind, detail)` on the loop, at once, for every fault reported."""
+        self._faults.hooks.append(callback)
 
     # -- lifecycle commands ----------------------------------------------------------------
 
     async def initialize(self) -> None:
         """CREATED -> INACTIVE (on_initialize); starts the execution context."""
+        self._faults.loop = asyncio.get_running_loop()
         async with self._lock:
+            await self._settle()
             target = next_state(self._state, "initialize")
             self._start()
             await self._guarded("on_initialize", self.component.on_initialize)
@@ -100,6 +109,7 @@ class ComponentRunner:
     async def activate(self) -> None:
         """INACTIVE -> ACTIVE (on_activated)."""
         async with self._lock:
+            await self._settle()
             target = next_state(self._state, "activate")
             await self._guarded("on_activated", self.component.on_activated)
             self._set(target)
@@ -107,6 +117,7 @@ class ComponentRunner:
     async def deactivate(self) -> None:
         """ACTIVE -> INACTIVE (on_deactivated); waits for a running on_execute to finish."""
         async with self._lock:
+            await self._settle()
             target = next_state(self._state, "deactivate")
             await self._guarded("on_deactivated", self.component.on_deactivated)
             self._set(target)
@@ -114,6 +125,7 @@ class ComponentRunner:
     async def reset(self) -> None:
         """ERROR -> INACTIVE (on_reset; then on_initialize if that had never succeeded)."""
         async with self._lock:
+            await self._settle()
             target = next_state(self._state, "reset")
             await self._guarded("on_reset", self.component.on_reset)
             if not self._initialized:
@@ -128,6 +140,7 @@ class ComponentRunner:
         A failing on_finalize is logged and reported with the FINALIZED state, not raised.
         """
         async with self._lock:
+            await self._settle()
             if self._state is S.ACTIVE:
                 with contextlib.suppress(CallbackError):  # now in ERROR: finalize from there
                     await self._guarded("on_deactivated", self.component.on_deactivated)
@@ -152,6 +165,7 @@ class ComponentRunner:
         """
         values = self.component.convert_params(params)
         async with self._lock:
+            await self._settle()
             if self._state is S.FINALIZED:
                 raise LifecycleError("set_params", S.FINALIZED.value, "it is finalized")
             current = self.component._param_values
@@ -174,10 +188,26 @@ class ComponentRunner:
             await self._guarded("on_params_changed", self.component.on_params_changed, changed)
             return changed
 
+    async def snapshot(self) -> Any:
+        """`on_snapshot()`'s value (None without one); INACTIVE, ACTIVE or ERROR (handoff rules)."""
+        async with self._lock:
+            await self._settle()
+            check_handoff("snapshot", self._state)
+            return await call_snapshot(self.component)
+
+    async def restore(self, state: Any) -> None:
+        """Hand `state` to `on_restore`; INACTIVE or ACTIVE; CallbackError if it refuses."""
+        async with self._lock:
+            await self._settle()
+            check_handoff("restore", self._state)
+            await call_restore(self.component, state)
+
     # -- internals -------------------------------------------------------------------------
 
     def _set(self, state: LifecycleState, error: str | None = None) -> None:
         self._state = state
+        if state is not S.ERROR:
+            self.fault = None
         self._kick()
         for hook in tuple(self._state_hooks):
             try:
@@ -208,22 +238,33 @@ class ComponentRunner:
     async def _fail(self, name: str, exc: Exception) -> str:
         """Record the error, enter ERROR (hooks called at once), then run on_aborting."""
         text = self._record(name, exc)
+        await self._enter_error(text, None)
+        return text
+
+    async def _enter_error(self, text: str, fault: str | None) -> None:
         was = self._state
         if was is not S.ERROR:
+            self.fault = fault
             self._set(next_state(was, "error"), text)
             if was is S.ACTIVE:
                 try:
                     await self._call(self.component.on_aborting)
                 except Exception as abort_exc:
                     self.component.log.error("on_aborting failed", exc_info=abort_exc)
-        return text
 
-    def _fault(self, kind: str, detail: str) -> None:
-        for hook in tuple(self._fault_hooks):
-            try:
-                hook(kind, detail)
-            except Exception:
-                self.component.log.exception("on_fault hook failed")
+    async def _apply_fault(self) -> None:
+        """A fault asks for ERROR: apply it as soon as the lock is free."""
+        async with self._lock:
+            await self._settle()
+
+    async def _settle(self) -> None:
+        """Apply a fault's pending move to ERROR (under the lock, before anything else)."""
+        due = self._faults.take()
+        if due is None or self._state in (S.ERROR, S.FINALIZED):
+            return
+        kind, text = due
+        self.component.last_error = text
+        await self._enter_error(text, kind)
 
     def _kick(self) -> None:
         w = self._waiter
@@ -256,6 +297,8 @@ class ComponentRunner:
 
     async def _tick(self) -> None:
         async with self._lock:
+            if self._faults.pending is not None:
+                await self._settle()
             state = self._state
             if state is S.ACTIVE:
                 self.executions += 1

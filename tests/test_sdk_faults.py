@@ -1,0 +1,245 @@
+"""Faults a component reports (sdrpeer.sdk.faults): the table, hooks, ERROR moves, threads."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+
+from sdrpeer.sdk import (
+    FAULT_EFFECTS,
+    FAULT_KINDS,
+    Component,
+    ComponentRunner,
+    FaultEffect,
+    LifecycleState,
+    Periodic,
+)
+from sdrpeer.sdk.faults import moves_to_error
+
+S = LifecycleState
+
+
+class Robot(Component):
+    """Reports the fault named in `fault_on_execute` from its next on_execute; records callbacks."""
+
+    execution = Periodic(hz=200.0)
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(name)
+        self.calls: list[str] = []
+        self.fault_on_execute: tuple[str, str] | None = None
+        self.fault_on_initialize: tuple[str, str] | None = None
+
+    def on_initialize(self) -> None:
+        self.calls.append("on_initialize")
+        if self.fault_on_initialize is not None:
+            self.report_fault(*self.fault_on_initialize)
+
+    def on_execute(self) -> None:
+        self.calls.append("on_execute")
+        fault, self.fault_on_execute = self.fault_on_execute, None
+        if fault is not None:
+            self.report_fault(*fault)
+            self.calls.append("after report")
+
+    def on_aborting(self) -> None:
+        self.calls.append("on_aborting")
+
+    def on_reset(self) -> None:
+        self.calls.append("on_reset")
+
+    def on_finalize(self) -> None:
+        self.calls.append("on_finalize")
+
+
+class AsyncRobot(Robot):
+    """Reports from an async on_execute, across an await."""
+
+    async def on_execute(self) -> None:  # type: ignore[override]
+        self.calls.append("on_execute")
+        fault, self.fault_on_execute = self.fault_on_execute, None
+        if fault is not None:
+            await asyncio.sleep(0)
+            self.report_fault(*fault)
+            await asyncio.sleep(0.01)
+            self.calls.append("after report")
+
+
+@pytest.fixture
+async def runner() -> AsyncIterator[ComponentRunner]:
+    r = ComponentRunner(Robot("bot"))
+    yield r
+    if r.state is not S.FINALIZED:
+        await r.finalize()
+
+
+def bot(r: ComponentRunner) -> Robot:
+    assert isinstance(r.component, Robot)
+    return r.component
+
+
+def state_of(r: ComponentRunner) -> LifecycleState:
+    return r.state
+
+
+def fault_of(r: ComponentRunner) -> str | None:
+    return r.fault
+
+
+async def until(predicate: Any, within: float = 2.0) -> None:
+    async with asyncio.timeout(within):
+        while not predicate():  # noqa: ASYNC110 - polling state the test does not own
+            await asyncio.sleep(0.002)
+
+
+def record(r: ComponentRunner) -> tuple[list[tuple[str, str]], list[tuple[S, str | None, Any]]]:
+    faults: list[tuple[str, str]] = []
+    states: list[tuple[S, str | None, Any]] = []
+    r.on_fault(lambda k, d: faults.append((k, d)))
+    r.on_state(lambda s, e: states.append((s, e, r.fault)))
+    return faults, states
+
+
+@pytest.mark.parametrize(
+    ("kind", "effect"),
+    [
+        ("hardware_failure", FaultEffect.ERROR),
+        ("emergency_stop", FaultEffect.ERROR),
+        ("abnormal_behaviour", FaultEffect.REPORT),
+    ],
+)
+def test_the_effect_table(kind: str, effect: FaultEffect) -> None:
+    assert FAULT_EFFECTS[kind] is effect
+    assert moves_to_error(kind) is (effect is FaultEffect.ERROR)
+    assert kind in FAULT_KINDS
+
+
+def test_unknown_kind_is_refused_in_the_caller() -> None:
+    with pytest.raises(ValueError, match=r"kind 'overheat' not in hardware_failure, "):
+        Robot().report_fault("overheat")
+    assert not moves_to_error("overheat")
+
+
+def test_shorthands_without_a_runner_only_log(caplog: pytest.LogCaptureFixture) -> None:
+    comp = Robot("lonely")
+    comp.hardware_failure("camera unplugged")
+    comp.abnormal_behaviour("wheel slip")
+    comp.emergency_stop()
+    text = caplog.text
+    assert "fault hardware_failure: camera unplugged" in text
+    assert "fault abnormal_behaviour: wheel slip" in text
+    assert "fault emergency_stop" in text
+
+
+@pytest.mark.parametrize("cls", [Robot, AsyncRobot])
+async def test_emergency_stop_from_on_execute_reports_at_once_then_errors_through_aborting(
+    cls: type[Robot],
+) -> None:
+    r = ComponentRunner(cls("bot"))
+    faults, states = record(r)
+    await r.initialize()
+    await r.activate()
+    bot(r).fault_on_execute = ("emergency_stop", "bumper pressed")
+    await until(lambda: faults)
+    assert faults == [("emergency_stop", "bumper pressed")]
+    await until(lambda: state_of(r) is S.ERROR)
+    assert states[-1] == (S.ERROR, "emergency_stop: bumper pressed", "emergency_stop")
+    assert r.fault == "emergency_stop"
+    assert r.last_error == "emergency_stop: bumper pressed"
+    calls = bot(r).calls
+    # The callback that reported ran to its end before on_aborting: callbacks never interleave.
+    assert calls.index("after report") < calls.index("on_aborting")
+    assert calls.count("on_aborting") == 1
+    await r.reset()
+    assert (state_of(r), r.last_error is not None, fault_of(r)) == (S.INACTIVE, True, None)
+    await r.finalize()
+
+
+async def test_abnormal_behaviour_only_reports(runner: ComponentRunner) -> None:
+    faults, states = record(runner)
+    await runner.initialize()
+    await runner.activate()
+    bot(runner).fault_on_execute = ("abnormal_behaviour", "turning without a command")
+    await until(lambda: faults)
+    await asyncio.sleep(0.05)
+    assert faults == [("abnormal_behaviour", "turning without a command")]
+    assert state_of(runner) is S.ACTIVE
+    assert "on_aborting" not in bot(runner).calls
+    assert [s for s, _, _ in states] == [S.INACTIVE, S.ACTIVE]
+
+
+async def test_hardware_failure_from_a_thread_while_inactive(runner: ComponentRunner) -> None:
+    seen_on: list[int] = []
+    runner.on_fault(lambda k, d: seen_on.append(threading.get_ident()))
+    await runner.initialize()
+    thread = threading.Thread(target=bot(runner).hardware_failure, args=("lidar gone",))
+    thread.start()
+    thread.join()
+    await until(lambda: state_of(runner) is S.ERROR)
+    assert seen_on == [threading.get_ident()]  # handed over to the loop's thread
+    assert runner.last_error == "hardware_failure: lidar gone"
+    assert "on_aborting" not in bot(runner).calls  # it was not ACTIVE
+
+
+async def test_many_threads_reporting_at_once_lose_nothing(runner: ComponentRunner) -> None:
+    faults, _ = record(runner)
+    await runner.initialize()
+    await runner.activate()
+    threads = [
+        threading.Thread(target=bot(runner).abnormal_behaviour, args=(f"t{i}",)) for i in range(8)
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    await until(lambda: len(faults) == 8)
+    assert sorted(d for _, d in faults) == [f"t{i}" for i in range(8)]
+
+
+async def test_fault_during_on_initialize_errors_after_it() -> None:
+    comp = Robot("bot")
+    comp.fault_on_initialize = ("hardware_failure", "no camera at /dev/video0")
+    r = ComponentRunner(comp)
+    _faults, states = record(r)
+    await r.initialize()  # on_initialize itself returned: the transition completes
+    await until(lambda: state_of(r) is S.ERROR)
+    assert [s for s, _, _ in states] == [S.INACTIVE, S.ERROR]
+    await r.finalize()
+
+
+async def test_a_transition_asked_right_after_the_fault_sees_error_first(
+    runner: ComponentRunner,
+) -> None:
+    await runner.initialize()
+    await runner.activate()
+    bot(runner).emergency_stop("e-stop button")  # on the loop, outside any callback
+    with pytest.raises(Exception, match="cannot deactivate: component is ERROR"):
+        await runner.deactivate()
+    assert bot(runner).calls.count("on_aborting") == 1
+
+
+async def test_finalize_right_after_the_fault_still_aborts_first(runner: ComponentRunner) -> None:
+    await runner.initialize()
+    await runner.activate()
+    bot(runner).emergency_stop("e-stop button")
+    await runner.finalize()
+    calls = [c for c in bot(runner).calls if c != "on_execute"]
+    assert calls[-2:] == ["on_aborting", "on_finalize"]
+
+
+async def test_a_fault_in_error_is_reported_but_changes_nothing(runner: ComponentRunner) -> None:
+    faults, states = record(runner)
+    await runner.initialize()
+    await runner.activate()
+    bot(runner).emergency_stop("first")
+    await until(lambda: state_of(runner) is S.ERROR)
+    bot(runner).hardware_failure("second")
+    await asyncio.sleep(0.02)
+    assert [k for k, _ in faults] == ["emergency_stop", "hardware_failure"]
+    assert [s for s, _, _ in states].count(S.ERROR) == 1
+    assert runner.last_error == "emergency_stop: first"
+    assert bot(runner).calls.count("on_aborting") == 1
