@@ -236,10 +236,8 @@ def summary_table(timeline: list[dict[str, Any]]) -> str:
         if kind == "mark":
             text = f"mark {line.get('what')}: {line.get('label', '')}"
         elif kind == "state":
-            text = (
-                f"{line.get('robot')}: {line.get('instance')} ({line.get('component')}) "
-                f"{line.get('state')}, role {line.get('role')}"
-            )
+            state, role = line.get("state"), line.get("role")
+            text = f"{line.get('robot')}: {_instance(line)} {state}, role {role}"
         elif kind == "event":
             text = f"{line.get('robot')}: {line.get('event')} {_short(line.get('detail'))}"
         elif kind == "agent" and line.get("status") == "down":
@@ -248,6 +246,12 @@ def summary_table(timeline: list[dict[str, Any]]) -> str:
             continue
         rows.append(f"{float(line['t']):10.2f}  {text.rstrip()}")
     return "\n".join(rows) + "\n"
+
+
+def _instance(line: dict[str, Any]) -> str:
+    """'CameraRTC-s1', or 'cam-a (CameraRTC)' when the name does not tell the component."""
+    name, component = str(line.get("instance")), str(line.get("component") or "")
+    return name if name.startswith(component) else f"{name} ({component})"
 
 
 def _short(detail: Any, width: int = 70) -> str:
