@@ -5,6 +5,7 @@ from __future__ import annotations
 import msgpack
 import pytest
 
+from sdrpeer.control_parts import parts
 from sdrpeer.host import control
 from sdrpeer.host.control import Command, ControlDecoder, ControlProtocolError
 
@@ -90,7 +91,64 @@ def test_report_builders() -> None:
         "ts": 1.0,
         "ports": {"p": {"frames_in": 1}},
     }
-    assert control.fault("overheat", "92 C") == {"t": "fault", "kind": "overheat", "detail": "92 C"}
+    assert control.fault("emergency_stop", "bumper", 3.0) == {
+        "t": "fault",
+        "kind": "emergency_stop",
+        "detail": "bumper",
+        "ts": 3.0,
+    }
+    assert control.state("ERROR", 1.0, "emergency_stop: bumper", "emergency_stop")["fault"] == (
+        "emergency_stop"
+    )
+    assert control.reply(5, True, size=9) == {
+        "t": "reply",
+        "id": 5,
+        "ok": True,
+        "error": None,
+        "size": 9,
+    }
     hello = control.hello(pid=7, component="C", ports={"in": [], "out": []}, params={}, data={})
     assert hello["protocol"] == 1
     assert msgpack.unpackb(control.encode(hello)) == hello
+
+
+def test_parts_before_a_command_become_its_blob() -> None:
+    blob = bytes(range(256)) * 2000  # 512000 bytes: two parts
+    stream = b"".join(pack(m) for m in parts(7, blob))
+    stream += pack({"t": "restore", "id": 7, "size": len(blob)})
+    for cut in (0, 1, 100_000, len(stream) - 1):
+        decoder = ControlDecoder()
+        got = decoder.feed(stream[:cut]) + decoder.feed(stream[cut:])
+        assert [(c.t, c.id, c.blob, c.blob_error) for c in got] == [("restore", 7, blob, None)]
+
+
+@pytest.mark.parametrize(
+    ("stream", "error"),
+    [
+        ([{"t": "restore", "id": 1, "size": 3}], "got 0 bytes in parts, 'size' says 3"),
+        (
+            [{"t": "part", "of": 1, "data": b"ab"}, {"t": "restore", "id": 1, "size": "2"}],
+            "'size' must be a non-negative integer",
+        ),
+        (
+            [{"t": "part", "of": 2, "data": b"ab"}, {"t": "restore", "id": 1, "size": 2}],
+            "got 0 bytes",
+        ),
+        (
+            [{"t": "part", "of": 1, "data": b"x" * 60}] * 2
+            + [{"t": "restore", "id": 1, "size": 1}],
+            "over the limit of 100 bytes",
+        ),
+    ],
+)
+def test_parts_that_do_not_add_up_are_the_commands_error(stream: list[object], error: str) -> None:
+    decoder = ControlDecoder(max_blob=100)
+    (command,) = decoder.feed(b"".join(pack(m) for m in stream))
+    assert command.blob is None
+    assert command.blob_error is not None
+    assert error in command.blob_error
+
+
+def test_a_malformed_part_is_a_protocol_error() -> None:
+    with pytest.raises(ControlProtocolError, match="'of' must be an integer"):
+        ControlDecoder().feed(pack({"t": "part", "of": "x", "data": b""}))

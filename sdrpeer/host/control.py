@@ -4,11 +4,13 @@ How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CON
 read from it go through `ControlDecoder`, a pure core: the shared framing
 (`sdrpeer.control_stream`, the same code the agent uses) cuts the msgpack stream into values and
 enforces the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
-`ControlProtocolError`); maps carrying an integer `"id"` become `Command`s. The report builders
-(`hello`, `state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs, `now`
-included. `ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a
-callback, writes reports at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once
-when the channel ends: the agent closed it (the agent died), a protocol error closed it, or the
+`ControlProtocolError`); maps carrying an integer `"id"` become `Command`s. `part` maps (a big
+value cut up, `sdrpeer.control_parts`) are collected, and the command they belong to (it says
+`"size"`) gets their bytes as `Command.blob`, or `blob_error`. The report builders (`hello`,
+`state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs, `now` included.
+`ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a callback,
+writes reports at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once when
+the channel ends: the agent closed it (the agent died), a protocol error closed it, or the
 parent pid changed. A host must never outlive its agent, so `arm_parent_death_signal` also asks
 Linux to send SIGTERM when the parent goes away (unless the agent armed a signal of its own, e.g.
 SIGKILL in its pre-exec hook: that one is kept).
@@ -27,6 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from sdrpeer.control_parts import MAX_BLOB, PartAssembler, PartError, check_part
 from sdrpeer.control_stream import (
     MAX_MESSAGE,
     PROTOCOL,
@@ -69,13 +72,20 @@ class Command:
     """The id the reply carries back."""
     msg: Message
     """The whole map, for the command's own fields."""
+    blob: bytes | None = None
+    """The bytes its `part` messages carried, when the command says `"size"`."""
+    blob_error: str | None = None
+    """Why those parts did not add up (then `blob` is None)."""
 
 
 class ControlDecoder:
     """Cuts the byte stream from the agent into commands (pure: no I/O, no clock)."""
 
-    def __init__(self, max_message: int = MAX_MESSAGE) -> None:
+    def __init__(self, max_message: int = MAX_MESSAGE, max_blob: int = MAX_BLOB) -> None:
         self._stream = MessageStream(max_message)
+        self._parts = PartAssembler()
+        self.max_blob = max_blob
+        """The most bytes one command's parts may carry."""
         self.ignored = 0
         """Maps that were well-formed but not commands (no integer id): logged and skipped."""
 
@@ -84,12 +94,27 @@ class ControlDecoder:
         out: list[Command] = []
         for msg in self._stream.feed(data):
             ident = msg.get("id")
+            if msg["t"] == "part" and ident is None:
+                try:
+                    self._parts.add(*check_part(msg), self.max_blob)
+                except PartError as exc:
+                    raise ControlProtocolError(str(exc)) from None
+                continue
             if type(ident) is not int:
                 self.ignored += 1
                 log.warning("control: %r without an integer id ignored", msg["t"])
                 continue
-            out.append(Command(t=msg["t"], id=ident, msg=msg))
+            out.append(self._command(msg, ident))
         return out
+
+    def _command(self, msg: Message, ident: int) -> Command:
+        if "size" not in msg:
+            return Command(t=msg["t"], id=ident, msg=msg)
+        try:
+            blob = self._parts.take(ident, msg["size"])
+        except PartError as exc:
+            return Command(t=msg["t"], id=ident, msg=msg, blob_error=str(exc))
+        return Command(t=msg["t"], id=ident, msg=msg, blob=blob)
 
 
 def hello(
@@ -112,14 +137,20 @@ def hello(
     }
 
 
-def state(name: str, now: float, error: str | None = None) -> Message:
-    """A lifecycle change."""
-    return {"t": "state", "state": name, "ts": now, "error": error}
+def state(name: str, now: float, error: str | None = None, fault: str | None = None) -> Message:
+    """A lifecycle change (`fault`: the kind of the fault that caused this ERROR, if one did)."""
+    msg: Message = {"t": "state", "state": name, "ts": now, "error": error}
+    if fault is not None:
+        msg["fault"] = fault
+    return msg
 
 
-def reply(ident: int, ok: bool, error: str | None = None) -> Message:
-    """The answer to command `ident`."""
-    return {"t": "reply", "id": ident, "ok": ok, "error": error}
+def reply(ident: int, ok: bool, error: str | None = None, size: int | None = None) -> Message:
+    """The answer to command `ident` (`size`: bytes of the `part`s sent right before it)."""
+    msg: Message = {"t": "reply", "id": ident, "ok": ok, "error": error}
+    if size is not None:
+        msg["size"] = size
+    return msg
 
 
 def heartbeat(now: float, ports: dict[str, dict[str, int]]) -> Message:
@@ -127,9 +158,9 @@ def heartbeat(now: float, ports: dict[str, dict[str, int]]) -> Message:
     return {"t": "heartbeat", "ts": now, "ports": ports}
 
 
-def fault(kind: str, detail: str) -> Message:
+def fault(kind: str, detail: str, now: float) -> Message:
     """A fault the component reported."""
-    return {"t": "fault", "kind": kind, "detail": detail}
+    return {"t": "fault", "kind": kind, "detail": detail, "ts": now}
 
 
 def arm_parent_death_signal(sig: int = signal.SIGTERM) -> bool:
@@ -190,10 +221,13 @@ class ControlChannel(asyncio.Protocol):
         """True once the channel has ended."""
         return self._closed_reason is not None
 
-    def send(self, msg: Message) -> None:
-        """Write one report now (dropped if the channel has ended)."""
+    def send(self, msg: Message, *before: Message) -> None:
+        """Write one report now, `before` first in one write (dropped once the channel ended)."""
         if self._transport is not None and self._closed_reason is None:
-            self._transport.write(encode(msg))
+            data = encode(msg)
+            if before:
+                data = b"".join([*map(encode, before), data])
+            self._transport.write(data)
 
     def send_heartbeat(self) -> None:
         """Write a heartbeat with the current counters."""

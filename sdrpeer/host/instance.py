@@ -4,7 +4,9 @@ How it works: `HostedInstance` turns control commands into calls on the SDK's `C
 (lifecycle, parameters) and on the data plane (`Connection` objects attached to our OutPorts). It
 reports every lifecycle change and fault through the `report` callback the moment the runner
 announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for
-a heartbeat. `execute` raises `CommandError` (our peer's mistake: a bad field, an unknown port or
+a heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `restore` are
+sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot),
+else None. It raises `CommandError` (our peer's mistake: a bad field, an unknown port or
 connection) or whatever the runner raised (an illegal transition, a failing callback); the caller
 turns either into `reply ok=false`. The data server's `resolve` is `in_port`.
 """
@@ -19,7 +21,7 @@ from typing import Any
 
 from sdrpeer.dataplane import Connection
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.host import control
+from sdrpeer.host import control, handoff
 from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
 
 log = logging.getLogger("sdrpeer.host")
@@ -82,6 +84,10 @@ class HostedInstance:
             "disconnect": self._disconnect,
             "repoint": self._repoint,
         }
+        self._blob_handlers: dict[str, Callable[[control.Command], Awaitable[bytes | None]]] = {
+            "snapshot": lambda c: handoff.snapshot(self.runner, c),
+            "restore": lambda c: handoff.restore(self.runner, c),
+        }
 
     def watch(self) -> None:
         """Start reporting state changes and faults (after `hello` went out)."""
@@ -96,11 +102,12 @@ class HostedInstance:
         self.state = name
         text = None if error is None else (str(error) or type(error).__name__)
         log.info("state %s%s", name, f" ({text})" if text else "")
-        self.report(control.state(name, self.clock(), text))
+        fault = self.runner.fault if name == "ERROR" else None
+        self.report(control.state(name, self.clock(), text, fault))
 
     def _on_fault(self, kind: str, detail: str) -> None:
         """The component reported a fault: pass it on."""
-        self.report(control.fault(str(kind), str(detail)))
+        self.report(control.fault(str(kind), str(detail), self.clock()))
 
     def ports(self) -> dict[str, list[str]]:
         """Port names by direction, for `hello`."""
@@ -120,11 +127,15 @@ class HostedInstance:
 
     def handles(self, t: str) -> bool:
         """True if `t` is a command this instance carries out."""
-        return t in self._handlers
+        return t in self._handlers or t in self._blob_handlers
 
-    async def execute(self, t: str, msg: control.Message) -> None:
-        """Carry out command `t` (raises CommandError or what the runner raised)."""
-        await maybe_await(self._handlers[t](msg))
+    async def execute(self, command: control.Command) -> bytes | None:
+        """Carry out a command; the bytes it sends back, or None (raises if it failed)."""
+        blob_handler = self._blob_handlers.get(command.t)
+        if blob_handler is not None:
+            return await blob_handler(command)
+        await maybe_await(self._handlers[command.t](command.msg))
+        return None
 
     async def _set_params(self, msg: control.Message) -> None:
         """Change typed parameters."""

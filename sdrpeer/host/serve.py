@@ -5,8 +5,9 @@ in-port names to our runtime InPorts, then either opens the control channel (sen
 initializes: the runner's state changes go out as `state` reports the moment they happen) or,
 when standalone, activates at once and logs the port counters once a second. Commands are queued
 by the channel and run one at a time, in order, by `_serve_commands`, each answered by exactly one
-`reply`. Whatever ends the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent
-dying) sets `stop`; then the runner finalizes (deactivating first if active) within the timeout,
+`reply` (`snapshot`'s state goes in `part` messages written with its reply, in one write).
+Whatever ends the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent dying)
+sets `stop`; then the runner finalizes (deactivating first if active) within the timeout,
 connections and the data server close, `exit` is answered, and the channel is closed after the
 last report is written.
 """
@@ -20,9 +21,10 @@ import os
 import re
 from typing import Any
 
+from sdrpeer.control_parts import parts
 from sdrpeer.dataplane import DataServer
 from sdrpeer.host import control
-from sdrpeer.host.instance import HostedInstance, maybe_await
+from sdrpeer.host.instance import HostedInstance, Report, maybe_await
 from sdrpeer.host.main import (
     FINALIZE_TIMEOUT,
     STANDALONE_REPORT_INTERVAL,
@@ -58,7 +60,7 @@ class Host:
             self.channel = await control.ControlChannel.open(
                 self.config.control_fd, self._on_command, self._on_closed, self._counters
             )
-            report = self.channel.send
+            report: Report = self.channel.send
         else:
             report = _no_report  # standalone: state changes are logged by the instance
         self.inst = HostedInstance(self.name, component, runner, report, clock=now)
@@ -133,12 +135,16 @@ class Host:
                 )
                 continue
             try:
-                await self.inst.execute(command.t, command.msg)
+                blob = await self.inst.execute(command)
             except Exception as exc:
                 log.warning("%s (id %d) failed: %s", command.t, command.id, exc)
                 self.channel.send(control.reply(command.id, False, str(exc) or repr(exc)))
             else:
-                self.channel.send(control.reply(command.id, True))
+                if blob is None:
+                    self.channel.send(control.reply(command.id, True))
+                else:
+                    done = control.reply(command.id, True, size=len(blob))
+                    self.channel.send(done, *parts(command.id, blob))
 
     def _exit_timeout(self) -> float:
         """Seconds finalizing may take: the `exit` command's timeout, else the default."""

@@ -6,9 +6,12 @@ anything else raises `ProtocolError`). `ControlChannel` is
 its asyncio shell over the agent's end of a `socket.socketpair()`: `command(t, **fields)` sends a
 map with a fresh integer id and awaits the matching `reply` (timeout -> `CommandError` "timeout",
 ok=false -> "refused", channel gone -> "closed"); reports (`hello`, `state`, `heartbeat`,
-`fault`) go to the handler registered for their type. A protocol error closes the channel, is
-counted in `counters["protocol_errors"]`, and `on_close` hears why; the supervisor then treats the
-host as failed.
+`fault`) go to the handler registered for their type. A value too big for one message travels as
+`part` messages (`sdrpeer.control_parts`): `command(..., blob=b)` writes b's parts and the command
+(with `"size"`) in one write; `command(..., accept=n)` collects up to n bytes of parts sent before
+the reply and returns them as `reply["blob"]` (parts that do not add up refuse the command). A
+protocol error closes the channel, is counted in `counters["protocol_errors"]`, and `on_close`
+hears why; the supervisor then treats the host as failed.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import socket
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from sdrpeer.control_parts import PartAssembler, PartError, check_part, parts
 from sdrpeer.control_stream import (
     MAX_MESSAGE,
     PROTOCOL,
@@ -29,7 +33,7 @@ from sdrpeer.control_stream import (
 )
 from sdrpeer.errors import SdrpeerError
 
-REPORTS = ("hello", "state", "heartbeat", "fault")
+REPORTS = ("hello", "state", "heartbeat", "fault", "part")
 LIFECYCLE = ("CREATED", "INACTIVE", "ACTIVE", "ERROR", "FINALIZED")
 _READ = 64 * 1024
 log = logging.getLogger(__name__)
@@ -80,6 +84,11 @@ def check_report(msg: Report) -> None:
         not isinstance(msg.get("id"), int) or not isinstance(msg.get("ok"), bool)
     ):
         raise ProtocolError("reply: id must be an integer and ok a boolean")
+    elif t == "part":
+        try:
+            check_part(msg)
+        except PartError as e:
+            raise ProtocolError(str(e)) from None
 
 
 class ControlDecoder:
@@ -116,6 +125,8 @@ class ControlChannel:
         self._on_close = on_close
         self._decoder = ControlDecoder()
         self._pending: dict[int, asyncio.Future[Report]] = {}
+        self._accept: dict[int, int] = {}  # command id -> bytes of parts its reply may bring
+        self._parts = PartAssembler()
         self._next_id = 1
         self._writer: asyncio.StreamWriter | None = None
         self._reader_task: asyncio.Task[None] | None = None
@@ -126,16 +137,36 @@ class ControlChannel:
         reader, self._writer = await asyncio.open_unix_connection(sock=self._sock)
         self._reader_task = asyncio.create_task(self._read(reader))
 
-    async def command(self, t: str, *, wait: float | None = None, **fields: Any) -> Report:
-        """Send one command, await its reply for `wait` seconds; CommandError unless ok."""
+    async def command(
+        self,
+        t: str,
+        *,
+        wait: float | None = None,
+        blob: bytes | None = None,
+        accept: int = 0,
+        **fields: Any,
+    ) -> Report:
+        """Send one command, await its reply for `wait` seconds; CommandError unless ok.
+
+        `blob` goes along in parts; `accept` > 0 takes up to that many bytes of parts back, as
+        `reply["blob"]`.
+        """
         if self.closed or self._writer is None:
             raise CommandError(t, "closed")
         cid = self._next_id
         self._next_id += 1
         future: asyncio.Future[Report] = asyncio.get_running_loop().create_future()
         self._pending[cid] = future
+        if accept > 0:
+            self._accept[cid] = accept
+        msg = {"t": t, "id": cid, **fields}
+        if blob is None:
+            data = encode(msg)
+        else:
+            msg["size"] = len(blob)
+            data = b"".join([*map(encode, parts(cid, blob)), encode(msg)])
         try:
-            self._writer.write(encode({"t": t, "id": cid, **fields}))
+            self._writer.write(data)
             self.counters["messages_out"] += 1
             async with asyncio.timeout(self.command_timeout if wait is None else wait):
                 await self._writer.drain()
@@ -148,6 +179,7 @@ class ControlChannel:
             raise CommandError(t, "closed", str(e)) from None
         finally:
             self._pending.pop(cid, None)
+            self._accept.pop(cid, None)
         if not reply.get("ok"):
             raise CommandError(t, "refused", str(reply.get("error") or ""))
         return reply
@@ -169,16 +201,33 @@ class ControlChannel:
     def _dispatch(self, msg: Report) -> None:
         self.counters["messages_in"] += 1
         t = msg["t"]
+        if t == "part":
+            of, data = check_part(msg)
+            if of in self._accept:
+                self._parts.add(of, data, self._accept[of])
+            else:
+                self.counters["late"] += 1
+            return
         if t == "reply":
             future = self._pending.get(msg["id"])
             if future is None or future.done():
                 self.counters["late"] += 1
             else:
-                future.set_result(msg)
+                future.set_result(self._with_blob(msg))
             return
         handler = self._handlers.get(t)
         if handler is not None:
             handler(msg)
+
+    def _with_blob(self, msg: Report) -> Report:
+        """A reply to a command that accepts parts gets their bytes as "blob" (or fails)."""
+        cid = msg["id"]
+        if cid not in self._accept or not msg.get("ok"):
+            return msg
+        try:
+            return {**msg, "blob": self._parts.take(cid, msg.get("size"))}
+        except PartError as e:
+            return {**msg, "ok": False, "error": f"the state sent back: {e}"}
 
     def _shutdown(self, reason: str | None) -> None:
         if self.closed:
