@@ -21,7 +21,9 @@ other than `standby_same_robot`, which needs a standby of the component on this 
 and activate the standby, or restart it); `escalate=True` means the local steps are exhausted
 or the rule starts with a move: the agent sends the decision to the allocator
 (`AllocatorRecovery.escalation`). `action_result(now, decision, ok)` reports whether the step
-could be carried out; a failed step is not repeated and the next one is decided at once.
+could be carried out (for an escalation: whether the allocator took it); a failed step is not
+repeated and the next one is decided at once. Until it is reported, more faults of the same
+component and cause are the same fault (an instance in ERROR whose host then exits) and ignored.
 
 A metric condition is re-armed after each step: samples are ignored for `settle_s`, and if the
 condition still holds afterwards for its whole `for:`, it fires again and the step was
