@@ -53,7 +53,7 @@ def test_defaults() -> None:
 def test_example_robot_files_load() -> None:
     files = {p.stem: RobotFile.load(p) for p in sorted(EXAMPLES.glob("robot-*.yaml"))}
     assert sorted(files) == ["robot-1", "robot-2", "robot-3"]
-    assert [f.memory for f in files.values()] == [4_000_000_000, 3_000_000_000, 4_000_000_000]
+    assert [f.memory for f in files.values()] == [2_000_000_000] * 3  # Fig. 3 under Table V
     assert [f.battery for f in files.values()] == [100.0, 90.0, 95.0]
     assert all(f.name == stem for stem, f in files.items())
 

@@ -1,10 +1,14 @@
-"""One JSON request from an agent to another agent's API (aiohttp client, short timeout).
+"""JSON requests from an agent to other agents' APIs (aiohttp client, short timeout).
 
-Lives in `sdrpeer.api` so that aiohttp is imported without a CA store (see the package).
+How it works: one `ClientSession` per event loop is kept open (keep-alive connections to the
+peers: a plan push costs one request, not a TCP and session set-up) and closed by `close()` when
+the agent stops. Lives in `sdrpeer.api` so that aiohttp is imported without a CA store (see the
+package).
 """
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 import aiohttp
@@ -12,6 +16,23 @@ import aiohttp
 from sdrpeer.errors import ApiError
 
 TIMEOUT = 3.0
+_sessions: dict[asyncio.AbstractEventLoop, aiohttp.ClientSession] = {}
+
+
+def _session() -> aiohttp.ClientSession:
+    loop = asyncio.get_running_loop()
+    session = _sessions.get(loop)
+    if session is None or session.closed:
+        session = aiohttp.ClientSession(timeout=aiohttp.ClientTimeout(total=TIMEOUT))
+        _sessions[loop] = session
+    return session
+
+
+async def close() -> None:
+    """Close this loop's session (the agent calls it when it stops)."""
+    session = _sessions.pop(asyncio.get_running_loop(), None)
+    if session is not None:
+        await session.close()
 
 
 async def call(
@@ -20,10 +41,7 @@ async def call(
     """(status, decoded JSON body) of one request; ApiError if the agent cannot be reached."""
     headers = {"Authorization": f"Bearer {token}"}
     try:
-        async with (
-            aiohttp.ClientSession(timeout=aiohttp.ClientTimeout(total=TIMEOUT)) as session,
-            session.request(method, api + path, json=body, headers=headers) as resp,
-        ):
+        async with _session().request(method, api + path, json=body, headers=headers) as resp:
             doc = await resp.json(content_type=None)
             return resp.status, doc
     except (aiohttp.ClientError, TimeoutError, ValueError) as e:

@@ -27,9 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.alloc.view import ClusterView, RobotView
+from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.derive import Remote, specs_for_robot
 from sdrpeer.deploy.election_shell import ElectionShell
+from sdrpeer.deploy.health_shell import HealthShell
 from sdrpeer.deploy.placer import Infeasible, place, relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
@@ -38,6 +40,8 @@ from sdrpeer.errors import ApiError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.record import RobotRecord
+from sdrpeer.recovery.config import RecoveryConfig
+from sdrpeer.recovery.events import RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.system.model import SystemDef, Thresholds
 
@@ -79,7 +83,7 @@ class Coordinator:
         adopt_after: float = 1.0,
         retry_every: float = 5.0,
         election: ElectionConfig | None = None,
-        sick: Callable[[float], set[str]] = lambda now: set(),
+        recovery: RecoveryConfig | None = None,
     ) -> None:
         self.name = name
         self.manager = manager
@@ -90,8 +94,8 @@ class Coordinator:
         self.tick = tick
         self.adopt_after = adopt_after
         self.retry_every = retry_every
-        self.sick = sick
-        """Robots that must give up their components now (degraded: low battery, bad link)."""
+        self.health = HealthShell(recovery)
+        """Robot-wide recovery conditions (low battery, bad link) of every robot."""
         self._last_attempt: tuple[tuple[int, str, int], frozenset[str], frozenset[str]] | None = (
             None
         )
@@ -125,6 +129,7 @@ class Coordinator:
                 t.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await t
+        await peer_client.close()
 
     def wake(self) -> None:
         """Something changed (gossip, a member, an instance): step soon."""
@@ -133,7 +138,8 @@ class Coordinator:
     async def _loop(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            wait = min(self.tick, max(0.0, self.election.next_timer() - loop.time()))
+            due = min(self.election.next_timer(), self.health.next_timer())
+            wait = min(self.tick, max(0.0, due - loop.time()))
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._wake.wait(), wait)
             self._wake.clear()
@@ -152,8 +158,12 @@ class Coordinator:
         """Election, plan sync, apply, and the allocator's duties (see the module docstring)."""
         now = asyncio.get_running_loop().time()
         state = self.cluster()
+        plan = self.store.plan
+        recovery = None if plan is None or plan.system is None else plan.system.recovery
+        self.health.update(now, recovery, state.alive)
+        self._log_health()
         before = self.election.info()
-        self.election.update(now, state.alive, self._thresholds())
+        self.election.update(now, state.alive, self._thresholds(), self.health.degraded(now))
         info = self.election.info()
         for rec in state.alive.values():
             e = rec.election
@@ -172,6 +182,19 @@ class Coordinator:
             self._allocator_duties(now, state)
         else:
             self._elected_at = None
+
+    def _log_health(self) -> None:
+        for event in self.health.drain():
+            kind = "recovery.condition" if isinstance(event, RobotCondition) else "recovery.cleared"
+            self.events.add(
+                time.time(),
+                kind,
+                event.robot,
+                cause=event.cause,
+                metric=event.metric,
+                value=event.value,
+                observer=self.name,
+            )
 
     def _thresholds(self) -> Thresholds | None:
         plan = self.store.plan
@@ -290,14 +313,14 @@ class Coordinator:
             if not caught_up and now - self._elected_at < self.adopt_after:
                 return
             self._adopted_epoch = epoch
-            if plan is not None and plan.epoch < epoch:
+            if plan is not None and plan.epoch < epoch and not self._must_move(now, plan, state):
                 self._reissue(plan, epoch, state, reason="new allocator")
-            return
+                return
         if plan is None or plan.system is None:
             return
         placed_on = {p.robot for p in plan.placements}
         lost = placed_on - set(state.alive)
-        sick = frozenset(self.sick(now))
+        sick = frozenset(self.health.degraded(now))
         if not (lost or placed_on & sick) or self._lock.locked():
             return
         attempt = (plan.key, frozenset(state.alive), sick)
@@ -307,7 +330,13 @@ class Coordinator:
         why = [f"robots gone: {', '.join(sorted(lost))}"] if lost else []
         if placed_on & sick:
             why.append(f"robots degraded: {', '.join(sorted(placed_on & sick))}")
-        self._reissue(plan, epoch, state, reason="; ".join(why), exclude=sick, recovery=True)
+        exclude = frozenset(self.health.excluded(now))
+        self._reissue(plan, epoch, state, reason="; ".join(why), exclude=exclude, recovery=True)
+
+    def _must_move(self, now: float, plan: Plan, state: ClusterState) -> bool:
+        """Whether some placement sits on a robot that is gone or degraded."""
+        placed_on = {p.robot for p in plan.placements}
+        return bool(placed_on - set(state.alive) or placed_on & self.health.degraded(now))
 
     def _reissue(
         self,
@@ -348,6 +377,10 @@ class Coordinator:
             else:
                 new = result
         self.events.add(time.time(), "allocation", self.name, reason=reason, epoch=epoch)
+        if recovery:
+            moved = moved_components(plan, new)
+            if moved:
+                self.events.add(time.time(), "recovery.move", self.name, reason=reason, moved=moved)
         self._publish_plan(new, state)
 
     def _publish_plan(self, plan: Plan, state: ClusterState) -> None:
@@ -398,3 +431,15 @@ class Coordinator:
             )
             self._publish_plan(plan, state)
             return plan
+
+
+def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:
+    """component -> [from robot, to robot] for every active instance that changed robot."""
+    out = {}
+    for p in new.placements:
+        if p.role != "active":
+            continue
+        before = old.active_of(p.component)
+        if before is not None and before.robot != p.robot:
+            out[p.component] = [before.robot, p.robot]
+    return out

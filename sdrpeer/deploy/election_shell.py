@@ -10,7 +10,7 @@ of the view (the core treats a missing robot as gone). The core's timers are run
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 from sdrpeer.election.config import ElectionConfig, lan
 from sdrpeer.election.core import Election
@@ -20,16 +20,15 @@ from sdrpeer.record import ElectionInfo, RobotRecord
 from sdrpeer.system.model import Thresholds
 
 
-def candidate(rec: RobotRecord, thresholds: Thresholds) -> Candidate:
-    """What the election needs to know of one alive robot."""
+def candidate(rec: RobotRecord, thresholds: Thresholds, healthy: bool = True) -> Candidate:
+    """What the election needs to know of one alive robot (`healthy`: no recovery condition)."""
     m = rec.metrics
     loss = max((link.loss for link in rec.links.values()), default=None)
     e = rec.election
     return Candidate(
         alive=True,
-        eligible=eligible(
-            thresholds, battery_pct=m.battery_pct, rssi_dbm=m.rssi_dbm, link_loss=loss
-        ),
+        eligible=healthy
+        and eligible(thresholds, battery_pct=m.battery_pct, rssi_dbm=m.rssi_dbm, link_loss=loss),
         priority=rec.priority,
         health=health_bucket(battery_pct=m.battery_pct, rssi_dbm=m.rssi_dbm, link_loss=loss),
         state=None if e is None else ElectionState(e.epoch, e.leader, e.claiming),
@@ -49,13 +48,18 @@ class ElectionShell:
         self.core: Election | None = None
 
     def update(
-        self, now: float, alive: Mapping[str, RobotRecord], thresholds: Thresholds | None
+        self,
+        now: float,
+        alive: Mapping[str, RobotRecord],
+        thresholds: Thresholds | None,
+        degraded: Collection[str] = (),
     ) -> None:
-        """Feed the current view; runs a due timer too."""
+        """Feed the current view; runs a due timer too. `degraded` robots (a robot-wide recovery
+        condition holds) are not eligible: an allocator on one abdicates before recovery runs."""
         if self.core is None:
             self.core = Election(self.name, self.config, now, known_epoch=self.known_epoch)
         t = thresholds or Thresholds()
-        view = {name: candidate(rec, t) for name, rec in alive.items()}
+        view = {name: candidate(rec, t, name not in degraded) for name, rec in alive.items()}
         self.core.update(now, view)
         if self.core.next_timer() <= now:
             self.core.handle_timer(now)
