@@ -6,7 +6,11 @@ seconds: it turns each supervisor into an `Observed`, asks the pure `Reconciler`
 `loop.time()`, and runs each action as its own task (start/stop through the supervisor, the rest
 as control commands). When an action finishes the reconciler hears `done`; a failed one only
 after `retry_after` seconds, so a refusing host is not hammered. `status()` and `infos()` are what
-the API and the gossip record show; `on_change` tells the agent to publish at once.
+the API and the gossip record show; `on_change` tells the agent to publish at once. Trouble goes
+to the agent's recovery at once, by instance name: `on_fault(name, kind, detail)` for every fault
+a component reports, `on_instance_problem(name, cause)` for `component_error` (ERROR) and
+`crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
+`restore(name, state)` pass through to the instance's supervisor.
 """
 
 from __future__ import annotations
@@ -48,10 +52,16 @@ class InstanceManager:
         *,
         interval: float = 0.5,
         retry_after: float = 1.0,
+        on_fault: Callable[[str, str, str], None] = lambda name, kind, detail: None,
+        on_instance_problem: Callable[[str, str], None] = lambda name, cause: None,
     ) -> None:
         self.data_dir = data_dir
         self.config = config
         self.on_change = on_change
+        self.on_fault = on_fault
+        """Called at once with (instance name, kind, detail) for every fault reported."""
+        self.on_instance_problem = on_instance_problem
+        """Called at once with (instance name, cause): component_error or crashed."""
         self.interval = interval
         self.retry_after = retry_after
         self.reconciler = Reconciler()
@@ -101,6 +111,20 @@ class InstanceManager:
             raise ValueError(f"unknown action {action!r} (known: {', '.join(ACTIONS)})")
         self.wake()
         return self.status_of(name)
+
+    async def snapshot(self, name: str) -> Any:
+        """The state of a running instance (its on_snapshot); CommandError if not running."""
+        return await self._running(name, "snapshot").snapshot()
+
+    async def restore(self, name: str, state: Any) -> None:
+        """Hand `state` to a running instance's on_restore; CommandError if not running."""
+        await self._running(name, "restore").restore(state)
+
+    def _running(self, name: str, what: str) -> Supervisor:
+        sup = self._sups.get(name)
+        if sup is None or not sup.alive:
+            raise CommandError(what, "closed", f"{name} is not running")
+        return sup
 
     # ----------------------------------------------------------------- loop
     def wake(self) -> None:
@@ -179,7 +203,14 @@ class InstanceManager:
             spec = self._desired[a.instance]
             sup = self._sups.get(a.instance)
             if sup is None:
-                sup = Supervisor(spec, self.data_dir, self.config, self._changed)
+                sup = Supervisor(
+                    spec,
+                    self.data_dir,
+                    self.config,
+                    self._changed,
+                    on_fault=lambda s, kind, detail: self.on_fault(s.name, kind, detail),
+                    on_problem=lambda s, cause: self.on_instance_problem(s.name, cause),
+                )
                 self._sups[a.instance] = sup
             sup.spec = spec
             sup.start()
@@ -286,5 +317,6 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
         "ports": sup.ports,
         "start_latency_s": None if sup.start_latency is None else round(sup.start_latency, 4),
         "protocol_errors": sup.protocol_errors,
+        "faults": [f.to_json() for f in sup.faults],
         "log": str(sup.log_file()),
     }

@@ -9,6 +9,10 @@ again, or give up (state FAILED). `stop()` is graceful: the `exit` command, then
 `hello_timeout`, or breaks the control protocol, is killed and counts as a failure.
 States: STOPPED, STARTING (spawned, no INACTIVE yet), the host's own lifecycle states (CREATED,
 INACTIVE, ACTIVE, ERROR, FINALIZED), STOPPING, BACKOFF, FAILED; every change is timestamped.
+Trouble is passed on at once (sdrpeer.runtime.problems): each `fault` report is kept (the last
+`max_faults`) and goes to `on_fault(sup, kind, detail)`; an ERROR no fault caused and an exit
+nobody asked for go to `on_problem(sup, cause)`. `snapshot()`/`restore(state)` move a component's
+working state (sdrpeer.runtime.handoff), at most `max_state` bytes.
 """
 
 from __future__ import annotations
@@ -29,8 +33,10 @@ from typing import Any
 import psutil
 
 from sdrpeer.errors import ConfigError
+from sdrpeer.runtime import problems
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
 from sdrpeer.runtime.control import CommandError, ControlChannel, Report
+from sdrpeer.runtime.handoff import MAX_STATE, give_state, take_snapshot
 from sdrpeer.runtime.launch import (
     exit_text,
     host_argv,
@@ -71,6 +77,10 @@ class SupervisorConfig:
     """After SIGTERM, SIGKILL follows this much later."""
     data_host: str = "127.0.0.1"
     """SDRPEER_DATA_HOST: the address hosts bind their TCP data servers to."""
+    max_state: int = MAX_STATE
+    """Bytes a state may take in snapshot/restore (msgpack); bigger ones are refused."""
+    max_faults: int = 16
+    """How many of the last faults an instance keeps (shown in its status)."""
 
     @classmethod
     def fast_test(cls) -> SupervisorConfig:
@@ -87,11 +97,20 @@ class Supervisor:
         data_dir: Path,
         config: SupervisorConfig,
         on_change: Callable[[Supervisor], None] = lambda s: None,
+        *,
+        on_fault: Callable[[Supervisor, str, str], None] = lambda s, k, d: None,
+        on_problem: Callable[[Supervisor, str], None] = lambda s, c: None,
     ) -> None:
         self.spec = spec
         self.data_dir = data_dir
         self.config = config
         self.on_change = on_change
+        self.on_fault = on_fault
+        """Called at once with (self, kind, detail) for every fault the component reports."""
+        self.on_problem = on_problem
+        """Called at once with (self, cause): component_error or crashed (runtime.problems)."""
+        self.faults: deque[problems.Fault] = deque(maxlen=config.max_faults)
+        """The last faults reported, oldest first."""
         self.policy = RestartPolicy(config.restart)
         self.state = STOPPED
         self.since = time.time()
@@ -185,6 +204,14 @@ class Supervisor:
             raise CommandError(t, "closed", f"{self.name} is {self.state}")
         return await self._channel.command(t, **fields)
 
+    async def snapshot(self) -> Any:
+        """The component's state (its on_snapshot); CommandError if refused or over max_state."""
+        return await take_snapshot(self.command, self.config.max_state)
+
+    async def restore(self, state: Any) -> None:
+        """Hand `state` to the component's on_restore; StateError if too big, CommandError."""
+        await give_state(self.command, state, self.config.max_state)
+
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
         try:
@@ -205,6 +232,7 @@ class Supervisor:
                 if rc is not None:
                     why = self._kill_reason
                     self.last_error = f"{why}; {exit_text(rc)}" if why else exit_text(rc)
+                    self._problem(problems.CRASHED)  # an exit nobody asked for
                 delay = self.policy.on_exit(started, loop.time())
                 if delay is None:
                     log.error(
@@ -344,8 +372,10 @@ class Supervisor:
             self.start_latency = asyncio.get_running_loop().time() - self._spawned
         if msg.get("error"):
             self.last_error = str(msg["error"])
+        problem = problems.problem_of_state(self.state, msg, self._stopping)
         if self.state != STOPPING:
             self._set(state)
+        self._problem(problem)
 
     def _on_heartbeat(self, msg: Report) -> None:
         ports = msg.get("ports")
@@ -353,9 +383,17 @@ class Supervisor:
             self.ports = ports
 
     def _on_fault(self, msg: Report) -> None:
-        self.last_error = f"fault {msg.get('kind')}: {str(msg.get('detail'))[:500]}"
+        fault = problems.fault_from_report(msg, time.time())
+        self.faults.append(fault)
+        self.last_error = f"fault {fault.kind}: {fault.detail}"
         log.warning("%s: %s", self.name, self.last_error)
+        problems.call_hook("on_fault", self.on_fault, self, fault.kind, fault.detail)
         self.on_change(self)
+
+    def _problem(self, cause: str | None) -> None:
+        if cause is not None:
+            log.warning("%s: %s (%s)", self.name, cause, self.last_error)
+            problems.call_hook("on_problem", self.on_problem, self, cause)
 
     # ----------------------------------------------------------------- metrics
     def sample(self) -> tuple[float, int]:
