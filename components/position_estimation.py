@@ -9,7 +9,10 @@ integrated: the estimator re-anchors on the new sample and keeps its pose. `Area
 designated area `xmin,ymin,xmax,ymax` (a string param, since params are scalars) with
 `contains`. The component runs once per odometry frame (`OnInput("odometry")`, push `new`) and
 publishes `{"x", "y", "theta", "inside", "ts"}` on `pose`; it logs when the robot leaves or
-re-enters the area.
+re-enters the area. Migration: `on_snapshot` is the estimator's state (`Estimator.state`: the pose,
+the last odometry sample, the glitch count); `on_restore` checks a state whole and takes it over,
+also across the next activation (which otherwise starts afresh), so a new instance continues the
+estimate where the old one stopped (a controller that restarted its odometry is one glitch).
 """
 
 from __future__ import annotations
@@ -17,13 +20,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final
 
 from components.base import RobotComponent
-from components.red_controller import Odometry, wrap_angle
+from components.red_controller import Odometry, odometry_of, wrap_angle
 from sdrpeer.sdk import InPort, OnInput, OutPort, Param
 
 __all__ = ["Area", "Estimator", "PositionEstimation"]
+
+STATE_VERSION: Final = 1
+"""Version of the snapshot state (`Estimator.state`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +95,28 @@ class Estimator:
         )
         return self.pose
 
+    def state(self) -> dict[str, Any]:
+        """What a successor needs to continue: pose, last sample, glitch count (msgpack-able)."""
+        prev = self._prev
+        return {
+            "v": STATE_VERSION,
+            "pose": [self.pose.x, self.pose.y, self.pose.theta],
+            "prev": None if prev is None else [prev.x, prev.y, prev.theta],
+            "glitches": self.glitches,
+        }
+
+    def load(self, state: Any) -> None:
+        """Take over `state` (from `state()`); ValueError, changing nothing, if it is malformed."""
+        if not isinstance(state, dict) or state.get("v") != STATE_VERSION:
+            raise ValueError(f"estimator state: expected a map with v={STATE_VERSION}")
+        pose = odometry_of(state.get("pose"), "estimator state 'pose'")
+        raw_prev = state.get("prev")
+        prev = None if raw_prev is None else odometry_of(raw_prev, "estimator state 'prev'")
+        glitches = state.get("glitches", 0)
+        if type(glitches) is not int or glitches < 0:
+            raise ValueError(f"estimator state 'glitches': expected a count, got {glitches!r}")
+        self.pose, self._prev, self.glitches = pose, prev, glitches
+
 
 class PositionEstimation(RobotComponent):
     """Estimates the robot's pose from odometry and flags leaving the designated area."""
@@ -101,6 +129,7 @@ class PositionEstimation(RobotComponent):
     max_step = Param(float, 0.5, "odometry steps longer than this (m) are glitches", min=0.0)
     odometry = InPort("{x, y, theta, ts} from the controller", policy={"push": "new"})
     pose = OutPort("{x, y, theta, inside, ts} per odometry sample")
+    _restored: Estimator | None = None  # a restored estimate the next activation continues
 
     def on_initialize(self) -> None:
         """Check the area."""
@@ -110,10 +139,29 @@ class PositionEstimation(RobotComponent):
         self._region = Area.parse(value)
 
     def on_activated(self) -> None:
-        """Reserve memory; start a fresh estimate."""
+        """Reserve memory; start a fresh estimate (or continue a restored one)."""
         super().on_activated()
-        self.estimator = Estimator(self.bias, self.max_step)
+        restored, self._restored = self._restored, None
+        self.estimator = restored or Estimator(self.bias, self.max_step)
         self.inside: bool | None = None
+
+    def on_deactivated(self) -> None:
+        """Free the reserve; a state restored while active is not carried to a later activation."""
+        super().on_deactivated()
+        self._restored = None
+
+    def on_snapshot(self) -> dict[str, Any] | None:
+        """The estimator's state (None before the first activation and restore)."""
+        est = getattr(self, "estimator", None)
+        return est.state() if isinstance(est, Estimator) else None
+
+    def on_restore(self, state: Any) -> None:
+        """Continue from an earlier instance's estimate (ValueError if malformed)."""
+        est = Estimator(self.bias, self.max_step)
+        if state is not None:
+            est.load(state)
+        self.estimator = self._restored = est
+        self.log.info("restored pose (%.2f, %.2f, %.2f)", est.pose.x, est.pose.y, est.pose.theta)
 
     def on_params_changed(self, changed: dict[str, Any]) -> None:
         """Apply a new bias or step limit to the running estimator."""

@@ -11,7 +11,9 @@ component runs periodically (`rate`, 10 Hz), reads the newest `alarm` and `pose`
 its previous period on the monotonic clock (capped at five periods, so a stall does not teleport
 the robot), integrates the command that was in force over that time, decides anew, and
 publishes `cmd` `{"v", "w", "ts", "stopped", "reason"}` and `odometry` `{"x", "y", "theta",
-"ts"}` every period.
+"ts"}` every period. Migration: `on_snapshot` is `{"v": 1, "odometry": [x, y, theta], "stops"}`;
+`on_restore` checks it whole and continues from it, also across the next activation (which
+otherwise restarts at the origin), so a new instance's odometry goes on where the old one stopped.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from typing import Any
 from components.base import RobotComponent
 from sdrpeer.sdk import InPort, NoData, OutPort, Param, Periodic
 
-__all__ = ["Command", "Odometry", "REDController", "decide", "integrate"]
+__all__ = ["Command", "Odometry", "REDController", "decide", "integrate", "odometry_of"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +82,16 @@ def integrate(odo: Odometry, v: float, w: float, dt: float, drift: float = 0.0) 
     )
 
 
+def odometry_of(value: Any, what: str) -> Odometry:
+    """An Odometry from `[x, y, theta]` (finite numbers); ValueError naming `what` otherwise."""
+    ok = isinstance(value, list | tuple) and len(value) == 3
+    if ok and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        x, y, theta = (float(v) for v in value)
+        if all(map(math.isfinite, (x, y, theta))):
+            return Odometry(x, y, theta)
+    raise ValueError(f"{what}: expected [x, y, theta] finite numbers, got {value!r}")
+
+
 class REDController(RobotComponent):
     """Drives the RED base in a steady arc; stops on an alarm or outside the area."""
 
@@ -92,14 +104,40 @@ class REDController(RobotComponent):
     pose = InPort("{x, y, theta, inside, ts} from position estimation", policy={"push": "new"})
     cmd = OutPort("{v, w, ts, stopped, reason} each period")
     odometry = OutPort("{x, y, theta, ts} each period")
+    _restored: tuple[Odometry, int] | None = None  # odometry and stops the next activation keeps
 
     def on_activated(self) -> None:
-        """Reserve memory; restart the dead reckoning at the origin."""
+        """Reserve memory; restart the dead reckoning at the origin (or where it was restored)."""
         super().on_activated()
-        self.odo = Odometry()
+        restored, self._restored = self._restored, None
+        self.odo, self.stops = restored or (Odometry(), 0)
         self.last: Command | None = None
-        self.stops = 0
         self._prev: float | None = None
+
+    def on_deactivated(self) -> None:
+        """Free the reserve; a state restored while active is not carried to a later activation."""
+        super().on_deactivated()
+        self._restored = None
+
+    def on_snapshot(self) -> dict[str, Any] | None:
+        """The odometry and stop count (None before the first activation and restore)."""
+        odo = getattr(self, "odo", None)
+        if not isinstance(odo, Odometry):
+            return None
+        return {"v": 1, "odometry": [odo.x, odo.y, odo.theta], "stops": self.stops}
+
+    def on_restore(self, state: Any) -> None:
+        """Continue the odometry of an earlier instance (ValueError if the state is malformed)."""
+        odo, stops = Odometry(), 0
+        if state is not None:
+            if not isinstance(state, dict) or state.get("v") != 1:
+                raise ValueError("controller state: expected a map with v=1")
+            odo = odometry_of(state.get("odometry"), "controller state 'odometry'")
+            stops = state.get("stops", 0)
+            if type(stops) is not int or stops < 0:
+                raise ValueError(f"controller state 'stops': expected a count, got {stops!r}")
+        self.odo, self.stops = odo, stops
+        self._restored = (odo, stops)
 
     def _newest(self, port: str, key: str, default: bool) -> bool:
         try:
