@@ -1,0 +1,94 @@
+"""Recovery on real agents: components leave a robot whose signal fails (the allocator first, when
+it sat there) and a robot whose agent is SIGKILLed; port data flows again after each move."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.realnet import Agent, RealCluster, http
+
+pytestmark = pytest.mark.realnet
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def fast_system(tmp_path: Path) -> Path:
+    """The paper's small system, with the communication-failure rule held for 2 s, not 6 s."""
+    text = (REPO / "examples/paper/system-small.yaml").read_text()
+    text = text.replace("../../profiles/", f"{REPO}/profiles/").replace("for: 6s", "for: 2s")
+    path = tmp_path / "system.yaml"
+    path.write_text(text)
+    return path
+
+
+def status(agent: Agent) -> dict[str, Any]:
+    doc: dict[str, Any] = agent.get("/v1/status")
+    return doc
+
+
+def all_active_off(robot: str) -> Any:
+    def ok(doc: dict[str, Any]) -> bool:
+        comps = doc["components"]
+        return bool(comps) and all(c["state"] == "active" and c["robot"] != robot for c in comps)
+
+    return ok
+
+
+def controller_poses(agent: Agent) -> int:
+    rows = {i["component"]: i for i in agent.get("/v1/instances") if i.get("role") == "active"}
+    ctl = rows.get("REDControllerRTC")
+    return 0 if ctl is None else int(ctl["ports"].get("pose", {}).get("frames_in", 0))
+
+
+def deploy(cluster: RealCluster, entry: Agent, path: Path) -> dict[str, Any]:
+    cluster.wait_until(lambda: status(entry), lambda d: d["allocator"]["name"], "an allocator")
+    from sdrpeer.system.loader import load_system  # noqa: PLC0415 - yaml and plugins
+
+    code, body = http(
+        "POST", entry.api + "/v1/deploy", {"system": load_system(path).to_json()}, entry.token
+    )
+    assert code == 200, body
+    return cluster.wait_until(
+        lambda: status(entry),
+        lambda d: bool(d["components"]) and all(c["state"] == "active" for c in d["components"]),
+        "all ACTIVE",
+    )
+
+
+def test_signal_loss_on_the_allocators_robot_moves_the_allocator_first(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    agents = cluster.start_many(3)
+    one, two, three = agents
+    cluster.wait_until(lambda: status(two), lambda d: d["allocator"]["name"] == "robot-1", "r1")
+    doc = deploy(cluster, one, fast_system(tmp_path))
+    assert {c["robot"] for c in doc["components"]} == {"robot-1"}  # first_fit: the origin
+    epoch = doc["allocator"]["epoch"]
+    code, _ = http("POST", one.api + "/v1/robot", {"rssi": "-56dBm"}, one.token)
+    assert code == 200
+    after = cluster.wait_until(lambda: status(two), all_active_off("robot-1"), "moved off robot-1")
+    assert after["allocator"]["name"] in ("robot-2", "robot-3")
+    assert after["allocator"]["epoch"] > epoch
+    kinds = [e["kind"] for e in three.events()] + [e["kind"] for e in two.events()]
+    assert "recovery.condition" in kinds
+    assert "recovery.move" in kinds
+    # the moved controller hears poses again, and robot-1 stopped what it ran
+    ctl = next(c for c in after["components"] if c["component"] == "REDControllerRTC")
+    host = {a.name: a for a in agents}[ctl["robot"]]
+    n = cluster.wait_until(lambda: controller_poses(host), lambda v: v > 0, "poses after the move")
+    cluster.wait_until(lambda: controller_poses(host), lambda v: v > n, "more poses")
+    cluster.wait_until(lambda: one.get("/v1/instances"), lambda rows: rows == [], "robot-1 empty")
+
+
+def test_a_killed_robots_components_come_up_elsewhere(cluster: RealCluster, tmp_path: Path) -> None:
+    agents = cluster.start_many(3)
+    one, two, _ = agents
+    doc = deploy(cluster, one, fast_system(tmp_path))
+    assert {c["robot"] for c in doc["components"]} == {"robot-1"}
+    cluster.kill(one)
+    after = cluster.wait_until(lambda: status(two), all_active_off("robot-1"), "moved", 20)
+    standby_robots = {s["robot"] for c in doc["components"] for s in c["standbys"]}
+    assert {c["robot"] for c in after["components"]} <= standby_robots  # hot standbys took over
