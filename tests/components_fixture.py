@@ -1,8 +1,10 @@
-"""Small components the host tests run: a publisher, a recorder, a crasher, one with params."""
+"""Small components the host tests run: a publisher, a recorder, a crasher, one with params,
+fault reporters, one with a state to hand over."""
 
 from __future__ import annotations
 
 import os
+import threading
 import time
 from typing import Any
 
@@ -89,3 +91,43 @@ class Faulty(Component):
     def on_activated(self) -> None:
         """Report overheating."""
         self.report_fault("hardware_failure", "motor 2 overheated")
+
+
+class Reporter(Component):
+    """Reports the faults in `kinds` (comma-separated) when activated, from a thread if `thread`."""
+
+    kinds = Param(str, "", "fault kinds, e.g. emergency_stop,abnormal_behaviour")
+    thread = Param(bool, False, "report from a thread the component starts")
+
+    def on_activated(self) -> None:
+        """Report each kind, its detail saying which one it is (#0, #1, ...)."""
+        kinds = [k for k in self.kinds.split(",") if k]
+
+        def report() -> None:
+            for i, kind in enumerate(kinds):
+                self.report_fault(kind, f"#{i}")
+
+        if self.thread:
+            threading.Thread(target=report, name="reporter").start()
+        else:
+            report()
+
+
+class Hoarder(Component):
+    """Keeps `kb` KiB of state: `on_snapshot` returns it, `on_restore` takes `{"blob": bytes}`."""
+
+    kb = Param(int, 1, "KiB of state", min=0)
+
+    def on_initialize(self) -> None:
+        """Make the state."""
+        self.blob = bytes(range(256)) * (self.kb * 4)
+
+    def on_snapshot(self) -> dict[str, Any]:
+        """The state."""
+        return {"blob": self.blob}
+
+    def on_restore(self, state: Any) -> None:
+        """Take a state over; ValueError unless it is `{"blob": bytes}`."""
+        if not isinstance(state, dict) or not isinstance(state.get("blob"), bytes):
+            raise ValueError(f"expected {{'blob': bytes}}, got {type(state).__name__}")
+        self.blob = state["blob"]

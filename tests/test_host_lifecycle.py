@@ -128,6 +128,12 @@ def test_fault_is_forwarded(hosts: HostPool) -> None:
     host.command("activate")
     fault = host.wait_t("fault")
     assert (fault["kind"], fault["detail"]) == ("hardware_failure", "motor 2 overheated")
+    assert abs(fault["ts"] - time.time()) < 5
+    error = host.wait_state("ERROR")  # a hardware failure moves to ERROR, saying which fault
+    assert (error["error"], error["fault"]) == (
+        "hardware_failure: motor 2 overheated",
+        "hardware_failure",
+    )
 
 
 def test_unknown_and_malformed_commands(hosts: HostPool) -> None:

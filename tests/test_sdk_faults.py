@@ -1,14 +1,23 @@
-"""Faults a component reports (sdrpeer.sdk.faults): the table, hooks, ERROR moves, threads."""
+"""Faults a component reports (sdrpeer.sdk.faults): the table, hooks, ERROR moves, threads; and
+end to end, real hosts under the agent's InstanceManager: its on_fault and on_instance_problem
+hooks (component_error, crashed)."""
 
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 import threading
 from collections.abc import AsyncIterator
+from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import pytest
 
+from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.runtime.supervisor import SupervisorConfig
 from sdrpeer.sdk import (
     FAULT_EFFECTS,
     FAULT_KINDS,
@@ -243,3 +252,99 @@ async def test_a_fault_in_error_is_reported_but_changes_nothing(runner: Componen
     assert [s for s, _, _ in states].count(S.ERROR) == 1
     assert runner.last_error == "emergency_stop: first"
     assert bot(runner).calls.count("on_aborting") == 1
+
+
+# -- end to end: real hosts under the agent's InstanceManager --------------------------------
+
+
+class Seen:
+    """What the manager's hooks were called with, and when (loop time)."""
+
+    def __init__(self) -> None:
+        self.faults: list[tuple[str, str, str]] = []
+        self.problems: list[tuple[str, str]] = []
+
+    def fault(self, name: str, kind: str, detail: str) -> None:
+        self.faults.append((name, kind, detail))
+
+    def problem(self, name: str, cause: str) -> None:
+        self.problems.append((name, cause))
+
+
+def fixture_spec(name: str, cls: str, **params: Any) -> InstanceSpec:
+    doc = {"name": name, "target": f"tests.components_fixture:{cls}", "params": params}
+    return InstanceSpec.from_json(doc)
+
+
+@pytest.fixture
+async def managed(tmp_path: Path) -> AsyncIterator[tuple[InstanceManager, Seen]]:
+    seen = Seen()
+    manager = InstanceManager(
+        tmp_path,
+        replace(SupervisorConfig.fast_test(), max_faults=3),
+        interval=0.1,
+        on_fault=seen.fault,
+        on_instance_problem=seen.problem,
+    )
+    await manager.start()
+    try:
+        yield manager, seen
+    finally:
+        await asyncio.wait_for(manager.stop(), 10)
+
+
+async def wait_for(what: str, cond: Any, within: float = 10.0) -> None:
+    try:
+        await until(cond, within)
+    except TimeoutError:
+        raise AssertionError(f"waited {within}s for {what}") from None
+
+
+def state(manager: InstanceManager, name: str) -> str:
+    return str(manager.status_of(name)["state"])
+
+
+async def test_emergency_stop_reaches_the_managers_hook_and_errors_without_a_problem(
+    managed: tuple[InstanceManager, Seen],
+) -> None:
+    manager, seen = managed
+    manager.set_desired([fixture_spec("Stop1", "Reporter", kinds="emergency_stop")])
+    await wait_for("the fault", lambda: seen.faults)
+    assert seen.faults == [("Stop1", "emergency_stop", "#0")]
+    await wait_for("ERROR", lambda: state(manager, "Stop1") == "ERROR")
+    status = manager.status_of("Stop1")
+    assert status["last_error"] == "emergency_stop: #0"
+    assert [(f["kind"], f["detail"]) for f in status["faults"]] == [("emergency_stop", "#0")]
+    assert status["faults"][0]["ts"] <= status["faults"][0]["received"] + 1
+    await asyncio.sleep(0.2)
+    assert seen.problems == []  # the fault's hook already told; no component_error on top
+
+
+async def test_faults_from_a_thread_in_order_and_the_status_keeps_the_last_few(
+    managed: tuple[InstanceManager, Seen],
+) -> None:
+    manager, seen = managed
+    kinds = ",".join(["abnormal_behaviour"] * 5)
+    manager.set_desired([fixture_spec("Odd", "Reporter", kinds=kinds, thread=True)])
+    await wait_for("five faults", lambda: len(seen.faults) == 5)
+    assert [d for _, _, d in seen.faults] == ["#0", "#1", "#2", "#3", "#4"]
+    assert [f["detail"] for f in manager.status_of("Odd")["faults"]] == ["#2", "#3", "#4"]
+    assert state(manager, "Odd") == "ACTIVE"  # abnormal_behaviour only reports
+
+
+async def test_a_failing_callback_is_a_component_error_and_a_kill_a_crash(
+    managed: tuple[InstanceManager, Seen],
+) -> None:
+    manager, seen = managed
+    manager.set_desired([fixture_spec("Crash", "Crasher", after=3), fixture_spec("Pub", "Counter")])
+    await wait_for("component_error", lambda: ("Crash", "component_error") in seen.problems)
+    assert state(manager, "Crash") == "ERROR"
+    await wait_for("Pub ACTIVE", lambda: state(manager, "Pub") == "ACTIVE")
+    pid = manager.status_of("Pub")["pid"]
+    os.kill(pid, signal.SIGKILL)
+    await wait_for("crashed", lambda: ("Pub", "crashed") in seen.problems)
+    assert seen.problems.count(("Crash", "component_error")) == 1
+    assert seen.faults == []
+    await wait_for("Pub restarted", lambda: manager.status_of("Pub")["pid"] not in (None, pid))
+    await manager.stop()
+    assert seen.problems[-1] == ("Pub", "crashed")  # stopping on purpose is no problem
