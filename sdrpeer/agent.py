@@ -122,7 +122,7 @@ class Agent:
                 )
             self.robot = VirtualRobot(robot_file, self.meter.measure, start=self._started)
             if cfg.scenario is not None:
-                self.scenario = Scenario.load(cfg.scenario, robots=[robot_file])
+                self.scenario = Scenario.load(cfg.scenario, robots=[robot_file], fleet=True)
         else:
             self.host = HostMetrics()
         gossip_preset = preset(cfg.preset)

@@ -167,3 +167,16 @@ def test_errors_name_file_line_field(text: str, message: str) -> None:
 def test_without_robot_files_names_are_not_checked() -> None:
     s = Scenario.parse("steps:\n  - {at: 1s, robot: anyone, set: {battery: 50%}}\n")
     assert s.changes_for("anyone", 0.0, 1.0) == {"battery": 50.0}
+
+
+def test_a_fleet_scenario_is_read_by_each_robot_with_its_own_file(tmp_path: Path) -> None:
+    path = tmp_path / "fleet.yaml"
+    path.write_text(
+        "steps:\n  - {at: 5s, robot: robot-1, set: {rssi: -55dBm}}\n"
+        "  - {at: 6s, robot: robot-2, set: {battery: 10%}}\n"
+    )
+    with pytest.raises(ScenarioError, match="unknown robot 'robot-1'"):
+        Scenario.load(path, robots=[ROBOTS[1]])
+    two = Scenario.load(path, robots=[ROBOTS[1]], fleet=True)
+    assert two.changes_for("robot-2", 0.0, 10.0) == {"battery": 10.0}
+    assert two.changes_for("robot-1", 0.0, 10.0) == {"rssi": -55.0}

@@ -111,9 +111,11 @@ class Scenario:
         segments.append(_Segment(step.at, step.at + duration, start, target))
 
     @classmethod
-    def load(cls, path: Path | str, robots: Iterable[RobotFile] | None = None) -> Scenario:
+    def load(
+        cls, path: Path | str, robots: Iterable[RobotFile] | None = None, *, fleet: bool = False
+    ) -> Scenario:
         """Read and validate a scenario file (robot names checked if robot files are given)."""
-        return _build(YamlFile.read(path, ScenarioError), robots)
+        return _build(YamlFile.read(path, ScenarioError), robots, fleet=fleet)
 
     @classmethod
     def parse(
@@ -191,11 +193,13 @@ def _positive(parser: Callable[[object], float], example: str) -> Callable[[obje
     return parse
 
 
-def _build(doc: YamlFile, robots: Iterable[RobotFile] | None) -> Scenario:
-    """Validate a composed scenario document."""
+def _build(doc: YamlFile, robots: Iterable[RobotFile] | None, *, fleet: bool = False) -> Scenario:
+    """Validate a composed scenario document. `fleet`: one file for every robot of a fleet,
+    read by each robot's agent with only its own robot file: other robots' steps are accepted
+    unchecked (their own agents check them)."""
     files = {r.name: r for r in robots} if robots is not None else None
     top = doc.mapping(doc.root, None, ("steps", "description"), ("steps",))
-    known = set(files) if files is not None else None
+    known = set(files) if files is not None and not fleet else None
     steps = [_step(doc, node, known) for node in doc.sequence(top["steps"], "steps")]
     initial = {
         name: {"pos": f.position, "rssi": f.rssi, "memory": f.memory}
