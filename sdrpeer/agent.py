@@ -95,6 +95,8 @@ class Agent:
         self.keyring: Keyring | None = None
         self.instances = self._make_instances()
         self.coordinator: Coordinator | None = None
+        self.priority = config.priority
+        """Election priority: --priority / the config file, else the robot file's `priority:`."""
 
     @property
     def name(self) -> str:
@@ -121,6 +123,8 @@ class Agent:
                     f"{cfg.robot_file}: robot file is for {robot_file.name!r}, not {cfg.name!r}"
                 )
             self.robot = VirtualRobot(robot_file, self.meter.measure, start=self._started)
+            if not cfg.priority:  # the flag or config file wins; else the robot file's
+                self.priority = robot_file.priority
             if cfg.scenario is not None:
                 self.scenario = Scenario.load(cfg.scenario, robots=[robot_file], fleet=True)
         else:
@@ -232,7 +236,7 @@ class Agent:
             metrics,
             links,
             self.api_url,
-            self.config.priority,
+            self.priority,
             infos,
             time.time(),
             election=None if coord is None else coord.election.info(),
