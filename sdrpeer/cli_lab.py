@@ -1,8 +1,8 @@
-"""`sdrpeer lab up|down|status` and `sdrpeer demo`: the local lab from the command line.
+"""`sdrpeer lab up|down|status` (and the demo parser): the local lab from the command line.
 
 Without `--detach`, `lab up` stays in the foreground and redraws the members table once a second
 (in place on a terminal, appended when piped) until `--seconds` pass or Ctrl-C, then stops every
-agent. `demo` is, for now, a foreground lab in a temporary directory.
+agent. `demo` (the paper's experiment) lives in `sdrpeer.demo.command`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ import json
 import os
 import signal
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -48,10 +47,9 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     status = lab_sub.add_parser("status", parents=[where], help="the lab's agents")
     status.add_argument("--json", action="store_true", help="print JSON")
     status.set_defaults(func=cmd_lab_status)
-    demo = sub.add_parser("demo", help="a short lab run in a temporary directory")
-    demo.add_argument("--seconds", type=float, default=30.0, metavar="S", help="default 30")
-    demo.add_argument("--robots", type=int, default=3, metavar="N", help="default 3")
-    demo.set_defaults(func=cmd_demo)
+    from sdrpeer.demo.command import add_demo_parser  # noqa: PLC0415 - only when parsing
+
+    add_demo_parser(sub)
 
 
 def _say(text: str) -> None:
@@ -184,10 +182,3 @@ def cmd_lab_status(args: argparse.Namespace) -> int:
     ]
     _say(render_table(["ROBOT", "PID", "PROCESS", "API"], rows))
     return 0 if all(s["running"] for s in status) else 1
-
-
-def cmd_demo(args: argparse.Namespace) -> int:
-    """sdrpeer demo: a foreground lab in a temporary directory for --seconds."""
-    with tempfile.TemporaryDirectory(prefix="sdrpeer-demo-") as tmp:
-        options = UpOptions(robots=args.robots, lab_dir=Path(tmp), preset="lan")
-        return run_lab(options, detach=False, seconds=args.seconds)
