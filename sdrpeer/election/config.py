@@ -14,9 +14,11 @@ from typing import Any
 class ElectionConfig:
     """Tunables of the election core. Use a preset (`lan()`, `fast_test()`) and `with_()`."""
 
-    grace: float = 0.5
+    grace: float = 1.0
     """How long a robot waits for each alive, eligible robot ranked above it to claim a vacant
-    role: the k-th in rank claims after k * grace (the top one at once). A few gossip rounds."""
+    role: the k-th in rank claims after k * grace (the top one at once). A few gossip rounds,
+    plus the spread of start times when a fleet boots together: robots started up to `grace`
+    after a lower-ranked one still win the first election (0.5 s lost that race in the lab)."""
     startup_grace: float = 1.5
     """A freshly started robot claims nothing for this long, so that it first hears the cluster's
     records (the current allocator and the highest epoch) through gossip."""
