@@ -45,7 +45,11 @@ def wait_log(path: Path, text: str, timeout: float = 5.0) -> str:
         (f"{FX}:Nope", "defines no 'Nope'"),
         (f"{FX}:ROOT", "defines no 'ROOT'"),
         ("tests.hostctl:HostProc", "HostProc is not a subclass of Component"),
-        (FX, "defines several Component subclasses (Counter, Crasher, Faulty, Recorder, Tunable)"),
+        (
+            FX,
+            "defines several Component subclasses "
+            "(Counter, Crasher, Faulty, Hoarder, Recorder, Reporter, Tunable)",
+        ),
         ("tests/no_such_file.py", "no such file"),
         ("tests/hostctl.py", "defines no subclass of Component"),
     ],
