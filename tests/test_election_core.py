@@ -335,3 +335,17 @@ def test_the_role_table_rejects_illegal_moves() -> None:
 def test_config_rejects_negative_graces() -> None:
     with pytest.raises(ValueError, match="grace"):
         ElectionConfig(grace=-1.0)
+
+
+def test_at_boot_the_lower_ranked_waits_grace_after_the_startup_grace() -> None:
+    config = ElectionConfig(grace=1.0, startup_grace=1.5)
+    low = Election("z-low", config, 0.0)  # ranks below "a-high" only by priority
+    view = {"z-low": cand(), "a-high": cand(priority=10)}
+    low.update(0.0, view)
+    assert low.next_timer() == 2.5  # 1.5 s startup grace, then 1 grace for the one above
+    low.handle_timer(1.6)
+    assert not low.is_leader  # "a-high", booted with it, has until 2.5 to claim
+    low.update(1.7, {**view, "a-high": cand(priority=10, state=claim(1, "a-high"))})
+    low.handle_timer(2.5)
+    assert not low.is_leader
+    assert low.leader == "a-high"

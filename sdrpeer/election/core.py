@@ -187,10 +187,10 @@ class Election:
             for other, c in self._view.items()
             if c.alive and c.eligible and other != self.name and rank(other, c) > mine
         )
-        due = max(
-            self._waiting_since + above * self.config.grace,
-            self._started + self.config.startup_grace,
-        )
+        # the higher-ranked get their grace counted from when they could first claim: after
+        # the startup grace (a fleet booting together), not from our own boot
+        awake = max(self._waiting_since, self._started + self.config.startup_grace)
+        due = awake + above * self.config.grace
         if now >= due:
             self._move("claim")
             self._waiting_since = math.inf
