@@ -28,6 +28,7 @@ from typing import Any
 from sdrpeer.client import AgentClient
 from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import TimelineRecorder, load_timeline
+from sdrpeer.deploy.commands import post_when_elected
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab_up import UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
@@ -137,7 +138,10 @@ def run(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
     try:
         one, two = clients["robot-1"], clients["robot-2"]
         doc = _wait(
-            lambda: two.get("/v1/status"), lambda d: d["allocator"]["name"], "an allocator", 30
+            lambda: two.get("/v1/status"),
+            lambda d: d["allocator"]["name"] == opts.allocator_on,
+            f"{opts.allocator_on} elected",
+            30,
         )
         result.allocator_first = doc["allocator"]["name"]
         say(
@@ -146,7 +150,7 @@ def run(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
         )
         t0 = time.time()
         recorder.mark("allocation", "deploy")
-        one.post("/v1/deploy", {"system": system.to_json()})
+        post_when_elected(one, "/v1/deploy", {"system": system.to_json()}, 15.0)
         doc = _wait(lambda: one.get("/v1/status"), _all_active(), "all ACTIVE", opts.timeout)
         result.deploy_to_active_s = round(time.time() - t0, 3)
         result.placement = _placed(doc)
