@@ -348,3 +348,18 @@ async def test_a_failing_callback_is_a_component_error_and_a_kill_a_crash(
     await wait_for("Pub restarted", lambda: manager.status_of("Pub")["pid"] not in (None, pid))
     await manager.stop()
     assert seen.problems[-1] == ("Pub", "crashed")  # stopping on purpose is no problem
+
+
+def test_a_fault_before_any_loop_runs_is_applied_when_the_runner_starts() -> None:
+    r = ComponentRunner(Robot("early"))  # made outside a loop, as a script might
+    faults, states = record(r)
+    bot(r).hardware_failure("no device")
+    assert faults == [("hardware_failure", "no device")]
+
+    async def start() -> None:
+        await r.initialize()  # settles the pending move first: CREATED -> ERROR
+        await r.finalize()
+
+    with pytest.raises(Exception, match="cannot initialize: component is ERROR"):
+        asyncio.run(start())
+    assert [s for s, _, _ in states] == [S.ERROR]

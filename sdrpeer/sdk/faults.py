@@ -126,5 +126,6 @@ class FaultRelay:
                 log.exception("on_fault hook failed")
         if moves_to_error(kind) and self.pending is None:
             self.pending = (kind, fault_text(kind, detail))
-            if self._task is None or self._task.done():  # one task applies it (runner's lock)
-                self._task = asyncio.get_running_loop().create_task(self._apply())
+            loop = _running_loop()  # None only before the runner's loop runs: its start settles it
+            if loop is not None and (self._task is None or self._task.done()):
+                self._task = loop.create_task(self._apply())  # applies it under the runner's lock
