@@ -61,6 +61,10 @@ def deploy(cluster: RealCluster, entry: Agent, path: Path) -> dict[str, Any]:
 def test_signal_loss_on_the_allocators_robot_moves_the_allocator_first(
     cluster: RealCluster, tmp_path: Path
 ) -> None:
+    (cluster.root / "robot-1.yaml").write_text(  # the highest priority: it holds the allocator
+        "name: robot-1\nmemory: 4GB\ncpus: 4\nbattery: 100%\nposition: [0, 0]\nrssi: -45dBm\n"
+        "priority: 10\n"
+    )
     agents = cluster.start_many(3)
     one, two, three = agents
     cluster.wait_until(lambda: status(two), lambda d: d["allocator"]["name"] == "robot-1", "r1")

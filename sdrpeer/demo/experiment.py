@@ -171,8 +171,11 @@ def run(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
     finally:
         recorder.stop()
         lab.stop(grace=5)
-    lines = load_timeline(opts.out / "timeline.jsonl")
-    add_recovery_marks(lines)
+    path = opts.out / "timeline.jsonl"
+    marks = recovery_marks(load_timeline(path))
+    with path.open("a") as f:
+        f.writelines(json.dumps(m) + "\n" for m in marks)
+    lines = load_timeline(path)
     from sdrpeer.demo.figures import render_figures  # noqa: PLC0415 - matplotlib: only here
 
     result.figures = [str(p) for p in render_figures(lines, opts.out)]
@@ -192,7 +195,8 @@ def _times(result: RunResult, clients: dict[str, AgentClient], t_done: float) ->
         e["ts"]
         for e in events
         if e["kind"] == "recovery.condition"
-        and (e.get("detail") or {}).get("observer") == allocator
+        and e["robot"] == allocator
+        and (e.get("detail") or {}).get("subject") == "robot-1"
     ]
     t_cond = min(cond, default=None)
     last_active = _last_activation(events, since=t_cond) if t_cond is not None else None
@@ -226,12 +230,13 @@ def _last_activation(events: list[dict[str, Any]], since: float) -> float | None
     return max(times, default=None)
 
 
-def add_recovery_marks(lines: list[dict[str, Any]]) -> None:
-    """A recovery mark at every recovery.move event of the timeline (figures draw marks)."""
-    for line in list(lines):
-        if line.get("kind") == "event" and line.get("event") == "recovery.move":
-            lines.append({"t": line["t"], "kind": "mark", "what": "recovery", "label": "move"})
-    lines.sort(key=lambda ln: float(ln.get("t", 0.0)))
+def recovery_marks(lines: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A recovery mark at every recovery.move event of the timeline (the figures draw marks)."""
+    return [
+        {"t": line["t"], "kind": "mark", "what": "recovery", "label": "move"}
+        for line in lines
+        if line.get("kind") == "event" and line.get("event") == "recovery.move"
+    ]
 
 
 def timeline_of(out: Path) -> Timeline:

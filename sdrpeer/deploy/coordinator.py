@@ -186,14 +186,14 @@ class Coordinator:
     def _log_health(self) -> None:
         for event in self.health.drain():
             kind = "recovery.condition" if isinstance(event, RobotCondition) else "recovery.cleared"
-            self.events.add(
+            self.events.add(  # logged as this robot's judgement of `subject`
                 time.time(),
                 kind,
-                event.robot,
+                self.name,
+                subject=event.robot,
                 cause=event.cause,
                 metric=event.metric,
                 value=event.value,
-                observer=self.name,
             )
 
     def _thresholds(self) -> Thresholds | None:
