@@ -399,3 +399,31 @@ def test_empty_view_reports_no_robot():
     result = run(SystemDef("s", (comp("A"),)), cluster())
     assert result.infeasible is not None
     assert str(result.infeasible.unplaced[0]) == "A: no robot in view"
+
+
+def test_avoid_moves_one_component_off_a_robot_and_keeps_the_others():
+    system = SystemDef("s", (comp("A", mem=10 * MB), comp("B", mem=10 * MB)))
+    view = three()
+    first = run(system, view)
+    assert where(first) == {"A": "robot-1", "B": "robot-1"}
+    moved = allocate(
+        system,
+        view,
+        epoch=3,
+        version=8,
+        allocator="robot-1",
+        previous=first.plan,
+        avoid={"A": {"robot-1"}},
+    )
+    assert where(moved) == {"A": "robot-2", "B": "robot-1"}
+    nowhere = allocate(
+        system,
+        cluster(robot("robot-1")),
+        epoch=3,
+        version=8,
+        allocator="robot-1",
+        previous=first.plan,
+        avoid={"A": {"robot-1"}},
+    )
+    assert nowhere.infeasible is not None
+    assert "avoid" in (nowhere.infeasible.reason_for("A", "robot-1") or "")

@@ -28,7 +28,7 @@ How it works (pure: no I/O, no clock; `allocate` is the whole API):
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 
 from sdrpeer.alloc.constraints import RobotLoad
 from sdrpeer.alloc.feasibility import Feasibility
@@ -51,9 +51,13 @@ def allocate(
     version: int,
     allocator: str,
     previous: Plan | None = None,
+    avoid: Mapping[str, Collection[str]] | None = None,
 ) -> AllocationResult:
-    """Place every instance of `system` on the robots in `view` (see the module docstring)."""
-    return _Allocation(system, view, previous).run(epoch, version, allocator)
+    """Place every instance of `system` on the robots in `view` (see the module docstring).
+
+    `avoid`: component -> robots its instances must not be placed on (recovery moving a
+    component off a robot where it failed, while its other components stay)."""
+    return _Allocation(system, view, previous, avoid).run(epoch, version, allocator)
 
 
 def _first_fit_order(view: ClusterView) -> tuple[RobotView, ...]:
@@ -65,13 +69,19 @@ def _first_fit_order(view: ClusterView) -> tuple[RobotView, ...]:
 class _Allocation:
     """The state of one allocation (used once)."""
 
-    def __init__(self, system: SystemDef, view: ClusterView, previous: Plan | None) -> None:
+    def __init__(
+        self,
+        system: SystemDef,
+        view: ClusterView,
+        previous: Plan | None,
+        avoid: Mapping[str, Collection[str]] | None = None,
+    ) -> None:
         self.system = system
         self.t = system.allocation.thresholds
         self.robots = _first_fit_order(view)
         self.index = {r.name: i for i, r in enumerate(self.robots)}
         self.loads = tuple(RobotLoad(r) for r in self.robots)
-        self.check = Feasibility(self.robots, self.loads, system.allocation)
+        self.check = Feasibility(self.robots, self.loads, system.allocation, avoid)
         self.running_standbys: dict[str, list[tuple[int, InstanceInfo]]] = {}
         for i, inst in self.check.running.items():
             if inst.role == "standby":

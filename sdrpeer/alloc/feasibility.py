@@ -15,7 +15,7 @@ not count as running.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
 
 from sdrpeer.alloc.constraints import Need, RobotLoad, active_constraints
 from sdrpeer.alloc.strategies import Peer
@@ -32,9 +32,15 @@ class Feasibility:
     """The constraint checks of one allocation, with what does not change memoised."""
 
     def __init__(
-        self, robots: tuple[RobotView, ...], loads: tuple[RobotLoad, ...], allocation: AllocationDef
+        self,
+        robots: tuple[RobotView, ...],
+        loads: tuple[RobotLoad, ...],
+        allocation: AllocationDef,
+        avoid: Mapping[str, Collection[str]] | None = None,
     ) -> None:
         self.robots = robots
+        self.avoid = avoid or {}
+        """component -> robots it must not be placed on (recovery moved it away from them)."""
         self.loads = loads
         self.t = allocation.thresholds
         robot_cs, self.link_cs = active_constraints(allocation.constraints, self.t)
@@ -99,6 +105,8 @@ class Feasibility:
         self, comp: ComponentDef, name: str, cold: bool, i: int, peers: Sequence[Peer]
     ) -> str | None:
         """None when robot i may take the instance, else the first constraint it fails."""
+        if self.robots[i].name in self.avoid.get(comp.name, ()):
+            return "avoid: recovery is moving this component away from it"
         why = self._static_reason(i, comp, cold)
         if why is not None:
             return why
