@@ -210,6 +210,8 @@ class Agent:
                     self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
             self.instances.sample()
             self._publish()
+            if self.coordinator is not None and self.metrics is not None:
+                self.coordinator.local.sample(self.metrics.mem_free, self.metrics.cpu_pct)
 
     def _sample(self, now: float) -> Metrics:
         if self.robot is not None:
@@ -283,7 +285,19 @@ class Agent:
     def _make_instances(self) -> InstanceManager:
         """The instance manager: hosts bind data servers on this robot's gossip address."""
         config = SupervisorConfig(data_host=parse_hostport(self.config.bind)[0])
-        return InstanceManager(self.config.data_dir, config, lambda: self._publish(force=True))
+        return InstanceManager(
+            self.config.data_dir,
+            config,
+            lambda: self._publish(force=True),
+            on_fault=self._on_fault,
+            on_instance_problem=lambda name, cause: self._on_fault(name, cause, ""),
+        )
+
+    def _on_fault(self, name: str, kind: str, detail: str) -> None:
+        """A component fault, an instance in ERROR, or a host that died: to local recovery."""
+        self.events.add(time.time(), "instance.fault", self.name, instance=name, fault=kind)
+        if self.coordinator is not None:
+            self.coordinator.local.fault(name, kind, detail)
 
     # ----------------------------------------------------------------- deployment
     def _wake_coordinator(self) -> None:

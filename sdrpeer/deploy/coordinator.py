@@ -32,6 +32,7 @@ from sdrpeer.deploy import peers
 from sdrpeer.deploy.derive import Remote, specs_for_robot
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.health_shell import HealthShell
+from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible, place, relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
@@ -41,7 +42,7 @@ from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.record import RobotRecord
 from sdrpeer.recovery.config import RecoveryConfig
-from sdrpeer.recovery.events import RobotCondition
+from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.system.model import SystemDef, Thresholds
 
@@ -94,6 +95,10 @@ class Coordinator:
         self.tick = tick
         self.adopt_after = adopt_after
         self.retry_every = retry_every
+        self.local = LocalShell(
+            name, manager, lambda: self.store.plan, self.request_recovery, events
+        )
+        """Component faults on this robot (restart here; plan changes through the allocator)."""
         self.health = HealthShell(recovery)
         """Robot-wide recovery conditions (low battery, bad link) of every robot."""
         self._last_attempt: tuple[tuple[int, str, int], frozenset[str], frozenset[str]] | None = (
@@ -129,6 +134,7 @@ class Coordinator:
                 t.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await t
+        await self.local.stop()
         await peer_client.close()
 
     def wake(self) -> None:
@@ -138,7 +144,7 @@ class Coordinator:
     async def _loop(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            due = min(self.election.next_timer(), self.health.next_timer())
+            due = min(self.election.next_timer(), self.health.next_timer(), self.local.next_timer())
             wait = min(self.tick, max(0.0, due - loop.time()))
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._wake.wait(), wait)
@@ -161,6 +167,7 @@ class Coordinator:
         plan = self.store.plan
         recovery = None if plan is None or plan.system is None else plan.system.recovery
         self.health.update(now, recovery, state.alive)
+        self.local.tick()
         self._log_health()
         before = self.election.info()
         self.election.update(now, state.alive, self._thresholds(), self.health.degraded(now))
@@ -396,6 +403,71 @@ class Coordinator:
         except ApiError as e:
             log.info("cannot push the plan to %s (it will fetch it): %s", robot, e)
 
+    async def request_recovery(self, d: Decision) -> bool:
+        """Send a plan-changing recovery step of this robot to the allocator; True if taken."""
+        body = {
+            "robot": self.name,
+            "component": d.component,
+            "instance": d.instance,
+            "action": d.action,
+        }
+        if self.election.is_allocator():
+            result = await self.recover_component(self.name, d.component, d.instance, d.action)
+            return not isinstance(result, Infeasible)
+        leader = self.election.info().leader
+        rec = self.cluster().alive.get(leader or "")
+        if rec is None or rec.api is None:
+            return False
+        status, _ = await peer_client.call(rec.api, "POST", "/v1/recovery", self.token, body=body)
+        return status == 200
+
+    async def recover_component(
+        self, robot: str, component: str, instance: str, action: str
+    ) -> Plan | Infeasible:
+        """A robot's recovery step that changes who is active (allocator only):
+        `standby_same_robot` activates the component's standby on that robot in place of the
+        faulty instance; `standby_other_robot` / `launch_other_robot` move the component off
+        that robot (to a running standby first). Missing standbys are re-created."""
+        if not self.election.is_allocator():
+            raise NotAllocator(self.election.info().leader)
+        async with self._lock:
+            plan = self.store.plan
+            if plan is None or plan.system is None:
+                return Infeasible(component, (), 0)
+            state = self.cluster()
+            epoch = self.election.info().epoch
+            version = plan.version + 1 if plan.epoch == epoch else 1
+            avoid: dict[str, set[str]] = {}
+            previous = plan
+            if action == "standby_same_robot":
+                previous = swap_to_standby(plan, component, robot)
+            else:
+                avoid = {component: {robot}}
+            result = place(
+                relaxed_for_recovery(plan.system),
+                self.view(
+                    state, None, frozenset(self.health.excluded(asyncio.get_running_loop().time()))
+                ),
+                epoch=epoch,
+                version=version,
+                allocator=self.name,
+                previous=previous,
+                avoid=avoid,
+            )
+            if isinstance(result, Infeasible):
+                self.events.add(time.time(), "allocation.infeasible", self.name, report=str(result))
+                return result
+            new = replace(result, system=plan.system)
+            self.events.add(
+                time.time(),
+                "recovery.move",
+                self.name,
+                reason=f"{action} for {instance} on {robot}",
+                moved=moved_components(plan, new),
+            )
+            self._publish_plan(new, state)
+            return new
+
     async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
         """Allocate `system` (None: undeploy) and publish the plan. Allocator only."""
         if not self.election.is_allocator():
@@ -443,3 +515,23 @@ def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:
         if before is not None and before.robot != p.robot:
             out[p.component] = [before.robot, p.robot]
     return out
+
+
+def swap_to_standby(plan: Plan, component: str, robot: str) -> Plan:
+    """`plan` with the component's standby on `robot` made active and its active dropped."""
+    standby = next(
+        (
+            p
+            for p in plan.placements
+            if p.component == component and p.robot == robot and p.role == "standby"
+        ),
+        None,
+    )
+    if standby is None:
+        return plan
+    kept = tuple(
+        replace(p, role="active", mode="hot") if p is standby else p
+        for p in plan.placements
+        if not (p.component == component and p.role == "active")
+    )
+    return replace(plan, placements=kept)

@@ -6,6 +6,7 @@ returns either the new `Plan` or the `Infeasible` report (never a partial plan).
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping
 from dataclasses import replace
 
 from sdrpeer.alloc.core import allocate
@@ -43,10 +44,17 @@ def place(
     version: int,
     allocator: str,
     previous: Plan | None,
+    avoid: Mapping[str, Collection[str]] | None = None,
 ) -> Plan | Infeasible:
     """A plan for `system` on the robots in `view`, or why there is none."""
     result = allocate(
-        system, view, epoch=epoch, version=version, allocator=allocator, previous=previous
+        system,
+        view,
+        epoch=epoch,
+        version=version,
+        allocator=allocator,
+        previous=previous,
+        avoid=avoid,
     )
     if result.plan is not None:
         return result.plan

@@ -115,10 +115,29 @@ async def post_plan(request: web.Request) -> web.Response:
     return web.json_response({"accepted": accepted})
 
 
+async def post_recovery(request: web.Request) -> web.Response:
+    """POST /v1/recovery {robot, component, instance, action} (token): a robot's recovery step
+    that changes who is active; the allocator issues the new plan (others forward it there)."""
+    body = await _body(request)
+    coord = _coord(request)
+    try:
+        fields = [str(body[k]) for k in ("robot", "component", "instance", "action")]
+    except KeyError as e:
+        return json_error(400, f"field {e.args[0]!r}: missing")
+    try:
+        result = await coord.recover_component(*fields)
+    except NotAllocator as e:
+        return await _forward(request, e.leader, body)
+    if isinstance(result, Infeasible):
+        return json_error(409, f"cannot recover {fields[1]}:\n{result}")
+    return web.json_response({"plan": [result.epoch, result.version], "allocator": coord.name})
+
+
 ROUTES = [
     Route("POST", "/v1/deploy", post_deploy),
     Route("POST", "/v1/undeploy", post_undeploy),
     Route("GET", "/v1/status", get_status),
     Route("GET", "/v1/plan", get_plan),
     Route("POST", "/v1/plan", post_plan),
+    Route("POST", "/v1/recovery", post_recovery),
 ]
