@@ -3,6 +3,8 @@ it sat there) and a robot whose agent is SIGKILLed; port data flows again after 
 
 from __future__ import annotations
 
+import os
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -96,3 +98,60 @@ def test_a_killed_robots_components_come_up_elsewhere(cluster: RealCluster, tmp_
     after = cluster.wait_until(lambda: status(two), all_active_off("robot-1"), "moved", 20)
     standby_robots = {s["robot"] for c in doc["components"] for s in c["standbys"]}
     assert {c["robot"] for c in after["components"]} <= standby_robots  # hot standbys took over
+
+
+CRASHY = """\
+name: crashy
+components:
+  - name: Pub
+    target: tests.components_fixture:Counter
+    params: {rate: 50}
+    standby: {same_robot: 1, mode: hot}
+  - name: Rec
+    target: tests.components_fixture:Recorder
+connections:
+  - {from: Pub.out, to: Rec.inp}
+recovery:
+  rules:
+    - cause: component_error
+      actions: [standby_same_robot, restart, standby_other_robot, launch_other_robot]
+"""
+
+
+def test_a_crashed_host_is_replaced_by_its_same_robot_standby(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    agents = cluster.start_many(2)
+    one = agents[0]
+    path = tmp_path / "crashy.yaml"
+    path.write_text(CRASHY)
+
+    def ready(d: dict[str, Any]) -> bool:
+        comps = d["components"]
+        return bool(comps) and all(
+            c["state"] == "active" and all(s["state"] == "inactive" for s in c["standbys"])
+            for c in comps
+        )
+
+    deploy(cluster, one, path)
+    cluster.wait_until(lambda: status(one), ready, "standby ready")
+    rows = {i["name"]: i for i in one.get("/v1/instances")}
+    os.kill(rows["Pub"]["pid"], signal.SIGKILL)
+
+    def replaced(d: dict[str, Any]) -> bool:
+        pub = d["components"][0]
+        return pub["instance"] == "Pub-s1" and pub["state"] == "active" and ready(d)
+
+    doc = cluster.wait_until(lambda: status(one), replaced, "the standby active, a new standby")
+    pub = doc["components"][0]
+    assert pub["robot"] == "robot-1"  # standby on the same robot first (Table III)
+    assert pub["standbys"][0]["instance"] == "Pub-s2"
+    decisions = [e for e in one.events() if e["kind"] == "recovery.decision"]
+    assert decisions[0]["detail"]["action"] == "standby_same_robot"
+
+    def received() -> int:
+        rows = {i["name"]: i for i in one.get("/v1/instances")}
+        return int(rows["Rec"]["ports"].get("inp", {}).get("frames_in", 0))
+
+    n = received()
+    cluster.wait_until(received, lambda v: v > n, "frames from the new Pub")

@@ -1,12 +1,15 @@
 """Recovery benchmark on real agents: robot death and communication failure -> components ACTIVE
 elsewhere, with hot and cold standbys, with the allocator off or on the failing robot.
 
-Usage: python tools/bench_recovery.py [--json out.json] [--runs 20] [--only death,comm]
+Usage: python tools/bench_recovery.py [--json out.json] [--runs 20] [--only crash,death,comm]
 
 How it works: every run starts a fresh local lab of three real agents (`lan` gossip preset,
 robot files of 2000MB), deploys examples/paper/system-small.yaml through robot-1 (first_fit
 puts the five actives on robot-1 and one standby of each on another robot; `--standby` hot or
 cold), then breaks robot-1:
+- crash: a two-component system (Camera -> AnomalyDetection); the camera's host on robot-1 is
+  SIGKILLed; measured to the next camera instance ACTIVE: its same-robot hot standby (Table III's
+  first step), or its restart when it has no standby;
 - death: SIGKILL of robot-1's agent (its hosts die with it); measured from the kill to the
   last moved component's ACTIVE report (its agent's `instance.state` event, wall clock);
 - comm: robot-1's RSSI set to -56 dBm through its API (Table VI's rule, held 1 s here); measured
@@ -31,13 +34,19 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.client import AgentClient
+from sdrpeer.deploy.commands import post_when_elected
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 REPO = Path(__file__).resolve().parent.parent
 POLL = 0.02
-TARGETS = {"death_hot": 2.0, "comm_hot": 0.3, "comm_cold": 1.0}
+TARGETS = {
+    "crash_standby_same_robot": 0.2,
+    "death_hot": 2.0,
+    "comm_hot": 0.3,
+    "comm_cold": 1.0,
+}
 
 
 def system_json(standby: str) -> dict[str, Any]:
@@ -137,15 +146,18 @@ def _measure(lab: RunningLab, kind: str, standby: str, allocator_on: str) -> flo
         f"{allocator_on} elected",
         15,
     )
-    one.post("/v1/deploy", {"system": system_json(standby)})
+    system = crash_system(standby) if kind == "crash" else system_json(standby)
+    post_when_elected(one, "/v1/deploy", {"system": system}, 15.0)
     wait_for(lambda: two.get("/v1/status"), active_off("none"), "all ACTIVE", 30)
-    if standby == "hot":  # hot standbys INACTIVE and ready
+    if standby in ("hot", "same"):  # hot standbys INACTIVE and ready
         wait_for(
             lambda: two.get("/v1/status"),
             lambda d: all(s["state"] == "inactive" for c in d["components"] for s in c["standbys"]),
             "standbys ready",
             30,
         )
+    if kind == "crash":
+        return _crash(clients, standby)
     survivors = {n: c for n, c in clients.items() if n != "robot-1"}
     if kind == "death":
         t0 = time.time()
@@ -167,7 +179,57 @@ def _measure(lab: RunningLab, kind: str, standby: str, allocator_on: str) -> flo
     return done - t_cond
 
 
+CRASH_SYSTEM = """\
+name: crash-bench
+components:
+  - name: Cam
+    target: components.camera:Camera
+    params: {{reserve_mb: 0, rate: 10}}
+{standby}  - name: Det
+    target: components.anomaly_detection:AnomalyDetection
+connections:
+  - {{from: Cam.image, to: Det.image, policy: {{push: new}}}}
+recovery:
+  rules:
+    - cause: component_error
+      actions: [{actions}]
+"""
+
+
+def crash_system(standby: str) -> dict[str, Any]:
+    """Cam -> Det; with a same-robot hot standby of Cam (standby), or restart first (none)."""
+    if standby == "same":
+        text = CRASH_SYSTEM.format(
+            standby="    standby: {same_robot: 1, mode: hot}\n",
+            actions="standby_same_robot, restart, standby_other_robot, launch_other_robot",
+        )
+    else:
+        text = CRASH_SYSTEM.format(
+            standby="", actions="restart, standby_other_robot, launch_other_robot"
+        )
+    return parse_system(text, str(REPO / "crash-bench.yaml")).to_json()
+
+
+def _crash(clients: dict[str, AgentClient], standby: str) -> float:
+    """SIGKILL the active Cam host on robot-1; seconds until a Cam instance is ACTIVE again."""
+    one = clients["robot-1"]
+    rows = {i["name"]: i for i in one.get("/v1/instances")}
+    t0 = time.time()
+    os.kill(int(rows["Cam"]["pid"]), signal.SIGKILL)
+
+    done = wait_for(
+        lambda: last_activation({"robot-1": one}, t0),
+        lambda t: t is not None,
+        "a Cam instance ACTIVE after the crash",
+        30,
+    )
+    assert isinstance(done, float)
+    return done - t0
+
+
 VARIANTS = {
+    "crash_standby_same_robot": ("crash", "same", "robot-3"),
+    "crash_restart": ("crash", "none", "robot-3"),
     "death_hot": ("death", "hot", "robot-3"),
     "death_hot_alloc_on_failing": ("death", "hot", "robot-1"),
     "comm_hot": ("comm", "hot", "robot-3"),
