@@ -3,7 +3,7 @@
 Usage: python tools/bench_deploy.py [--json out.json] [--runs 5] [--reserve 0,500] [--kills 3]
                                     [--preset lan]
 
-How it works: a local lab of three real agents (`sdrpeer.lab_up`, robot files with 1700MB of
+How it works: a local lab of three real agents (`sdrpeer.lab_up`, robot files with 2000MB of
 memory so that Table V — free memory above 500MB after adding a 500MB component — splits the
 paper's five components 2 + 2 + 1, as in the paper's Fig. 3). For each `reserve_mb` value the
 paper's system (the five components of `components/`, wired as in Fig. 3, `requires: memory:
@@ -40,7 +40,7 @@ from sdrpeer.system.loader import parse_system
 T = TypeVar("T")
 POLL = 0.01
 TARGET_DEPLOY_S = 1.0
-MEM_BACK = 1_400_000_000  # bytes free per 1700MB robot once its hosts are gone
+MEM_BACK = 1_750_000_000  # bytes free per 2000MB robot once its hosts are gone
 COMPONENTS = {
     "OmnidirectionalCameraRTC": "components.camera:OmnidirectionalCamera",
     "AnomalyDetectionRTC": "components.anomaly_detection:AnomalyDetection",
@@ -74,12 +74,12 @@ def system_text(reserve_mb: int) -> str:
 
 
 def robot_files(root: Path) -> Path:
-    """robot-1..3.yaml with 1700MB each (Fig. 3's split under Table V)."""
+    """robot-1..3.yaml with 2000MB each (Fig. 3's split under Table V)."""
     folder = root / "robots"
     folder.mkdir(parents=True, exist_ok=True)
     for i in (1, 2, 3):
         (folder / f"robot-{i}.yaml").write_text(
-            f"name: robot-{i}\nmemory: 1700MB\ncpus: 4\nbattery: 100%\n"
+            f"name: robot-{i}\nmemory: 2000MB\ncpus: 4\nbattery: 100%\n"
             f"position: [{3 * i}, 0]\nrssi: -45dBm\n"
         )
     return folder
