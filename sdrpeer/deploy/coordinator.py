@@ -22,18 +22,18 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
+from sdrpeer.deploy.allocator_role import AllocatorRole
 from sdrpeer.deploy.derive import Remote, specs_for_robot
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.health_shell import HealthShell
 from sdrpeer.deploy.local_shell import LocalShell
-from sdrpeer.deploy.placer import Infeasible, place, relaxed_for_recovery
+from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
 from sdrpeer.election.config import ElectionConfig
@@ -47,14 +47,6 @@ from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.system.model import SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
-
-
-class NotAllocator(Exception):
-    """This robot is not the allocator; `leader` is the one it believes in (or None)."""
-
-    def __init__(self, leader: str | None) -> None:
-        super().__init__(leader)
-        self.leader = leader
 
 
 @dataclass
@@ -93,29 +85,21 @@ class Coordinator:
         self.events = events
         self.on_change = on_change
         self.tick = tick
-        self.adopt_after = adopt_after
-        self.retry_every = retry_every
         self.local = LocalShell(
             name, manager, lambda: self.store.plan, self.request_recovery, events
         )
         """Component faults on this robot (restart here; plan changes through the allocator)."""
         self.health = HealthShell(recovery)
         """Robot-wide recovery conditions (low battery, bad link) of every robot."""
-        self._last_attempt: tuple[tuple[int, str, int], frozenset[str], frozenset[str]] | None = (
-            None
-        )
-        self._last_attempt_at = 0.0
         self.store = PlanStore(data_dir / "plan.json")
         self.election = ElectionShell(name, election, self.store.highest_epoch)
         self._owned: set[str] = set()
         self._fetching: tuple[int, str, int] | None = None
-        self._elected_at: float | None = None
-        self._adopted_epoch = 0
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
         self._since = SinceTracker()
-        self._lock = asyncio.Lock()
+        self.role = AllocatorRole(self, adopt_after, retry_every)
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
@@ -184,11 +168,9 @@ class Coordinator:
         self._sync(state)
         self._apply(state)
         if self.election.is_allocator():
-            if self._elected_at is None:
-                self._elected_at = now
-            self._allocator_duties(now, state)
+            self.role.on_duty(now, state)
         else:
-            self._elected_at = None
+            self.role.off_duty()
 
     def _log_health(self) -> None:
         for event in self.health.drain():
@@ -298,111 +280,6 @@ class Coordinator:
         return status_doc(self.store.plan, alive, allocator, self._since, now_wall)
 
     # ----------------------------------------------------------------- the allocator
-    def view(
-        self, state: ClusterState, origin: str | None, exclude: frozenset[str] = frozenset()
-    ) -> ClusterView:
-        """The allocator's view: every alive robot with a record, in first-fit order, except
-        `exclude` (robots that must not receive components: degraded, or being left)."""
-        names = [n for n in state.order if n in state.alive] or sorted(state.alive)
-        names = [n for n in names if n not in exclude]
-        robots = tuple(
-            RobotView(n, state.alive[n].metrics, state.alive[n].links, state.alive[n].instances)
-            for n in names
-        )
-        return ClusterView(robots, origin)
-
-    def _allocator_duties(self, now: float, state: ClusterState) -> None:
-        epoch = self.election.info().epoch
-        plan = self.store.plan
-        if self._adopted_epoch != epoch:
-            caught_up = self._newest_offer(state) is None and self._fetching is None
-            assert self._elected_at is not None
-            if not caught_up and now - self._elected_at < self.adopt_after:
-                return
-            self._adopted_epoch = epoch
-            if plan is not None and plan.epoch < epoch and not self._must_move(now, plan, state):
-                self._reissue(plan, epoch, state, reason="new allocator")
-                return
-        if plan is None or plan.system is None:
-            return
-        placed_on = {p.robot for p in plan.placements}
-        lost = placed_on - set(state.alive)
-        sick = frozenset(self.health.degraded(now))
-        if not (lost or placed_on & sick) or self._lock.locked():
-            return
-        attempt = (plan.key, frozenset(state.alive), sick)
-        if attempt == self._last_attempt and now - self._last_attempt_at < self.retry_every:
-            return  # the same plan and robots failed to place already: wait or for a change
-        self._last_attempt, self._last_attempt_at = attempt, now
-        why = [f"robots gone: {', '.join(sorted(lost))}"] if lost else []
-        if placed_on & sick:
-            why.append(f"robots degraded: {', '.join(sorted(placed_on & sick))}")
-        exclude = frozenset(self.health.excluded(now))
-        self._reissue(plan, epoch, state, reason="; ".join(why), exclude=exclude, recovery=True)
-
-    def _must_move(self, now: float, plan: Plan, state: ClusterState) -> bool:
-        """Whether some placement sits on a robot that is gone or degraded."""
-        placed_on = {p.robot for p in plan.placements}
-        return bool(placed_on - set(state.alive) or placed_on & self.health.degraded(now))
-
-    def _reissue(
-        self,
-        plan: Plan,
-        epoch: int,
-        state: ClusterState,
-        reason: str,
-        *,
-        exclude: frozenset[str] = frozenset(),
-        recovery: bool = False,
-    ) -> None:
-        """Re-allocate `plan` (smallest change) under our epoch; when that is infeasible keep the
-        placements as they are (re-issued only when the epoch is new: adopting a plan).
-
-        `recovery`: components are moving because of a failure; the robots receiving them only
-        need to stay out of the recovery rules' memory shortage, not above the allocation's
-        free-memory threshold (as in the paper, where robot-3 ends below Table V's 500MB)."""
-        version = plan.version + 1 if plan.epoch == epoch else 1
-        if plan.system is None:
-            new = Plan(epoch, version, None, (), self.name)
-        else:
-            system = relaxed_for_recovery(plan.system) if recovery else plan.system
-            result = place(
-                system,
-                self.view(state, None, exclude),
-                epoch=epoch,
-                version=version,
-                allocator=self.name,
-                previous=plan,
-            )
-            if not isinstance(result, Infeasible):
-                result = replace(result, system=plan.system)
-            if isinstance(result, Infeasible):
-                self.events.add(time.time(), "allocation.infeasible", self.name, report=str(result))
-                if plan.epoch == epoch and plan.allocator == self.name:
-                    return  # nothing better to issue: keep the plan we hold
-                new = Plan(epoch, version, plan.system, plan.placements, self.name)
-            else:
-                new = result
-        self.events.add(time.time(), "allocation", self.name, reason=reason, epoch=epoch)
-        if recovery:
-            moved = moved_components(plan, new)
-            if moved:
-                self.events.add(time.time(), "recovery.move", self.name, reason=reason, moved=moved)
-        self._publish_plan(new, state)
-
-    def _publish_plan(self, plan: Plan, state: ClusterState) -> None:
-        if not self.accept(plan, source=self.name):
-            return
-        for robot, rec in state.alive.items():
-            if robot != self.name and rec.api is not None:
-                self._spawn(self._push(robot, rec.api, plan))
-
-    async def _push(self, robot: str, api: str, plan: Plan) -> None:
-        try:
-            await peers.push_plan(api, self.token, plan)
-        except ApiError as e:
-            log.info("cannot push the plan to %s (it will fetch it): %s", robot, e)
-
     async def request_recovery(self, d: Decision) -> bool:
         """Send a plan-changing recovery step of this robot to the allocator; True if taken."""
         body = {
@@ -412,7 +289,7 @@ class Coordinator:
             "action": d.action,
         }
         if self.election.is_allocator():
-            result = await self.recover_component(self.name, d.component, d.instance, d.action)
+            result = await self.role.recover_component(self.name, d.component, d.instance, d.action)
             return not isinstance(result, Infeasible)
         leader = self.election.info().leader
         rec = self.cluster().alive.get(leader or "")
@@ -421,117 +298,12 @@ class Coordinator:
         status, _ = await peer_client.call(rec.api, "POST", "/v1/recovery", self.token, body=body)
         return status == 200
 
+    async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
+        """Allocate `system` (None: undeploy) and publish the plan (allocator only)."""
+        return await self.role.deploy(system, origin)
+
     async def recover_component(
         self, robot: str, component: str, instance: str, action: str
     ) -> Plan | Infeasible:
-        """A robot's recovery step that changes who is active (allocator only):
-        `standby_same_robot` activates the component's standby on that robot in place of the
-        faulty instance; `standby_other_robot` / `launch_other_robot` move the component off
-        that robot (to a running standby first). Missing standbys are re-created."""
-        if not self.election.is_allocator():
-            raise NotAllocator(self.election.info().leader)
-        async with self._lock:
-            plan = self.store.plan
-            if plan is None or plan.system is None:
-                return Infeasible(component, (), 0)
-            state = self.cluster()
-            epoch = self.election.info().epoch
-            version = plan.version + 1 if plan.epoch == epoch else 1
-            avoid: dict[str, set[str]] = {}
-            previous = plan
-            if action == "standby_same_robot":
-                previous = swap_to_standby(plan, component, robot)
-            else:
-                avoid = {component: {robot}}
-            result = place(
-                relaxed_for_recovery(plan.system),
-                self.view(
-                    state, None, frozenset(self.health.excluded(asyncio.get_running_loop().time()))
-                ),
-                epoch=epoch,
-                version=version,
-                allocator=self.name,
-                previous=previous,
-                avoid=avoid,
-            )
-            if isinstance(result, Infeasible):
-                self.events.add(time.time(), "allocation.infeasible", self.name, report=str(result))
-                return result
-            new = replace(result, system=plan.system)
-            self.events.add(
-                time.time(),
-                "recovery.move",
-                self.name,
-                reason=f"{action} for {instance} on {robot}",
-                moved=moved_components(plan, new),
-            )
-            self._publish_plan(new, state)
-            return new
-
-    async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
-        """Allocate `system` (None: undeploy) and publish the plan. Allocator only."""
-        if not self.election.is_allocator():
-            raise NotAllocator(self.election.info().leader)
-        async with self._lock:
-            state = self.cluster()
-            epoch = self.election.info().epoch
-            current = self.store.plan
-            version = current.version + 1 if current is not None and current.epoch == epoch else 1
-            if system is None:
-                plan: Plan | Infeasible = Plan(epoch, version, None, (), self.name)
-            else:
-                previous = current if current is not None and current.system is not None else None
-                plan = place(
-                    system,
-                    self.view(state, origin),
-                    epoch=epoch,
-                    version=version,
-                    allocator=self.name,
-                    previous=previous,
-                )
-            if isinstance(plan, Infeasible):
-                self.events.add(time.time(), "allocation.infeasible", self.name, report=str(plan))
-                return plan
-            self._adopted_epoch = epoch
-            self.events.add(
-                time.time(),
-                "allocation",
-                self.name,
-                reason="deploy",
-                epoch=epoch,
-                system=None if system is None else system.name,
-            )
-            self._publish_plan(plan, state)
-            return plan
-
-
-def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:
-    """component -> [from robot, to robot] for every active instance that changed robot."""
-    out = {}
-    for p in new.placements:
-        if p.role != "active":
-            continue
-        before = old.active_of(p.component)
-        if before is not None and before.robot != p.robot:
-            out[p.component] = [before.robot, p.robot]
-    return out
-
-
-def swap_to_standby(plan: Plan, component: str, robot: str) -> Plan:
-    """`plan` with the component's standby on `robot` made active and its active dropped."""
-    standby = next(
-        (
-            p
-            for p in plan.placements
-            if p.component == component and p.robot == robot and p.role == "standby"
-        ),
-        None,
-    )
-    if standby is None:
-        return plan
-    kept = tuple(
-        replace(p, role="active", mode="hot") if p is standby else p
-        for p in plan.placements
-        if not (p.component == component and p.role == "active")
-    )
-    return replace(plan, placements=kept)
+        """A robot's recovery step that changes who is active (allocator only)."""
+        return await self.role.recover_component(robot, component, instance, action)

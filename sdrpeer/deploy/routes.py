@@ -17,7 +17,8 @@ from aiohttp import web
 
 from sdrpeer.api.app import Route, json_error, require_token, view_of
 from sdrpeer.api.peer_client import call
-from sdrpeer.deploy.coordinator import Coordinator, NotAllocator
+from sdrpeer.deploy.allocator_role import NotAllocator
+from sdrpeer.deploy.coordinator import Coordinator
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import plan_from_json

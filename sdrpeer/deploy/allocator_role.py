@@ -1,0 +1,292 @@
+"""The allocator's duties, on the robot that holds the role: deploy, adopt, re-place, recover.
+
+How it works: the coordinator calls `on_duty(now, state)` on every step while its robot is the
+allocator (and `off_duty()` otherwise). On taking the role it first catches up with the newest
+plan any robot gossips (at most `adopt_after` seconds), then re-issues it under its own epoch —
+losing the allocator loses nothing — or, when some placement sits on a robot that is gone or
+degraded, re-places at once (smallest change; the sick robot left out of the view; recovery
+moves only need to stay out of a memory shortage). `deploy` and `recover_component` (a robot's
+recovery step that changes who is active) run here too; every new plan is accepted locally,
+gossiped, and pushed to every alive robot.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from sdrpeer.alloc.view import ClusterView, RobotView
+from sdrpeer.deploy import peers
+from sdrpeer.deploy.placer import Infeasible, place, relaxed_for_recovery
+from sdrpeer.errors import ApiError
+from sdrpeer.plan import Plan
+from sdrpeer.system.model import SystemDef
+
+if TYPE_CHECKING:
+    from sdrpeer.deploy.coordinator import ClusterState, Coordinator
+
+log = logging.getLogger(__name__)
+
+
+class NotAllocator(Exception):
+    """This robot is not the allocator; `leader` is the one it believes in (or None)."""
+
+    def __init__(self, leader: str | None) -> None:
+        super().__init__(leader)
+        self.leader = leader
+
+
+class AllocatorRole:
+    """What the allocator does, for one coordinator."""
+
+    def __init__(self, coordinator: Coordinator, adopt_after: float, retry_every: float) -> None:
+        self.c = coordinator
+        self.adopt_after = adopt_after
+        self.retry_every = retry_every
+        self._elected_at: float | None = None
+        self._adopted_epoch = 0
+        self._last_attempt: tuple[tuple[int, str, int], frozenset[str], frozenset[str]] | None = (
+            None
+        )
+        self._last_attempt_at = 0.0
+        self._lock = asyncio.Lock()
+
+    def off_duty(self) -> None:
+        """This robot does not hold the role (any more)."""
+        self._elected_at = None
+
+    def view(
+        self, state: ClusterState, origin: str | None, exclude: frozenset[str] = frozenset()
+    ) -> ClusterView:
+        """The allocator's view: every alive robot with a record, in first-fit order, except
+        `exclude` (robots that must not receive components: degraded, or being left)."""
+        names = [n for n in state.order if n in state.alive] or sorted(state.alive)
+        names = [n for n in names if n not in exclude]
+        robots = tuple(
+            RobotView(n, state.alive[n].metrics, state.alive[n].links, state.alive[n].instances)
+            for n in names
+        )
+        return ClusterView(robots, origin)
+
+    def on_duty(self, now: float, state: ClusterState) -> None:
+        """One step while this robot holds the role (adopt, then move what must move)."""
+        if self._elected_at is None:
+            self._elected_at = now
+        epoch = self.c.election.info().epoch
+        plan = self.c.store.plan
+        if self._adopted_epoch != epoch:
+            caught_up = self.c._newest_offer(state) is None and self.c._fetching is None
+            assert self._elected_at is not None
+            if not caught_up and now - self._elected_at < self.adopt_after:
+                return
+            self._adopted_epoch = epoch
+            if plan is not None and plan.epoch < epoch and not self._must_move(now, plan, state):
+                self._reissue(plan, epoch, state, reason="new allocator")
+                return
+        if plan is None or plan.system is None:
+            return
+        placed_on = {p.robot for p in plan.placements}
+        lost = placed_on - set(state.alive)
+        sick = frozenset(self.c.health.degraded(now))
+        if not (lost or placed_on & sick) or self._lock.locked():
+            return
+        attempt = (plan.key, frozenset(state.alive), sick)
+        if attempt == self._last_attempt and now - self._last_attempt_at < self.retry_every:
+            return  # the same plan and robots failed to place already: wait or for a change
+        self._last_attempt, self._last_attempt_at = attempt, now
+        why = [f"robots gone: {', '.join(sorted(lost))}"] if lost else []
+        if placed_on & sick:
+            why.append(f"robots degraded: {', '.join(sorted(placed_on & sick))}")
+        exclude = frozenset(self.c.health.excluded(now))
+        self._reissue(plan, epoch, state, reason="; ".join(why), exclude=exclude, recovery=True)
+
+    def _must_move(self, now: float, plan: Plan, state: ClusterState) -> bool:
+        """Whether some placement sits on a robot that is gone or degraded."""
+        placed_on = {p.robot for p in plan.placements}
+        return bool(placed_on - set(state.alive) or placed_on & self.c.health.degraded(now))
+
+    def _reissue(
+        self,
+        plan: Plan,
+        epoch: int,
+        state: ClusterState,
+        reason: str,
+        *,
+        exclude: frozenset[str] = frozenset(),
+        recovery: bool = False,
+    ) -> None:
+        """Re-allocate `plan` (smallest change) under our epoch; when that is infeasible keep the
+        placements as they are (re-issued only when the epoch is new: adopting a plan).
+
+        `recovery`: components are moving because of a failure; the robots receiving them only
+        need to stay out of the recovery rules' memory shortage, not above the allocation's
+        free-memory threshold (as in the paper, where robot-3 ends below Table V's 500MB)."""
+        version = plan.version + 1 if plan.epoch == epoch else 1
+        if plan.system is None:
+            new = Plan(epoch, version, None, (), self.c.name)
+        else:
+            system = relaxed_for_recovery(plan.system) if recovery else plan.system
+            result = place(
+                system,
+                self.view(state, None, exclude),
+                epoch=epoch,
+                version=version,
+                allocator=self.c.name,
+                previous=plan,
+            )
+            if not isinstance(result, Infeasible):
+                result = replace(result, system=plan.system)
+            if isinstance(result, Infeasible):
+                self.c.events.add(
+                    time.time(), "allocation.infeasible", self.c.name, report=str(result)
+                )
+                if plan.epoch == epoch and plan.allocator == self.c.name:
+                    return  # nothing better to issue: keep the plan we hold
+                new = Plan(epoch, version, plan.system, plan.placements, self.c.name)
+            else:
+                new = result
+        self.c.events.add(time.time(), "allocation", self.c.name, reason=reason, epoch=epoch)
+        if recovery:
+            moved = moved_components(plan, new)
+            if moved:
+                self.c.events.add(
+                    time.time(), "recovery.move", self.c.name, reason=reason, moved=moved
+                )
+        self._publish_plan(new, state)
+
+    def _publish_plan(self, plan: Plan, state: ClusterState) -> None:
+        if not self.c.accept(plan, source=self.c.name):
+            return
+        for robot, rec in state.alive.items():
+            if robot != self.c.name and rec.api is not None:
+                self.c._spawn(self._push(robot, rec.api, plan))
+
+    async def _push(self, robot: str, api: str, plan: Plan) -> None:
+        try:
+            await peers.push_plan(api, self.c.token, plan)
+        except ApiError as e:
+            log.info("cannot push the plan to %s (it will fetch it): %s", robot, e)
+
+    async def recover_component(
+        self, robot: str, component: str, instance: str, action: str
+    ) -> Plan | Infeasible:
+        """A robot's recovery step that changes who is active (allocator only):
+        `standby_same_robot` activates the component's standby on that robot in place of the
+        faulty instance; `standby_other_robot` / `launch_other_robot` move the component off
+        that robot (to a running standby first). Missing standbys are re-created."""
+        if not self.c.election.is_allocator():
+            raise NotAllocator(self.c.election.info().leader)
+        async with self._lock:
+            plan = self.c.store.plan
+            if plan is None or plan.system is None:
+                return Infeasible(component, (), 0)
+            state = self.c.cluster()
+            epoch = self.c.election.info().epoch
+            version = plan.version + 1 if plan.epoch == epoch else 1
+            avoid: dict[str, set[str]] = {}
+            previous = plan
+            if action == "standby_same_robot":
+                previous = swap_to_standby(plan, component, robot)
+            else:
+                avoid = {component: {robot}}
+            result = place(
+                relaxed_for_recovery(plan.system),
+                self.view(
+                    state,
+                    None,
+                    frozenset(self.c.health.excluded(asyncio.get_running_loop().time())),
+                ),
+                epoch=epoch,
+                version=version,
+                allocator=self.c.name,
+                previous=previous,
+                avoid=avoid,
+            )
+            if isinstance(result, Infeasible):
+                self.c.events.add(
+                    time.time(), "allocation.infeasible", self.c.name, report=str(result)
+                )
+                return result
+            new = replace(result, system=plan.system)
+            self.c.events.add(
+                time.time(),
+                "recovery.move",
+                self.c.name,
+                reason=f"{action} for {instance} on {robot}",
+                moved=moved_components(plan, new),
+            )
+            self._publish_plan(new, state)
+            return new
+
+    async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
+        """Allocate `system` (None: undeploy) and publish the plan. Allocator only."""
+        if not self.c.election.is_allocator():
+            raise NotAllocator(self.c.election.info().leader)
+        async with self._lock:
+            state = self.c.cluster()
+            epoch = self.c.election.info().epoch
+            current = self.c.store.plan
+            version = current.version + 1 if current is not None and current.epoch == epoch else 1
+            if system is None:
+                plan: Plan | Infeasible = Plan(epoch, version, None, (), self.c.name)
+            else:
+                previous = current if current is not None and current.system is not None else None
+                plan = place(
+                    system,
+                    self.view(state, origin),
+                    epoch=epoch,
+                    version=version,
+                    allocator=self.c.name,
+                    previous=previous,
+                )
+            if isinstance(plan, Infeasible):
+                self.c.events.add(
+                    time.time(), "allocation.infeasible", self.c.name, report=str(plan)
+                )
+                return plan
+            self._adopted_epoch = epoch
+            self.c.events.add(
+                time.time(),
+                "allocation",
+                self.c.name,
+                reason="deploy",
+                epoch=epoch,
+                system=None if system is None else system.name,
+            )
+            self._publish_plan(plan, state)
+            return plan
+
+
+def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:
+    """component -> [from robot, to robot] for every active instance that changed robot."""
+    out = {}
+    for p in new.placements:
+        if p.role != "active":
+            continue
+        before = old.active_of(p.component)
+        if before is not None and before.robot != p.robot:
+            out[p.component] = [before.robot, p.robot]
+    return out
+
+
+def swap_to_standby(plan: Plan, component: str, robot: str) -> Plan:
+    """`plan` with the component's standby on `robot` made active and its active dropped."""
+    standby = next(
+        (
+            p
+            for p in plan.placements
+            if p.component == component and p.robot == robot and p.role == "standby"
+        ),
+        None,
+    )
+    if standby is None:
+        return plan
+    kept = tuple(
+        replace(p, role="active", mode="hot") if p is standby else p
+        for p in plan.placements
+        if not (p.component == component and p.role == "active")
+    )
+    return replace(plan, placements=kept)
