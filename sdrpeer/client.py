@@ -9,15 +9,18 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from sdrpeer.errors import ApiError
+from sdrpeer.errors import ApiError, SdrpeerError
+
+T = TypeVar("T")
 
 DEFAULT_TIMEOUT = 5.0
 
@@ -149,3 +152,27 @@ def resolve_endpoint(
             f"(sdrpeer lab up; looked for {lab_dir / 'lab.json'})"
         )
     return Endpoint(str(live[0]["api"]), token or live[0].get("token"), str(lab_dir / "lab.json"))
+
+
+def wait_for(
+    probe: Callable[[], T],
+    ok: Callable[[T], bool],
+    what: str,
+    timeout: float,
+    poll: float = 0.02,
+) -> T:
+    """Call `probe()` every `poll` s until `ok(value)`; an ApiError counts as not yet.
+    After `timeout` s: SdrpeerError naming `what` and the last answer (labs, demo, benchmarks)."""
+    deadline = time.monotonic() + timeout
+    last: Any = None
+    while time.monotonic() < deadline:
+        try:
+            value = probe()
+        except ApiError as e:
+            last = str(e)
+        else:
+            if ok(value):
+                return value
+            last = value
+        time.sleep(poll)
+    raise SdrpeerError(f"timed out after {timeout:g} s waiting for {what}; last: {last!r:.400}")

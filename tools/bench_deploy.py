@@ -27,18 +27,14 @@ import statistics
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from functools import partial
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-from sdrpeer.client import AgentClient
-from sdrpeer.errors import ApiError, SdrpeerError
+from sdrpeer.client import AgentClient, wait_for
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
-T = TypeVar("T")
-POLL = 0.01
 TARGET_DEPLOY_S = 1.0
 MEM_BACK = 1_750_000_000  # bytes free per 2000MB robot once its hosts are gone
 COMPONENTS = {
@@ -83,23 +79,6 @@ def robot_files(root: Path) -> Path:
             f"position: [{3 * i}, 0]\nrssi: -45dBm\n"
         )
     return folder
-
-
-def wait_for(probe: Callable[[], T], ok: Callable[[T], bool], what: str, timeout: float) -> T:
-    """Poll every POLL s until ok(probe()); SdrpeerError after `timeout`."""
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            value = probe()
-        except ApiError as e:
-            last = str(e)
-        else:
-            if ok(value):
-                return value
-            last = value
-        time.sleep(POLL)
-    raise SdrpeerError(f"timed out waiting for {what}; last: {last!r:.300}")
 
 
 def clients(lab: RunningLab) -> dict[str, AgentClient]:

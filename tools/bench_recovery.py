@@ -33,14 +33,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.client import AgentClient
+from sdrpeer.client import AgentClient, wait_for
 from sdrpeer.deploy.commands import post_when_elected
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 REPO = Path(__file__).resolve().parent.parent
-POLL = 0.02
 TARGETS = {
     "crash_standby_same_robot": 0.2,
     "death_hot": 2.0,
@@ -67,22 +66,6 @@ def robot_files(root: Path, allocator_on: str) -> Path:
             f"rssi: -45dBm\npriority: {priority}\n"
         )
     return folder
-
-
-def wait_for(probe: Any, ok: Any, what: str, timeout: float) -> Any:
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            value = probe()
-        except ApiError as e:
-            last = str(e)
-        else:
-            if ok(value):
-                return value
-            last = value
-        time.sleep(POLL)
-    raise SdrpeerError(f"timed out waiting for {what}; last: {last!r:.300}")
 
 
 def active_off(robot: str) -> Any:

@@ -25,16 +25,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.client import AgentClient
+from sdrpeer.client import AgentClient, wait_for
 from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import TimelineRecorder, load_timeline
 from sdrpeer.deploy.commands import post_when_elected
-from sdrpeer.errors import ApiError, SdrpeerError
+from sdrpeer.errors import ApiError
 from sdrpeer.lab_up import UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 REPO = Path(__file__).resolve().parent.parent.parent
-POLL = 0.05
 RSSI_THRESHOLD = -52.5
 
 
@@ -92,21 +91,6 @@ def prepare(opts: RunOptions) -> tuple[Path, Path]:
     return robots, scenario
 
 
-def _wait(probe: Callable[[], Any], ok: Callable[[Any], bool], what: str, timeout: float) -> Any:
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            last = probe()
-        except ApiError as e:
-            last = str(e)
-        else:
-            if ok(last):
-                return last
-        time.sleep(POLL)
-    raise SdrpeerError(f"demo: timed out waiting for {what}; last: {last!r:.400}")
-
-
 def _placed(doc: dict[str, Any]) -> dict[str, str]:
     return {c["component"]: c["robot"] for c in doc.get("components", [])}
 
@@ -137,7 +121,7 @@ def run(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
     recorder.start()
     try:
         one, two = clients["robot-1"], clients["robot-2"]
-        doc = _wait(
+        doc = wait_for(
             lambda: two.get("/v1/status"),
             lambda d: d["allocator"]["name"] == opts.allocator_on,
             f"{opts.allocator_on} elected",
@@ -151,12 +135,12 @@ def run(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
         t0 = time.time()
         recorder.mark("allocation", "deploy")
         post_when_elected(one, "/v1/deploy", {"system": system.to_json()}, 15.0)
-        doc = _wait(lambda: one.get("/v1/status"), _all_active(), "all ACTIVE", opts.timeout)
+        doc = wait_for(lambda: one.get("/v1/status"), _all_active(), "all ACTIVE", opts.timeout)
         result.deploy_to_active_s = round(time.time() - t0, 3)
         result.placement = _placed(doc)
         say(f"  all ACTIVE after {result.deploy_to_active_s:.2f} s: {result.placement}")
         say(f"  waiting for robot-1's signal to fall (scenario: {opts.drop_at:g} s after start)")
-        doc = _wait(
+        doc = wait_for(
             lambda: two.get("/v1/status"),
             _all_active(off="robot-1"),
             "recovery off robot-1",
