@@ -105,7 +105,7 @@ def condition_time(clients: dict[str, AgentClient], allocator: str) -> float | N
     times = [
         float(e["ts"])
         for e in events
-        if e["kind"] == "recovery.condition" and e.get("robot") == "robot-1"
+        if e["kind"] == "recovery.condition" and (e.get("detail") or {}).get("subject") == "robot-1"
     ]
     return min(times, default=None)
 
