@@ -78,9 +78,7 @@ class AllocatorRole:
         epoch = self.c.election.info().epoch
         plan = self.c.store.plan
         if self._adopted_epoch != epoch:
-            caught_up = self.c._newest_offer(state) is None and self.c._fetching is None
-            assert self._elected_at is not None
-            if not caught_up and now - self._elected_at < self.adopt_after:
+            if not self.c.caught_up(state) and now - self._elected_at < self.adopt_after:
                 return
             self._adopted_epoch = epoch
             if plan is not None and plan.epoch < epoch and not self._must_move(now, plan, state):

@@ -199,6 +199,10 @@ class Coordinator:
                 best = (robot, p.key)
         return best
 
+    def caught_up(self, state: ClusterState) -> bool:
+        """No alive robot gossips a plan newer than ours, and no fetch is in flight."""
+        return self._newest_offer(state) is None and self._fetching is None
+
     def _sync(self, state: ClusterState) -> None:
         offer = self._newest_offer(state)
         if offer is None or self._fetching is not None:
