@@ -151,7 +151,10 @@ def _measure(lab: RunningLab, kind: str, standby: str, allocator_on: str) -> flo
             raise SdrpeerError("no activation event after the kill")
         return done - t0
     one.post("/v1/robot", {"rssi": "-56dBm"})
-    doc = wait_for(lambda: two.get("/v1/status"), active_off("robot-1"), "moved", 30)
+    wait_for(lambda: two.get("/v1/status"), active_off("robot-1"), "moved", 30)
+    doc = wait_for(  # the election may still be settling when the components are back
+        lambda: two.get("/v1/status"), lambda d: d["allocator"]["name"], "an allocator", 10
+    )
     allocator = doc["allocator"]["name"]
     t_cond = condition_time(clients, allocator)
     if t_cond is None:
@@ -248,6 +251,9 @@ def main(argv: list[str] | None = None) -> int:
                 "all_s": [round(t, 4) for t in times],
             }
             print(f"  {name}: median {figures[name]['median_s']:.3f} s", flush=True)
+            if args.json:  # written after every variant: a late failure loses nothing
+                args.json.parent.mkdir(parents=True, exist_ok=True)
+                args.json.write_text(json.dumps(figures, indent=2))
     print(f"\n{'variant':<30} {'median':>8} {'p90':>8} {'min':>8} {'max':>8} {'runs':>5}  target")
     for name, f in figures.items():
         base = name.replace("_alloc_on_failing", "")
