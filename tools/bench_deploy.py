@@ -110,12 +110,13 @@ def deploy_runs(lab: RunningLab, reserve_mb: int, runs: int) -> list[float]:
             "hosts stopped",
             60,
         )
-        wait_for(  # the robots' records show the memory back (sampled every second)
-            lambda: entry.get("/v1/members"),
-            lambda ms: all((m.get("metrics") or {}).get("mem_free", 0) > MEM_BACK for m in ms),
-            "free memory back in every record",
-            30,
-        )
+        for client in api.values():  # every agent's view (the allocator's too) shows the
+            wait_for(  # memory back: records are sampled every second and gossiped
+                partial(client.get, "/v1/members"),
+                lambda ms: all((m.get("metrics") or {}).get("mem_free", 0) > MEM_BACK for m in ms),
+                "free memory back in every agent's view",
+                30,
+            )
     return times
 
 
