@@ -167,6 +167,8 @@ async def test_repoint_between_ring_and_tcp_loses_nothing(tmp_path: Path) -> Non
         await until(lambda step=step: conn.seq > 60 * step)  # type: ignore[misc]
         conn.repoint(to)
     await asyncio.wait_for(sender, 20)
+    # the sender may finish before the last repoint's dial: wait for that link, then count rings
+    await asyncio.wait_for(conn.wait_connected(), 5)
     received = lambda: first.port.frames + second.port.frames  # noqa: E731
     await until(lambda: len(received()) == len(values), within=20)
     by_seq = sorted(received(), key=lambda frame: frame[0])
