@@ -5,7 +5,8 @@ Usage: python tools/bench_host.py [--runs 10] [--json out.json] [--target pkg.mo
 Each run starts one host exactly as an agent does (`sdrpeer.runtime.supervisor.Supervisor`: a
 launcher, a control socket pair, a per-instance log), records the supervisor's own spawn-to-
 INACTIVE latency, waits one second idle, and measures the host's RSS with psutil. Targets (the
-components issue): spawn to INACTIVE <= 150 ms, idle host <= 25 MB RSS. Medians are quoted.
+components issue): spawn to INACTIVE <= 150 ms, idle host <= 25 MB (10^6 bytes) RSS. Medians are
+quoted.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
 
 TARGET_START_S = 0.150
-TARGET_RSS_MIB = 25.0
+TARGET_RSS_MB = 25.0
+"""The issue's 25 MB, in decimal megabytes (23.8 MiB)."""
 DEFAULT_TARGET = "components.camera:Camera"
 
 
@@ -61,15 +63,16 @@ async def measure(target: str, runs: int, idle: float) -> dict[str, Any]:
         "rss_bytes": rss,
         "start_median_s": statistics.median(starts),
         "rss_median_mib": statistics.median(rss) / 2**20,
+        "rss_median_mb": statistics.median(rss) / 1e6,
         "target_start_s": TARGET_START_S,
-        "target_rss_mib": TARGET_RSS_MIB,
+        "target_rss_mb": TARGET_RSS_MB,
     }
 
 
 def report(r: dict[str, Any]) -> str:
     """The result table."""
     ok_s = "ok" if r["start_median_s"] <= TARGET_START_S else "MISSED"
-    ok_m = "ok" if r["rss_median_mib"] <= TARGET_RSS_MIB else "MISSED"
+    ok_m = "ok" if r["rss_median_mb"] <= TARGET_RSS_MB else "MISSED"
     starts = sorted(r["start_to_inactive_s"])
     return "\n".join(
         [
@@ -78,9 +81,11 @@ def report(r: dict[str, Any]) -> str:
             f"{'spawn to INACTIVE (ms)':<28}{r['start_median_s'] * 1000:>10.0f}"
             f"{starts[0] * 1000:>10.0f}{starts[-1] * 1000:>10.0f}"
             f"{TARGET_START_S * 1000:>10.0f}  {ok_s}",
+            f"{'idle RSS (MB = 10^6 bytes)':<28}{r['rss_median_mb']:>10.1f}"
+            f"{min(r['rss_bytes']) / 1e6:>10.1f}{max(r['rss_bytes']) / 1e6:>10.1f}"
+            f"{TARGET_RSS_MB:>10.1f}  {ok_m}",
             f"{'idle RSS (MiB)':<28}{r['rss_median_mib']:>10.1f}"
-            f"{min(r['rss_bytes']) / 2**20:>10.1f}{max(r['rss_bytes']) / 2**20:>10.1f}"
-            f"{TARGET_RSS_MIB:>10.1f}  {ok_m}",
+            f"{min(r['rss_bytes']) / 2**20:>10.1f}{max(r['rss_bytes']) / 2**20:>10.1f}",
         ]
     )
 

@@ -25,7 +25,6 @@ import contextlib
 import mmap
 import os
 import re
-import secrets
 import struct
 from typing import Any, Final
 
@@ -104,7 +103,7 @@ class SenderRing:
     def create(cls, size: int = DEFAULT_SIZE, directory: str = SHM_DIR) -> SenderRing | None:
         """A new segment of `size` bytes, or None where shared memory is not available."""
         sweep(directory)
-        path = os.path.join(directory, f"{_PREFIX}{os.getpid()}-{secrets.token_hex(8)}")
+        path = os.path.join(directory, f"{_PREFIX}{os.getpid()}-{os.urandom(8).hex()}")
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
         except OSError:
