@@ -60,6 +60,19 @@ class Plan:
                 return p
         return None
 
+    def standbys_short(self) -> dict[str, int]:
+        """Component -> how many of the standbys its system asks for the plan has not placed
+        (a recovery on too few robots places the actives first)."""
+        if self.system is None:
+            return {}
+        short = {}
+        for c in self.system.components:
+            want = c.standby.same_robot + c.standby.other_robots
+            have = sum(1 for p in self.placements if p.component == c.name and p.role == "standby")
+            if have < want:
+                short[c.name] = want - have
+        return short
+
     def to_json(self) -> dict[str, Any]:
         """JSON form (`plan_from_json` inverts it)."""
         return {

@@ -427,3 +427,22 @@ def test_avoid_moves_one_component_off_a_robot_and_keeps_the_others():
     )
     assert nowhere.infeasible is not None
     assert "avoid" in (nowhere.infeasible.reason_for("A", "robot-1") or "")
+
+
+def test_optional_standbys_let_the_actives_run_on_too_few_robots() -> None:
+    system = SystemDef("s", (comp("A", standby=StandbySpec(same_robot=0, other_robots=2)),))
+    view = cluster(robot("robot-1"), robot("robot-2"))
+    strict = run(system, view)
+    assert strict.infeasible is not None  # one other robot for two standbys
+    assert [u.instance for u in strict.infeasible.unplaced] == ["A-s2"]
+    loose = allocate(system, view, epoch=3, version=7, allocator="robot-1", standbys_optional=True)
+    assert where(loose) == {"A": "robot-1", "A-s1": "robot-2"}
+    assert loose.plan is not None
+    assert loose.plan.standbys_short() == {"A": 1}
+    alone = allocate(
+        system, cluster(robot("robot-1")), epoch=3, version=7, allocator="r", standbys_optional=True
+    )
+    assert where(alone) == {"A": "robot-1"}
+    assert alone.plan is not None
+    assert alone.plan.standbys_short() == {"A": 2}
+    assert replace(alone.plan, system=None).standbys_short() == {}

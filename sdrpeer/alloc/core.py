@@ -52,12 +52,18 @@ def allocate(
     allocator: str,
     previous: Plan | None = None,
     avoid: Mapping[str, Collection[str]] | None = None,
+    standbys_optional: bool = False,
 ) -> AllocationResult:
     """Place every instance of `system` on the robots in `view` (see the module docstring).
 
     `avoid`: component -> robots its instances must not be placed on (recovery moving a
-    component off a robot where it failed, while its other components stay)."""
-    return _Allocation(system, view, previous, avoid).run(epoch, version, allocator)
+    component off a robot where it failed, while its other components stay).
+    `standbys_optional`: a standby that finds no robot is left out instead of making the result
+    infeasible (recovery: the actives must run even when too few robots are left for standbys;
+    `Plan.standbys_short` tells what is missing)."""
+    allocation = _Allocation(system, view, previous, avoid)
+    allocation.standbys_optional = standbys_optional
+    return allocation.run(epoch, version, allocator)
 
 
 def _first_fit_order(view: ClusterView) -> tuple[RobotView, ...]:
@@ -82,6 +88,8 @@ class _Allocation:
         self.index = {r.name: i for i, r in enumerate(self.robots)}
         self.loads = tuple(RobotLoad(r) for r in self.robots)
         self.check = Feasibility(self.robots, self.loads, system.allocation, avoid)
+        self.standbys_optional = False
+        """Leave out standbys that find no robot (see `allocate`)."""
         self.running_standbys: dict[str, list[tuple[int, InstanceInfo]]] = {}
         for i, inst in self.check.running.items():
             if inst.role == "standby":
@@ -261,6 +269,8 @@ class _Allocation:
                     got = self._first_same(comp, name, cold, only, peers)
                 else:
                     got = self._first(comp, name, cold, self._candidates(comp), peers)
+                if got is None and self.standbys_optional:
+                    continue
                 if got is None:
                     self._fail(comp, name, "standby", cold, only)
                     self.names[comp.name].add(name)

@@ -5,9 +5,10 @@ allocator (and `off_duty()` otherwise). On taking the role it first catches up w
 plan any robot gossips (at most `adopt_after` seconds), then re-issues it under its own epoch —
 losing the allocator loses nothing — or, when some placement sits on a robot that is gone or
 degraded, re-places at once (smallest change; the sick robot left out of the view; recovery
-moves only need to stay out of a memory shortage). `deploy` and `recover_component` (a robot's
-recovery step that changes who is active) run here too; every new plan is accepted locally,
-gossiped, and pushed to every alive robot.
+moves only need to stay out of a memory shortage, and place the actives even where too few robots
+are left for every standby: the missing standbys are placed later, when robots allow).
+`deploy` and `recover_component` (a robot's recovery step that changes who is active) run here
+too; every new plan is accepted locally, gossiped, and pushed to every alive robot.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from typing import TYPE_CHECKING
 
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy import peers
-from sdrpeer.deploy.placer import Infeasible, place, relaxed_for_recovery
+from sdrpeer.deploy.placer import Infeasible, place
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import Plan
 from sdrpeer.system.model import SystemDef
@@ -89,7 +90,8 @@ class AllocatorRole:
         placed_on = {p.robot for p in plan.placements}
         lost = placed_on - set(state.alive)
         sick = frozenset(self.c.health.degraded(now))
-        if not (lost or placed_on & sick) or self._lock.locked():
+        short = plan.standbys_short()
+        if not (lost or placed_on & sick or short) or self._lock.locked():
             return
         attempt = (plan.key, frozenset(state.alive), sick)
         if attempt == self._last_attempt and now - self._last_attempt_at < self.retry_every:
@@ -98,6 +100,10 @@ class AllocatorRole:
         why = [f"robots gone: {', '.join(sorted(lost))}"] if lost else []
         if placed_on & sick:
             why.append(f"robots degraded: {', '.join(sorted(placed_on & sick))}")
+        if short:
+            why.append(
+                f"standbys missing: {', '.join(f'{c} {n}' for c, n in sorted(short.items()))}"
+            )
         exclude = frozenset(self.c.health.excluded(now))
         self._reissue(plan, epoch, state, reason="; ".join(why), exclude=exclude, recovery=True)
 
@@ -126,17 +132,15 @@ class AllocatorRole:
         if plan.system is None:
             new = Plan(epoch, version, None, (), self.c.name)
         else:
-            system = relaxed_for_recovery(plan.system) if recovery else plan.system
             result = place(
-                system,
+                plan.system,
                 self.view(state, None, exclude),
                 epoch=epoch,
                 version=version,
                 allocator=self.c.name,
                 previous=plan,
+                recovery=recovery,
             )
-            if not isinstance(result, Infeasible):
-                result = replace(result, system=plan.system)
             if isinstance(result, Infeasible):
                 self.c.events.add(
                     time.time(), "allocation.infeasible", self.c.name, report=str(result)
@@ -144,6 +148,8 @@ class AllocatorRole:
                 if plan.epoch == epoch and plan.allocator == self.c.name:
                     return  # nothing better to issue: keep the plan we hold
                 new = Plan(epoch, version, plan.system, plan.placements, self.c.name)
+            elif result.placements == plan.placements and plan.epoch == epoch:
+                return  # e.g. still no robot for a missing standby: nothing to publish
             else:
                 new = result
         self.c.events.add(time.time(), "allocation", self.c.name, reason=reason, epoch=epoch)
@@ -191,7 +197,7 @@ class AllocatorRole:
             else:
                 avoid = {component: {robot}}
             result = place(
-                relaxed_for_recovery(plan.system),
+                plan.system,
                 self.view(
                     state,
                     None,
@@ -202,13 +208,14 @@ class AllocatorRole:
                 allocator=self.c.name,
                 previous=previous,
                 avoid=avoid,
+                recovery=True,
             )
             if isinstance(result, Infeasible):
                 self.c.events.add(
                     time.time(), "allocation.infeasible", self.c.name, report=str(result)
                 )
                 return result
-            new = replace(result, system=plan.system)
+            new = result
             self.c.events.add(
                 time.time(),
                 "recovery.move",

@@ -45,17 +45,25 @@ def place(
     allocator: str,
     previous: Plan | None,
     avoid: Mapping[str, Collection[str]] | None = None,
+    recovery: bool = False,
 ) -> Plan | Infeasible:
-    """A plan for `system` on the robots in `view`, or why there is none."""
+    """A plan for `system` on the robots in `view`, or why there is none.
+
+    `recovery`: components move because of a failure: the thresholds are `relaxed_for_recovery`
+    and standbys are placed where they fit (the actives first: availability), the plan keeping
+    the system as given."""
     result = allocate(
-        system,
+        relaxed_for_recovery(system) if recovery else system,
         view,
         epoch=epoch,
         version=version,
         allocator=allocator,
         previous=previous,
         avoid=avoid,
+        standbys_optional=recovery,
     )
+    if result.plan is not None and recovery:
+        return replace(result.plan, system=system)
     if result.plan is not None:
         return result.plan
     assert result.infeasible is not None
