@@ -1,5 +1,5 @@
 """Small components the host tests run: a publisher, a recorder, a crasher, one with params,
-fault reporters, one with a state to hand over."""
+fault reporters, ones with a state to hand over."""
 
 from __future__ import annotations
 
@@ -131,3 +131,50 @@ class Hoarder(Component):
         if not isinstance(state, dict) or not isinstance(state.get("blob"), bytes):
             raise ValueError(f"expected {{'blob': bytes}}, got {type(state).__name__}")
         self.blob = state["blob"]
+
+
+class Tally(Component):
+    """Counts at `rate` Hz and publishes the count; its state is the count, and every restore and
+    activation is logged (`restored n=...`, `active from n=...`) so a test can follow it."""
+
+    execution = Periodic(param="rate")
+    rate = Param(float, 20.0, "counts per second")
+    out = OutPort("the count")
+
+    def on_initialize(self) -> None:
+        """Start from zero."""
+        self.n = 0
+
+    def on_activated(self) -> None:
+        """Say where counting goes on from."""
+        self.log.info("active from n=%d", self.n)
+
+    def on_execute(self) -> None:
+        """Count and publish."""
+        self.n += 1
+        self.out.write(self.n)
+
+    def on_snapshot(self) -> dict[str, int]:
+        """The count."""
+        return {"n": self.n}
+
+    def on_restore(self, state: Any) -> None:
+        """Go on from a predecessor's count."""
+        if not isinstance(state, dict) or not isinstance(state.get("n"), int):
+            raise ValueError(f"expected {{'n': int}}, got {state!r}")
+        self.n = state["n"]
+        self.log.info("restored n=%d", self.n)
+
+
+class Fragile(Component):
+    """Raises in `on_execute` while the file `trigger` names this instance (one name a line)."""
+
+    execution = Periodic(hz=50.0)
+    trigger = Param(str, "", "a file; an instance named in it raises")
+
+    def on_execute(self) -> None:
+        """Raise if named."""
+        if self.trigger and os.path.exists(self.trigger):
+            with open(self.trigger) as f:
+                if self.instance_name in f.read().split():
+                    raise RuntimeError(f"{self.instance_name} was told to fail")

@@ -129,6 +129,11 @@ CASES: list[tuple[str, str, str]] = [
         "sys.yaml:5: field 'components[2].standby.mode': expected one of hot, cold, got 'warm'",
     ),
     (
+        "bad standby sync",
+        HEAD + f"  - {{name: E, target: {CAM}, standby: {{sync: 2h}}}}\n",
+        "sys.yaml:5: field 'components[2].standby.sync': '2h' is out of range (0s to 3600s)",
+    ),
+    (
         "pin not a robot name",
         HEAD + f"  - {{name: E, target: {CAM}, pin: 'robot 2'}}\n",
         "sys.yaml:5: field 'components[2].pin': expected a robot name",

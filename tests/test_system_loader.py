@@ -105,7 +105,7 @@ def test_units_are_converted_to_base_units(tmp_path: Path) -> None:
             requires: {cpu: 5%, memory: 520MB, traffic: {image: 200kB/s}}
             pin: robot-2
             prefer: [robot-1, robot-3]
-            standby: {same_robot: 1, other_robots: 2, mode: cold}
+            standby: {same_robot: 1, other_robots: 2, mode: cold, sync: 500ms}
         allocation:
           strategy: objective
           constraints:
@@ -130,7 +130,7 @@ def test_units_are_converted_to_base_units(tmp_path: Path) -> None:
     assert cam.requires == Requirements(5.0, 520 * MB, (("image", 200_000.0),), None)
     assert cam.pin == "robot-2"
     assert cam.prefer == ("robot-1", "robot-3")
-    assert cam.standby == StandbySpec(1, 2, "cold")
+    assert cam.standby == StandbySpec(1, 2, "cold", sync_s=0.5)
     a = s.allocation
     assert a.strategy == "objective"
     assert a.thresholds == Thresholds(

@@ -39,9 +39,22 @@ async def call(
     api: str, method: str, path: str, token: str, *, body: Any = None
 ) -> tuple[int, Any]:
     """(status, decoded JSON body) of one request; ApiError if the agent cannot be reached."""
+    return await _request(api, method, path, token, json=body)
+
+
+async def post_packed(api: str, path: str, token: str, data: bytes) -> tuple[int, Any]:
+    """POST a msgpack body; (status, decoded JSON answer); ApiError if it cannot be delivered."""
+    return await _request(api, "POST", path, token, data=data, content_type="application/msgpack")
+
+
+async def _request(
+    api: str, method: str, path: str, token: str, *, content_type: str | None = None, **body: Any
+) -> tuple[int, Any]:
     headers = {"Authorization": f"Bearer {token}"}
+    if content_type is not None:
+        headers["Content-Type"] = content_type
     try:
-        async with _session().request(method, api + path, json=body, headers=headers) as resp:
+        async with _session().request(method, api + path, headers=headers, **body) as resp:
             doc = await resp.json(content_type=None)
             return resp.status, doc
     except (aiohttp.ClientError, TimeoutError, ValueError) as e:

@@ -31,6 +31,7 @@ from sdrpeer.deploy import peers
 from sdrpeer.deploy.allocator_role import AllocatorRole
 from sdrpeer.deploy.derive import Remote, specs_for_robot
 from sdrpeer.deploy.election_shell import ElectionShell
+from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
 from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible
@@ -92,6 +93,11 @@ class Coordinator:
         self.health = HealthShell(recovery)
         """Robot-wide recovery conditions (low battery, bad link) of every robot."""
         self.store = PlanStore(data_dir / "plan.json")
+        self.handoff = HandoffShell(
+            name, manager, lambda: self.store.plan, self._api_of, token=token, events=events
+        )
+        """Component states to hot standbys (sync) and to a moved component's new instance."""
+        manager.before_stop = self.handoff.retire
         self.election = ElectionShell(name, election, self.store.highest_epoch)
         self._owned: set[str] = set()
         self._fetching: tuple[int, str, int] | None = None
@@ -119,6 +125,7 @@ class Coordinator:
                 with contextlib.suppress(asyncio.CancelledError):
                     await t
         await self.local.stop()
+        await self.handoff.stop()
         await peer_client.close()
 
     def wake(self) -> None:
@@ -167,6 +174,7 @@ class Coordinator:
             self.on_change()
         self._sync(state)
         self._apply(state)
+        self.handoff.tick()
         if self.election.is_allocator():
             self.role.on_duty(now, state)
         else:
@@ -184,6 +192,10 @@ class Coordinator:
                 metric=event.metric,
                 value=event.value,
             )
+
+    def _api_of(self, robot: str) -> str | None:
+        rec = self.cluster().alive.get(robot)
+        return None if rec is None else rec.api
 
     def _thresholds(self) -> Thresholds | None:
         plan = self.store.plan

@@ -19,9 +19,11 @@ from sdrpeer.api.app import Route, json_error, require_token, view_of
 from sdrpeer.api.peer_client import call
 from sdrpeer.deploy.allocator_role import NotAllocator
 from sdrpeer.deploy.coordinator import Coordinator
+from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import plan_from_json
+from sdrpeer.runtime.handoff import MAX_STATE
 from sdrpeer.system.model import SystemDef, system_from_json
 
 
@@ -134,6 +136,28 @@ async def post_recovery(request: web.Request) -> web.Response:
     return web.json_response({"plan": [result.epoch, result.version], "allocator": coord.name})
 
 
+async def post_state(request: web.Request) -> web.Response:
+    """POST /v1/state (token; a msgpack StateMsg): a component's state for an instance here."""
+    handoff = _coord(request).handoff
+    limit = MAX_STATE + 64 * 1024
+    if request.content_length is not None and request.content_length > limit:
+        handoff.counters["dropped_oversized"] += 1
+        return json_error(413, f"a state message may take at most {limit} bytes")
+    data = bytearray()
+    async for chunk in request.content.iter_any():
+        data += chunk
+        if len(data) > limit:
+            handoff.counters["dropped_oversized"] += 1
+            return json_error(413, f"a state message may take at most {limit} bytes")
+    try:
+        msg = StateMsg.decode(bytes(data))
+    except ValueError as e:
+        handoff.counters["dropped_malformed"] += 1
+        return json_error(400, f"not a state message: {e}")
+    verdict = handoff.receive(msg)
+    return web.json_response({"verdict": verdict}, status=200 if verdict in (APPLY, HOLD) else 409)
+
+
 ROUTES = [
     Route("POST", "/v1/deploy", post_deploy),
     Route("POST", "/v1/undeploy", post_undeploy),
@@ -141,4 +165,5 @@ ROUTES = [
     Route("GET", "/v1/plan", get_plan),
     Route("POST", "/v1/plan", post_plan),
     Route("POST", "/v1/recovery", post_recovery),
+    Route("POST", "/v1/state", post_state),
 ]

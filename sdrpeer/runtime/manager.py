@@ -10,7 +10,9 @@ the API and the gossip record show; `on_change` tells the agent to publish at on
 to the agent's recovery at once, by instance name: `on_fault(name, kind, detail)` for every fault
 a component reports, `on_instance_problem(name, cause)` for `component_error` (ERROR) and
 `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
-`restore(name, state)` pass through to the instance's supervisor.
+`restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when
+set, runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands
+the instance's last state to its successor there.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -64,6 +66,9 @@ class InstanceManager:
         """Called at once with (instance name, cause): component_error or crashed."""
         self.interval = interval
         self.retry_after = retry_after
+        self.before_stop: Callable[[str], Awaitable[None]] | None = None
+        """Awaited before an ACTIVE instance is stopped (errors are logged, the stop goes on)."""
+        self.before_stop_timeout = 2.0
         self.reconciler = Reconciler()
         self._desired: dict[str, InstanceSpec] = {}
         self._sups: dict[str, Supervisor] = {}
@@ -217,6 +222,8 @@ class InstanceManager:
             return
         sup = self._sups[a.instance]
         if a.kind == "stop":
+            if self.before_stop is not None and sup.state == "ACTIVE":
+                await self._before_stop(a.instance, self.before_stop)
             await sup.stop()
             if a.instance not in self._desired:
                 self._sups.pop(a.instance, None)
@@ -234,6 +241,13 @@ class InstanceManager:
         elif a.kind == "disconnect" and conn is not None:
             sup.connections.pop(conn.id, None)
             await sup.command("disconnect", conn_id=conn.id)
+
+    async def _before_stop(self, name: str, hook: Callable[[str], Awaitable[None]]) -> None:
+        try:
+            async with asyncio.timeout(self.before_stop_timeout):
+                await hook(name)
+        except Exception:  # the stop must happen whatever the hook does
+            log.warning("%s: before_stop failed; stopping anyway", name, exc_info=True)
 
     def _changed(self, sup: Supervisor) -> None:
         self.wake()

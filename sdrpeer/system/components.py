@@ -32,7 +32,7 @@ from sdrpeer.system.values import (
     robot_names,
     text,
 )
-from sdrpeer.units import parse_percent, parse_size
+from sdrpeer.units import parse_duration, parse_percent, parse_size
 
 COMPONENT_KEYS = (
     "name",
@@ -46,7 +46,7 @@ COMPONENT_KEYS = (
     "prefer",
 )
 REQUIRES_KEYS = ("cpu", "memory", "traffic")
-STANDBY_KEYS = ("same_robot", "other_robots", "mode")
+STANDBY_KEYS = ("same_robot", "other_robots", "mode", "sync")
 
 parse_cpu = bounded(parse_percent, 0.0, 10_000.0, "0% to 10000%: percent of one core")
 parse_memory = bounded(lambda v: float(parse_size(v)), 0.0, 1e12, "0 to 1TB")
@@ -243,6 +243,7 @@ def _standby(p: Problems, fields: dict[str, yaml.Node], where: str) -> StandbySp
         same_robot=p.get(items, "same_robot", w, integer(0, 16), 0),
         other_robots=p.get(items, "other_robots", w, integer(0, 64), 0),
         mode=p.get(items, "mode", w, _mode, "hot"),
+        sync_s=p.get(items, "sync", w, bounded(parse_duration, 0, 3600, "0s to 3600s"), 0.0),
     )
 
 

@@ -49,6 +49,9 @@ class StandbySpec:
     """Standbys on other robots, each on a different robot."""
     mode: str = "hot"
     """hot or cold (see STANDBY_MODES)."""
+    sync_s: float = 0.0
+    """Seconds between state snapshots of the active instance handed to its hot standbys (its
+    `on_snapshot` -> their `on_restore`); 0: none (a planned move still carries the last state)."""
 
 
 @dataclass(frozen=True, slots=True)
