@@ -17,12 +17,15 @@ import os
 import random
 import signal
 import time
+from collections import Counter
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_views
 from sdrpeer.agent_files import load_token, write_agent_json
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
+from sdrpeer.dashboard.feed import Feed
+from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
 from sdrpeer.deploy.coordinator import ClusterState, Coordinator
 from sdrpeer.deploy.peers import peer_token
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
@@ -95,6 +98,12 @@ class Agent:
         self.keyring: Keyring | None = None
         self.instances = self._make_instances()
         self.coordinator: Coordinator | None = None
+        self.dashboard = Feed(self)
+        """History and live streams of the dashboard (`sdrpeer.dashboard`)."""
+        self.events.listeners.append(self.dashboard.on_event)
+        self.recovery_counts: dict[str, Counter[str]] = {"actions": Counter(), "moves": Counter()}
+        """Recovery steps decided here by action, and components moved by this allocator."""
+        self.events.listeners.append(self._count_recovery)
         self.priority = config.priority
         """Election priority: --priority / the config file, else the robot file's `priority:`."""
 
@@ -157,6 +166,7 @@ class Agent:
         if seeds:
             self.shell.join(seeds)
         self._tasks.append(asyncio.create_task(self._metrics_loop()))
+        self._tasks.append(asyncio.create_task(self.dashboard.run()))
         self.coordinator.start()
         trim_heap()
         log.info(
@@ -172,6 +182,7 @@ class Agent:
         """Leave the cluster gracefully, then close the API and the socket."""
         for task in self._tasks:
             task.cancel()
+        self.dashboard.close()
         if self.coordinator is not None:
             if leave:
                 self.coordinator.leave()
@@ -190,7 +201,12 @@ class Agent:
     async def _start_api(self, token: str) -> None:
         host, port = parse_hostport(self.config.api)
         self._runner, self.api_url = await serve_api(
-            self, token, host, port, extra_routes=DEPLOY_ROUTES, peer_token=peer_token(self.keyring)
+            self,
+            token,
+            host,
+            port,
+            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES],
+            peer_token=peer_token(self.keyring),
         )
 
     # ----------------------------------------------------------------- monitoring
@@ -383,6 +399,34 @@ class Agent:
     def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
         """Event log entries after `since` (see AgentView)."""
         return self.events.since(since, limit)
+
+    def _count_recovery(self, entry: dict[str, Any]) -> None:
+        detail = entry["detail"]
+        if entry["kind"] == "recovery.decision":
+            self.recovery_counts["actions"][str(detail.get("action"))] += 1
+        elif entry["kind"] == "recovery.move":
+            for component in detail.get("moved") or {}:
+                self.recovery_counts["moves"][str(component)] += 1
+
+    def deploy_view(self) -> dict[str, Any]:
+        """Election, recovery and handoff counters, event counts (the Prometheus families)."""
+        coord = self.coordinator
+        info = None if coord is None else coord.election.info()
+        return {
+            "election": {
+                "epoch": 0 if info is None else info.epoch,
+                "leader": None if info is None else info.leader,
+            },
+            "recovery_actions": dict(self.recovery_counts["actions"]),
+            "recovery_moves": dict(self.recovery_counts["moves"]),
+            "handoff": {} if coord is None else dict(coord.handoff.counters),
+            "events": dict(self.events.counts),
+            "dashboard_streams": self.dashboard.hub.clients,
+        }
+
+    def status_view(self) -> dict[str, Any] | None:
+        """The deployment status (GET /v1/status), for the dashboard."""
+        return None if self.coordinator is None else self.coordinator.status(time.time())
 
     def set_virtual(self, changes: dict[str, Any]) -> dict[str, Any]:
         """Change this virtual robot's facts live and publish at once (see AgentView)."""

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections import deque
+from collections import Counter, deque
+from collections.abc import Callable
 from typing import Any
 
 
@@ -12,6 +13,10 @@ class EventLog:
     def __init__(self, maxlen: int = 10_000) -> None:
         self._entries: deque[dict[str, Any]] = deque(maxlen=maxlen)
         self._next_id = 1
+        self.listeners: list[Callable[[dict[str, Any]], None]] = []
+        """Called with every new entry (the dashboard's live stream, the metrics' counters)."""
+        self.counts: Counter[str] = Counter()
+        """Entries ever added, by kind (not bounded by `maxlen`: Prometheus counters)."""
 
     def add(self, ts: float, kind: str, robot: str, **detail: Any) -> dict[str, Any]:
         """Append an entry and return it."""
@@ -24,6 +29,9 @@ class EventLog:
         }
         self._next_id += 1
         self._entries.append(entry)
+        self.counts[kind] += 1
+        for listener in self.listeners:
+            listener(entry)
         return entry
 
     def since(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:

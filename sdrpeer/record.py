@@ -13,11 +13,12 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
     links     = [peer, rtt_10us, jitter_10us, loss_permille, peer, ...]   (flat, 4 per link)
     components= [component name, ...]                 (each distinct component once)
     instances = [[component_index, shared_prefix_len, name_rest, state, role, cpu_dpct,
-                  rss_kib, data_addr|nil], ...]
+                  rss_kib, data_addr|nil, out_bytes_per_s], ...]
     election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
     plan      = [epoch, version, digest, allocator] | nil   (the newest plan this robot holds)
 
-Records of the first layout (8 fields, 7 per instance) are still accepted.
+Records of the first layout (8 fields, 7 per instance) and instances of 8 fields (no traffic)
+are still accepted.
 
 `dpct` is 0.1 %, `ddbm` 0.1 dB, `10us` 0.01 ms, `permille` 0.1 % loss. An instance name usually
 starts with its component's name (`CameraRTC2` of `CameraRTC`), so only the differing tail is
@@ -81,6 +82,8 @@ class InstanceInfo:
     rss: int
     data: str | None = None
     """Where other robots' senders reach its InPorts (tcp://host:port), while it runs."""
+    out_bps: int = 0
+    """Bytes per second its OutPorts sent, over the last metrics interval."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,6 +181,7 @@ def encode_record(r: RobotRecord) -> bytes:
                 _fix(inst.cpu_pct, 10),
                 _kib(inst.rss),
                 inst.data,
+                max(0, int(inst.out_bps)),
             ]
         )
     e, p = r.election, r.plan
@@ -274,7 +278,9 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
         fields = _list(item, "instance")
         if len(fields) == 7:
             fields = [*fields, None]
-        ci, shared, rest, state, role, cpu, rss, data = _list(fields, "instance", 8)
+        if len(fields) == 8:
+            fields = [*fields, 0]
+        ci, shared, rest, state, role, cpu, rss, data, out_bps = _list(fields, "instance", 9)
         component = components[_int(ci, "instance.component", 0, len(components) - 1)]
         prefix = component[: _int(shared, "instance.prefix", 0, len(component))]
         out.append(
@@ -286,6 +292,7 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
                 cpu_pct=_int(cpu, "instance.cpu_pct", 0, 1_000_000) / 10,
                 rss=_int(rss, "instance.rss") * 1024,
                 data=None if data is None else _str(data, "instance.data"),
+                out_bps=_int(out_bps, "instance.out_bps", 0, 1 << 40),
             )
         )
     return tuple(out)
@@ -381,6 +388,7 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
                 "cpu_pct": i.cpu_pct,
                 "rss": i.rss,
                 "data": i.data,
+                "out_bps": i.out_bps,
             }
             for i in r.instances
         ],

@@ -225,6 +225,8 @@ EXPECTED_FAMILIES = {
     "sdrpeer_members": "gauge",
     "sdrpeer_health_score": "gauge",
     "sdrpeer_uptime_seconds": "gauge",
+    "sdrpeer_instance_state": "gauge",
+    "sdrpeer_instance_sent_bytes_per_second": "gauge",
 }
 
 

@@ -52,7 +52,14 @@ class ViewCollector(Collector):
         members = self._view.members_view()
         agent = self._view.agent_view()
         yield from self._member_families(members)
+        yield from instance_families(members)
         yield from self._agent_families(agent)
+        local = getattr(self._view, "instances", None)
+        if local is not None and callable(getattr(local, "status", None)):
+            yield from local_instance_families(self._view.name, local.status())
+        deploy = getattr(self._view, "deploy_view", None)
+        if callable(deploy):
+            yield from deploy_families(self._view.name, deploy())
 
     def _member_families(self, members: list[dict[str, Any]]) -> Iterator[Metric]:
         up = GaugeMetricFamily(
@@ -126,3 +133,113 @@ def make_registry(view: AgentView) -> CollectorRegistry:
 def render(registry: CollectorRegistry) -> bytes:
     """The Prometheus text exposition of `registry`."""
     return generate_latest(registry)
+
+
+INSTANCE_STATES = ("active", "inactive", "error", "created", "starting", "stopping", "stopped")
+PORT_COUNTERS = ("frames", "bytes", "dropped", "lost", "refused")
+
+
+def instance_families(members: list[dict[str, Any]]) -> Iterator[Metric]:
+    """Every robot's gossiped instances: state (one series per state, 1 for the current one)."""
+    state = GaugeMetricFamily(
+        "sdrpeer_instance_state",
+        "1 for the lifecycle state an instance is in (as its robot gossips it), else 0.",
+        labels=["robot", "instance", "component", "role", "state"],
+    )
+    sent = GaugeMetricFamily(
+        "sdrpeer_instance_sent_bytes_per_second",
+        "Bytes per second an instance's OutPorts sent over the last metrics interval.",
+        labels=["robot", "instance", "component"],
+    )
+    for member in members:
+        robot = str(member.get("name"))
+        for inst in member.get("instances") or []:
+            name, comp = str(inst.get("name")), str(inst.get("component"))
+            now = str(inst.get("state"))
+            states = INSTANCE_STATES if now in INSTANCE_STATES else (*INSTANCE_STATES, now)
+            for s in states:
+                state.add_metric([robot, name, comp, str(inst.get("role")), s], float(s == now))
+            sent.add_metric([robot, name, comp], _number(inst.get("out_bps")) or 0.0)
+    yield state
+    yield sent
+
+
+def local_instance_families(robot: str, rows: list[dict[str, Any]]) -> Iterator[Metric]:
+    """This robot's instances: restarts, CPU, RSS and port traffic (from its supervisors)."""
+    restarts = CounterMetricFamily(
+        "sdrpeer_instance_restarts", "Restarts of an instance's host.", labels=["robot", "instance"]
+    )
+    cpu = GaugeMetricFamily(
+        "sdrpeer_instance_cpu_ratio",
+        "CPU use of an instance's host, 0..1 of a core.",
+        labels=["robot", "instance"],
+    )
+    rss = GaugeMetricFamily(
+        "sdrpeer_instance_memory_rss_bytes",
+        "Resident memory of an instance's host.",
+        labels=["robot", "instance"],
+    )
+    ports = {
+        name: CounterMetricFamily(
+            f"sdrpeer_port_{name}",
+            f"Port {name} of an instance (direction in: received, out: sent).",
+            labels=["robot", "instance", "port", "direction"],
+        )
+        for name in PORT_COUNTERS
+    }
+    for row in rows:
+        inst = str(row.get("name"))
+        restarts.add_metric([robot, inst], _number(row.get("restarts")) or 0.0)
+        cpu.add_metric([robot, inst], (_number(row.get("cpu_pct")) or 0.0) / 100)
+        rss.add_metric([robot, inst], _number(row.get("rss")) or 0.0)
+        for port, c in sorted((row.get("ports") or {}).items()):
+            if not isinstance(c, dict):
+                continue
+            direction = "in" if (c.get("frames_in") or c.get("bytes_in")) else "out"
+            for name in PORT_COUNTERS:
+                key = f"{name}_{direction}" if name in ("frames", "bytes") else name
+                ports[name].add_metric(
+                    [robot, inst, str(port), direction], _number(c.get(key)) or 0.0
+                )
+    yield restarts
+    yield cpu
+    yield rss
+    yield from ports.values()
+
+
+def deploy_families(robot: str, doc: dict[str, Any]) -> Iterator[Metric]:
+    """Election epoch and allocator, recovery actions, state handoffs, dashboard streams."""
+    election = doc.get("election") or {}
+    yield GaugeMetricFamily(
+        "sdrpeer_election_epoch",
+        "The allocator epoch this robot follows.",
+        value=_number(election.get("epoch")) or 0.0,
+    )
+    leader = GaugeMetricFamily(
+        "sdrpeer_allocator",
+        "1 for the robot this robot believes is the allocator.",
+        labels=["robot"],
+    )
+    if election.get("leader"):
+        leader.add_metric([str(election["leader"])], 1.0)
+    yield leader
+    yield GaugeMetricFamily(
+        "sdrpeer_is_allocator",
+        "1 while this robot holds the allocator role.",
+        value=1.0 if election.get("leader") == robot else 0.0,
+    )
+    for name, key, label, text in (
+        ("sdrpeer_recovery_actions", "recovery_actions", "action", "Recovery steps decided here."),
+        ("sdrpeer_recovery_moves", "recovery_moves", "component", "Components moved by recovery."),
+        ("sdrpeer_state_handoffs", "handoff", "what", "State handoff messages, by outcome."),
+        ("sdrpeer_events", "events", "kind", "Event log entries added, by kind."),
+    ):
+        family = CounterMetricFamily(name, text, labels=[label])
+        for k, v in sorted((doc.get(key) or {}).items()):
+            family.add_metric([str(k)], _number(v) or 0.0)
+        yield family
+    yield GaugeMetricFamily(
+        "sdrpeer_dashboard_streams",
+        "Dashboard pages streaming from this agent now.",
+        value=_number(doc.get("dashboard_streams")) or 0.0,
+    )

@@ -290,6 +290,7 @@ class InstanceManager:
                 cpu_pct=round(sup.cpu_pct, 1),
                 rss=sup.rss,
                 data=sup.tcp_address(),
+                out_bps=round(sup.out_bps),
             )
             for _, sup in sorted(self._sups.items())
         )
@@ -323,6 +324,7 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
         "pid": sup.pid,
         "cpu_pct": round(sup.cpu_pct, 1),
         "rss": sup.rss,
+        "out_bps": round(sup.out_bps),
         "restarts": sup.restarts,
         "since": round(sup.since, 3),
         "connections": conns,

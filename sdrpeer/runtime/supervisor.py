@@ -122,6 +122,9 @@ class Supervisor:
         self.last_exit: int | None = None
         self.hello: Report = {}
         self.ports: dict[str, Any] = {}
+        self.out_bps = 0.0
+        """Bytes per second sent by the OutPorts between the last two `sample` calls."""
+        self._last_sent: tuple[float, int] | None = None
         self.connections: dict[str, tuple[ConnectionSpec, str]] = {}
         self.start_latency: float | None = None
         self.cpu_pct = 0.0
@@ -397,7 +400,16 @@ class Supervisor:
 
     # ----------------------------------------------------------------- metrics
     def sample(self) -> tuple[float, int]:
-        """Measure the host's CPU % (since the last call) and RSS bytes now."""
+        """Measure the host's CPU % (since the last call) and RSS bytes now, and the bytes per
+        second its OutPorts sent since the last call (`out_bps`, from the heartbeat's counters)."""
+        now = time.monotonic()
+        sent = sum(int(c.get("bytes_out", 0)) for c in self.ports.values() if isinstance(c, dict))
+        last = self._last_sent
+        if last is not None and sent >= last[1] and now > last[0]:
+            self.out_bps = (sent - last[1]) / (now - last[0])
+        else:
+            self.out_bps = 0.0
+        self._last_sent = (now, sent)
         ps = self._ps
         if ps is None:
             self.cpu_pct, self.rss = 0.0, 0

@@ -1,0 +1,165 @@
+"""What the dashboard shows, taken from the agent: history frames, live samples, events.
+
+How it works: `tick(now)` runs once a second in the agent: it reads the members view once, adds
+a frame to the `History` (always, so a page opened late still sees the past) and, only while a
+page listens, publishes a `sample` (every robot's state, metrics, link summary and instances, and
+the deployment status: allocator, plan, components, connections with their traffic). Every event
+log entry is published as an `event` the moment it is added. A new page first gets `hello`
+(which robot, the window), `history` (the series and the fleet moments of `moments.Moments`),
+`events` (the log since the page's last event id, or the newest `replay` entries) and the current
+`sample`. Every sample also carries the moments since the one before.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Iterable, Mapping
+from typing import Any, Protocol
+
+from sdrpeer.dashboard.history import History
+from sdrpeer.dashboard.moments import Moments
+from sdrpeer.dashboard.stream import Hub, encode_event
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DashboardSource", "Feed", "member_summary"]
+
+
+class DashboardSource(Protocol):
+    """What the feed reads from an agent."""
+
+    @property
+    def name(self) -> str:
+        """This robot's name."""
+        ...
+
+    def members_view(self) -> list[dict[str, Any]]:
+        """Every member with metrics, links and instances (sdrpeer.api.view.AgentView)."""
+        ...
+
+    def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
+        """Event log entries after `since`."""
+        ...
+
+    def status_view(self) -> dict[str, Any] | None:
+        """The deployment status (GET /v1/status), None on an agent that deploys nothing."""
+        ...
+
+
+def _mean(values: Iterable[Any]) -> float | None:
+    known = [float(v) for v in values if isinstance(v, int | float) and not math.isnan(v)]
+    return round(sum(known) / len(known), 3) if known else None
+
+
+def member_summary(member: Mapping[str, Any]) -> dict[str, Any]:
+    """One robot as a live sample shows it: its links summed up, not listed pair by pair."""
+    links = [v for v in (member.get("links") or {}).values() if isinstance(v, Mapping)]
+    losses = [float(v["loss"]) for v in links if isinstance(v.get("loss"), int | float)]
+    return {
+        "name": member.get("name"),
+        "state": member.get("state"),
+        "api": member.get("api"),
+        "metrics": member.get("metrics"),
+        "link": {
+            "peers": len(links),
+            "rtt_ms": _mean(v.get("rtt_ms") for v in links),
+            "jitter_ms": _mean(v.get("jitter_ms") for v in links),
+            "loss": max(losses, default=None),
+        },
+        "instances": member.get("instances") or [],
+    }
+
+
+class Feed:
+    """Keeps the history and feeds the live streams of one agent."""
+
+    def __init__(
+        self,
+        source: DashboardSource,
+        *,
+        history: History | None = None,
+        hub: Hub | None = None,
+        interval_s: float = 1.0,
+        replay: int = 1000,
+    ) -> None:
+        self.source = source
+        self.history = history or History()
+        self.hub = hub or Hub()
+        self.interval_s = interval_s
+        self.replay = replay
+        self.moments = Moments(self.history.window_s)
+
+    def on_event(self, entry: dict[str, Any]) -> None:
+        """An event log listener: publish the entry at once."""
+        self.hub.publish("event", entry, int(entry["id"]))
+
+    def tick(self, now: float) -> None:
+        """One frame: into the history and the moments; to the pages, if any listen."""
+        members = self.source.members_view()
+        status = self.source.status_view()
+        self.history.add(now, members)
+        moments = self.moments.observe(now, status)
+        if self.hub.clients:
+            self.hub.publish("sample", self.sample(now, members, status, moments))
+
+    def sample(
+        self,
+        now: float,
+        members: list[dict[str, Any]] | None = None,
+        status: dict[str, Any] | None = None,
+        moments: list[dict[str, Any]] | None = None,
+    ) -> dict[str, Any]:
+        """The live state of the fleet as this agent sees it, with the moments since the last."""
+        if members is None:
+            members = self.source.members_view()
+            status = self.source.status_view()
+        return {
+            "ts": round(now, 3),
+            "robot": self.source.name,
+            "members": [member_summary(m) for m in members],
+            "status": status,
+            "moments": moments or [],
+        }
+
+    def hello(self, last_event_id: str | None) -> list[bytes]:
+        """What a new (or reconnecting) page gets before the live messages."""
+        try:
+            since = max(0, int(last_event_id)) if last_event_id else None
+        except ValueError:
+            since = None
+        if since is None:
+            tail = self.source.events_view(0, 10**9)[-self.replay :]
+        else:
+            tail = self.source.events_view(since, self.replay)
+        now = time.time()
+        return [
+            encode_event(
+                "hello",
+                {
+                    "robot": self.source.name,
+                    "window_s": self.history.window_s,
+                    "interval_s": self.interval_s,
+                },
+            ),
+            encode_event("history", {**self.history.series(), "moments": self.moments.all()}),
+            encode_event("events", tail, int(tail[-1]["id"]) if tail else None),
+            encode_event("sample", self.sample(now)),
+        ]
+
+    async def run(self) -> None:
+        """Tick every `interval_s` until cancelled."""
+        while True:
+            try:
+                self.tick(time.time())
+            except Exception:
+                log.exception("dashboard frame failed")
+            await asyncio.sleep(self.interval_s)
+
+    def close(self) -> None:
+        """End the live streams."""
+        with contextlib.suppress(Exception):
+            self.hub.close()

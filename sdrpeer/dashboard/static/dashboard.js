@@ -1,0 +1,380 @@
+// sdrpeer dashboard: one page per agent, fed by the agent's server-sent events (/v1/stream).
+//
+// How it works: the stream first sends `hello` (which robot, the history window), `history`
+// (every robot's metric series and the fleet moments of the window), `events` (this agent's event
+// log) and a `sample`; then a `sample` every second and an `event` whenever the agent logs one.
+// Messages only update the state `S`; drawing happens once per animation frame for the parts
+// marked dirty, and every render's duration is kept in `S.perf` (the benchmark and the browser
+// test read `window.__sdrpeer`). Nothing is fetched from outside the agent: uPlot is vendored.
+"use strict";
+(() => {
+  const METRICS = [
+    ["mem_free", "free memory (MB)", (v) => v / 1e6],
+    ["cpu_pct", "CPU (%)", (v) => v],
+    ["battery_pct", "battery (%)", (v) => v],
+    ["rssi_dbm", "RSSI (dBm)", (v) => v],
+    ["rtt_ms", "link RTT, mean of peers (ms)", (v) => v],
+    ["jitter_ms", "link jitter, mean of peers (ms)", (v) => v],
+    ["loss", "link loss, worst peer (%)", (v) => v * 100],
+  ];
+  const STATE_COLORS = {
+    active: "#1a9850", inactive: "#4575b4", error: "#d73027", failed: "#d73027",
+    pending: "#fdae61", starting: "#fdae61", updating: "#fdae61", cold: "#e5e7eb",
+    "robot down": "#7f7f7f", gone: "#ffffff", stopped: "#bdbdbd",
+  };
+  const MARKERS = { allocation: "#f28e2b", move: "#8a3ffc", election: "#9ca3af" };
+  const MAX_EVENTS = 5000, MAX_ROWS = 400, MAX_PERF = 4000;
+
+  const S = {
+    robot: null, windowS: 900, connected: false,
+    t: [], series: {}, robots: [], members: [], status: null,
+    events: [], moments: [], charts: {}, chartRobots: "",
+    dirty: new Set(), scheduled: false,
+    perf: { renders: [], frames: [], samples: 0, events: 0, lastSampleAt: 0 },
+  };
+  window.__sdrpeer = S;
+
+  const $ = (id) => document.getElementById(id);
+  const esc = (x) => String(x ?? "").replace(/[&<>"']/g, (c) => ({
+    "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
+  const color = (i) => `hsl(${(i * 137.508) % 360}, 62%, 45%)`;
+  const num = (v, digits = 1) => (v === null || v === undefined || Number.isNaN(v)) ? "-"
+    : Number(v).toFixed(digits);
+  const bytes = (v) => v === null || v === undefined ? "-"
+    : v >= 1e6 ? `${(v / 1e6).toFixed(1)} MB/s` : v >= 1e3 ? `${(v / 1e3).toFixed(1)} kB/s`
+    : `${Math.round(v)} B/s`;
+  const clock = (ts) => new Date(ts * 1000).toLocaleTimeString([], { hour12: false });
+
+  // ------------------------------------------------------------------ state updates
+  function setHistory(h) {
+    S.t = h.t.slice();
+    S.series = {};
+    for (const [name, lists] of Object.entries(h.robots)) {
+      S.series[name] = {};
+      for (const [m] of METRICS) S.series[name][m] = lists[m].slice();
+    }
+    S.moments = (h.moments || []).slice();
+    mark("charts", "states", "events");
+  }
+
+  function memberValues(m) {
+    const x = m.metrics || {}, l = m.link || {};
+    return { mem_free: x.mem_free, cpu_pct: x.cpu_pct, battery_pct: x.battery_pct,
+      rssi_dbm: x.rssi_dbm, rtt_ms: l.rtt_ms, jitter_ms: l.jitter_ms, loss: l.loss };
+  }
+
+  function addSample(s) {
+    S.perf.samples += 1;
+    S.perf.lastSampleAt = performance.now();
+    S.members = s.members;
+    S.status = s.status;
+    const k = S.t.length;
+    S.t.push(s.ts);
+    const seen = new Set();
+    for (const m of s.members) {
+      if (m.state !== "alive" && m.state !== "suspect") continue;
+      seen.add(m.name);
+      let lists = S.series[m.name];
+      if (!lists) {
+        lists = S.series[m.name] = {};
+        for (const [metric] of METRICS) lists[metric] = new Array(k).fill(null);
+      }
+      const v = memberValues(m);
+      for (const [metric] of METRICS) lists[metric].push(v[metric] ?? null);
+    }
+    for (const [name, lists] of Object.entries(S.series)) {
+      if (!seen.has(name)) for (const [metric] of METRICS) lists[metric].push(null);
+    }
+    trim(s.ts);
+    for (const mo of s.moments || []) S.moments.push(mo);
+    mark("summary", "fleet", "topology", "charts", "states");
+    if ((s.moments || []).some((mo) => mo.kind !== "state")) mark("events");
+  }
+
+  function trim(now) {
+    let cut = 0;
+    while (cut < S.t.length && S.t[cut] < now - S.windowS) cut++;
+    if (cut > 0) {
+      S.t.splice(0, cut);
+      for (const lists of Object.values(S.series)) for (const a of Object.values(lists)) a.splice(0, cut);
+    }
+    let m = 0;
+    while (m < S.moments.length && S.moments[m].ts < now - S.windowS) m++;
+    if (m > 0) S.moments.splice(0, m);
+    for (const [name, lists] of Object.entries(S.series)) {
+      if (lists.mem_free.every((v) => v === null)) delete S.series[name];
+    }
+  }
+
+  function addEvents(list) {
+    for (const e of list) S.events.push(e);
+    S.perf.events += list.length;
+    if (S.events.length > MAX_EVENTS) S.events.splice(0, S.events.length - MAX_EVENTS);
+    mark("events");
+  }
+
+  // ------------------------------------------------------------------ rendering
+  function mark(...parts) {
+    for (const p of parts) S.dirty.add(p);
+    if (!S.scheduled) {
+      S.scheduled = true;
+      requestAnimationFrame(render);
+    }
+  }
+
+  function render() {
+    S.scheduled = false;
+    const t0 = performance.now();
+    const parts = [...S.dirty];
+    S.dirty.clear();
+    for (const p of parts) RENDER[p]();
+    const took = performance.now() - t0;
+    S.perf.renders.push([parts.join(","), took]);
+    if (S.perf.renders.length > MAX_PERF) S.perf.renders.splice(0, S.perf.renders.length - MAX_PERF);
+  }
+
+  function renderSummary() {
+    const st = S.status || {};
+    const a = st.allocator || {};
+    $("allocator").textContent = a.name || "none";
+    $("epoch").textContent = a.epoch ?? "-";
+    const p = st.plan;
+    $("plan").textContent = p ? `${p.system ?? "undeployed"} ${p.epoch}.${p.version}` : "none";
+  }
+
+  function renderFleet() {
+    const leader = (S.status && S.status.allocator || {}).name;
+    const rows = S.members.map((m) => {
+      const x = m.metrics || {}, l = m.link || {};
+      const role = m.name === leader ? '<span class="badge alloc">allocator</span>' : "";
+      const insts = (m.instances || []).map((i) =>
+        `<span class="badge s-${esc(String(i.state).replace(" ", "-"))}" title="${esc(i.component)} ${esc(i.role)}">${esc(i.name)}</span>`).join(" ");
+      return `<tr id="robot-${esc(m.name)}" data-state="${esc(m.state)}"><td>${esc(m.name)}</td>` +
+        `<td><span class="badge s-${esc(m.state)}">${esc(m.state)}</span></td><td>${role}</td>` +
+        `<td class="num">${num(x.cpu_pct)} %</td><td class="num">${num(x.mem_free / 1e6, 0)} MB</td>` +
+        `<td class="num">${num(x.battery_pct, 0)} %</td><td class="num">${num(x.rssi_dbm)} dBm</td>` +
+        `<td class="num">${num(l.rtt_ms, 2)} ms</td><td class="num">${num(l.jitter_ms, 2)} ms</td>` +
+        `<td class="num">${l.loss == null ? "-" : num(l.loss * 100, 0) + " %"}</td><td>${insts}</td></tr>`;
+    });
+    $("fleet").tBodies[0].innerHTML = rows.join("");
+  }
+
+  function renderTopology() {
+    const svg = $("topology");
+    const width = Math.max(600, svg.clientWidth || 900);
+    const robots = S.members.filter((m) => m.state !== "left");
+    const leader = (S.status && S.status.allocator || {}).name;
+    const boxW = 200, rowH = 15, pad = 10, gap = 26;
+    const cols = Math.max(1, Math.floor((width + gap) / (boxW + gap)));
+    const pos = {};
+    let html = '<defs><marker id="arrow" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="6" ' +
+      'markerHeight="6" orient="auto-start-reverse"><path d="M 0 0 L 10 5 L 0 10 z" fill="#64748b"/></marker></defs>';
+    let y = 0, rowMax = 0, boxes = "";
+    robots.forEach((m, i) => {
+      const col = i % cols;
+      if (col === 0 && i > 0) { y += rowMax + gap; rowMax = 0; }
+      const insts = (m.instances || []).slice().sort((a, b) =>
+        (a.role === b.role ? a.name.localeCompare(b.name) : a.role === "active" ? -1 : 1));
+      const h = 24 + insts.length * rowH + pad;
+      rowMax = Math.max(rowMax, h);
+      const x = col * (boxW + gap);
+      const cls = `robot ${m.state}${m.name === leader ? " allocator" : ""}`;
+      boxes += `<g class="${esc(cls)}" data-robot="${esc(m.name)}"><rect x="${x}" y="${y}" width="${boxW}" height="${h}" rx="6"/>` +
+        `<text class="name" x="${x + 8}" y="${y + 16}">${esc(m.name)}${m.name === leader ? " ★ allocator" : ""}</text>`;
+      insts.forEach((inst, k) => {
+        const iy = y + 22 + k * rowH;
+        const fill = STATE_COLORS[inst.state] || "#cbd5e1";
+        boxes += `<g class="inst ${esc(inst.role)}" data-instance="${esc(inst.name)}" data-state="${esc(inst.state)}">` +
+          `<rect x="${x + 8}" y="${iy}" width="${boxW - 16}" height="${rowH - 3}" rx="3" fill="${fill}"/>` +
+          `<text x="${x + 12}" y="${iy + 9}">${esc(inst.name)} · ${esc(inst.state)}</text></g>`;
+        pos[inst.name] = [x + 8, iy + (rowH - 3) / 2, x + boxW - 8];
+      });
+      boxes += "</g>";
+    });
+    const total = y + rowMax + 4;
+    let edges = "";
+    const st = S.status || {};
+    const where = {};
+    for (const c of st.components || []) if (c.instance) where[c.component] = c.instance;
+    for (const c of st.connections || []) {
+      const a = pos[where[c.from.split(".")[0]]], b = pos[where[c.to.split(".")[0]]];
+      if (!a || !b) continue;
+      const x1 = a[2], y1 = a[1], x2 = b[0], y2 = b[1];
+      const dx = Math.max(40, Math.abs(x2 - x1) / 2);
+      edges += `<path class="edge" d="M ${x1} ${y1} C ${x1 + dx} ${y1}, ${x2 - dx} ${y2}, ${x2} ${y2}"/>` +
+        `<text class="edge-label" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${esc(c.from.split(".")[1])}: ${bytes(c.bytes_per_s)}</text>`;
+    }
+    svg.setAttribute("viewBox", `-2 -2 ${width + 4} ${total + 4}`);
+    svg.style.height = `${total + 4}px`;
+    svg.innerHTML = html + boxes + edges;
+  }
+
+  function markerHook(u) {
+    const ctx = u.ctx, [lo, hi] = [u.scales.x.min, u.scales.x.max];
+    ctx.save();
+    ctx.lineWidth = 1.5 * devicePixelRatio;
+    for (const mo of S.moments) {
+      const c = MARKERS[mo.kind];
+      if (!c || mo.ts < lo || mo.ts > hi) continue;
+      const x = u.valToPos(mo.ts, "x", true);
+      ctx.strokeStyle = c;
+      ctx.setLineDash(mo.kind === "allocation" ? [6, 4] : mo.kind === "move" ? [8, 3, 2, 3] : [2, 3]);
+      ctx.beginPath();
+      ctx.moveTo(x, u.bbox.top);
+      ctx.lineTo(x, u.bbox.top + u.bbox.height);
+      ctx.stroke();
+    }
+    ctx.restore();
+  }
+
+  function renderCharts() {
+    const robots = Object.keys(S.series).sort();
+    const key = robots.join("|");
+    const box = $("charts");
+    if (key !== S.chartRobots) {
+      for (const c of Object.values(S.charts)) c.destroy();
+      S.charts = {};
+      box.innerHTML = "";
+      S.chartRobots = key;
+      const width = Math.max(380, Math.min(640, (box.clientWidth || 900) / 2 - 12));
+      for (const [metric, title] of METRICS) {
+        const div = document.createElement("div");
+        div.className = "chart";
+        div.innerHTML = `<h3>${esc(title)}</h3>`;
+        box.appendChild(div);
+        const opts = {
+          width, height: 170, legend: { show: robots.length <= 12 },
+          scales: { x: { time: true } },
+          series: [{}, ...robots.map((r, i) => ({ label: r, stroke: color(i), width: 1.5, spanGaps: false }))],
+          hooks: { draw: [markerHook] },
+        };
+        S.charts[metric] = new uPlot(opts, dataFor(metric, robots), div);
+      }
+      return;
+    }
+    for (const [metric] of METRICS) S.charts[metric].setData(dataFor(metric, robots));
+  }
+
+  function dataFor(metric, robots) {
+    const scale = METRICS.find((m) => m[0] === metric)[2];
+    return [S.t, ...robots.map((r) => S.series[r][metric].map((v) => v === null ? null : scale(v)))];
+  }
+
+  function renderStates() {
+    const canvas = $("states");
+    const comps = ((S.status && S.status.components) || []).map((c) => c.component);
+    const rowH = 14, left = 190, top = 4;
+    const width = Math.max(600, canvas.clientWidth || 900);
+    const height = top + Math.max(1, comps.length) * rowH + 18;
+    const dpr = devicePixelRatio || 1;
+    if (canvas.width !== width * dpr || canvas.height !== height * dpr) {
+      canvas.width = width * dpr; canvas.height = height * dpr; canvas.style.height = `${height}px`;
+    }
+    const ctx = canvas.getContext("2d");
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    ctx.clearRect(0, 0, width, height);
+    const now = S.t.length ? S.t[S.t.length - 1] : Date.now() / 1000;
+    const t0 = now - S.windowS;
+    const xOf = (ts) => left + (width - left - 8) * Math.max(0, Math.min(1, (ts - t0) / S.windowS));
+    const segs = {};
+    for (const mo of S.moments) {
+      if (mo.kind !== "state" || mo.role !== "active") continue;
+      (segs[mo.component] ||= []).push([mo.ts, mo.state, mo.robot]);
+    }
+    ctx.font = "11px system-ui, sans-serif";
+    comps.forEach((comp, i) => {
+      const y = top + i * rowH;
+      ctx.fillStyle = "#1d2125";
+      ctx.fillText(comp, 4, y + 10);
+      const list = segs[comp] || [];
+      for (let k = 0; k < list.length; k++) {
+        const [ts, state] = list[k];
+        const end = k + 1 < list.length ? list[k + 1][0] : now;
+        ctx.fillStyle = STATE_COLORS[state] || "#cbd5e1";
+        ctx.fillRect(xOf(ts), y + 2, Math.max(1, xOf(end) - xOf(ts)), rowH - 4);
+      }
+    });
+    for (const mo of S.moments) {
+      const c = MARKERS[mo.kind];
+      if (!c || mo.ts < t0) continue;
+      ctx.strokeStyle = c;
+      ctx.beginPath();
+      ctx.moveTo(xOf(mo.ts), top);
+      ctx.lineTo(xOf(mo.ts), height - 16);
+      ctx.stroke();
+    }
+    ctx.fillStyle = "#6b7280";
+    ctx.fillText(clock(t0), left, height - 4);
+    ctx.fillText(clock(now), width - 60, height - 4);
+  }
+
+  function fleetEvents() {
+    return S.moments.filter((m) => m.kind !== "state").map((m) => ({
+      id: null, ts: m.ts, kind: `fleet.${m.kind}`, robot: m.to || m.leader || "",
+      detail: Object.fromEntries(Object.entries(m).filter(([k]) => k !== "ts" && k !== "kind")),
+    }));
+  }
+
+  function renderEvents() {
+    const kind = $("event-kind").value, text = $("event-text").value.toLowerCase();
+    const all = S.events.concat(fleetEvents()).sort((a, b) => b.ts - a.ts);
+    const match = (e) => (!kind || e.kind.startsWith(kind) || (kind === "allocation" && e.kind.startsWith("plan")) ||
+      (kind === "fleet" && e.kind.startsWith("fleet"))) &&
+      (!text || `${e.kind} ${e.robot} ${JSON.stringify(e.detail)}`.toLowerCase().includes(text));
+    const rows = [];
+    let shown = 0;
+    for (const e of all) {
+      if (!match(e)) continue;
+      if (shown++ >= MAX_ROWS) continue;
+      rows.push(`<tr data-kind="${esc(e.kind)}"><td>${clock(e.ts)}</td><td>${esc(e.kind)}</td>` +
+        `<td>${esc(e.robot)}</td><td class="detail">${esc(JSON.stringify(e.detail))}</td></tr>`);
+    }
+    $("events").tBodies[0].innerHTML = rows.join("");
+    $("event-count").textContent = `${Math.min(shown, MAX_ROWS)} of ${shown} shown (${all.length} kept)`;
+  }
+
+  function renderLegend() {
+    $("state-legend").innerHTML = ["active", "inactive", "error", "pending", "robot down"].map((s) =>
+      `<span style="--c:${STATE_COLORS[s]}">${s}</span>`).join("") +
+      Object.entries(MARKERS).map(([k, c]) => `<span style="--c:${c}">${k}</span>`).join("");
+  }
+
+  const RENDER = {
+    summary: renderSummary, fleet: renderFleet, topology: renderTopology,
+    charts: renderCharts, states: renderStates, events: renderEvents,
+  };
+
+  // ------------------------------------------------------------------ the stream
+  function connect() {
+    const es = new EventSource("/v1/stream");
+    const on = (kind, fn) => es.addEventListener(kind, (msg) => fn(JSON.parse(msg.data)));
+    on("hello", (h) => {
+      S.robot = h.robot;
+      S.windowS = h.window_s;
+      $("robot").textContent = h.robot;
+      document.title = `sdrpeer · ${h.robot}`;
+    });
+    on("history", setHistory);
+    on("events", (list) => { S.events = []; addEvents(list); });
+    on("event", (e) => addEvents([e]));
+    on("sample", addSample);
+    es.onopen = () => { S.connected = true; $("conn").className = "conn on"; $("conn").textContent = "live"; };
+    es.onerror = () => { S.connected = false; $("conn").className = "conn off"; $("conn").textContent = "reconnecting"; };
+  }
+
+  function frames(last) {  // frame intervals, for the benchmark's smoothness figure
+    requestAnimationFrame((now) => {
+      if (last !== undefined) {
+        S.perf.frames.push(now - last);
+        if (S.perf.frames.length > MAX_PERF) S.perf.frames.splice(0, S.perf.frames.length - MAX_PERF);
+      }
+      frames(now);
+    });
+  }
+
+  $("event-kind").addEventListener("change", () => mark("events"));
+  $("event-text").addEventListener("input", () => mark("events"));
+  renderLegend();
+  frames();
+  connect();
+})();

@@ -1,0 +1,143 @@
+"""The dashboard's bounded history (pure) and its fleet moments (pure)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+
+from sdrpeer.dashboard.history import METRICS, History, frame_values
+from sdrpeer.dashboard.moments import Moments, diff_status
+
+
+def member(name: str, free: float = 1e9, state: str = "alive", **links: Any) -> dict[str, Any]:
+    return {
+        "name": name,
+        "state": state,
+        "metrics": {"mem_free": free, "cpu_pct": 5.0, "battery_pct": 90.0, "rssi_dbm": -47.5},
+        "links": links,
+    }
+
+
+def test_frame_values_sum_up_links_and_mark_unknowns() -> None:
+    m = member(
+        "r1",
+        r2={"rtt_ms": 1.0, "jitter_ms": 0.5, "loss": 0.1},
+        r3={"rtt_ms": 3.0, "jitter_ms": 1.5, "loss": 0.3},
+    )
+    assert frame_values(m) == [1e9, 5.0, 90.0, -47.5, 2.0, 1.0, 0.3]
+    silent = frame_values({"name": "r9", "metrics": None, "links": {}})
+    assert all(math.isnan(x) for x in silent)  # NaN everywhere: nothing reported
+
+
+def test_series_follow_robots_that_join_and_leave() -> None:
+    h = History(window_s=100)
+    h.add(1.0, [member("r1", 100.0)])
+    h.add(2.0, [member("r1", 200.0), member("r2", 50.0)])
+    h.add(3.0, [member("r2", 60.0), member("r1", 0, state="dead")])  # dead: not plotted
+    s = h.series()
+    assert s["t"] == [1.0, 2.0, 3.0]
+    assert s["robots"]["r1"]["mem_free"] == [100.0, 200.0, None]
+    assert s["robots"]["r2"]["mem_free"] == [None, 50.0, 60.0]
+    assert s["robots"]["r1"]["rtt_ms"] == [None, None, None]  # no links measured
+    assert set(s["robots"]["r2"]) == set(METRICS)
+    assert h.series(since=2.0)["t"] == [3.0]
+    assert h.series(since=2.0)["robots"]["r2"]["mem_free"] == [60.0]
+
+
+def test_frames_older_than_the_window_fall_off() -> None:
+    h = History(window_s=10, max_frames=1000)
+    for t in range(100):
+        h.add(float(t), [member("r1", float(t))])
+    assert h.series()["t"][0] == 89.0
+    assert len(h) == 11
+
+
+def test_max_frames_bounds_the_history_whatever_the_window() -> None:
+    h = History(window_s=1e9, max_frames=50)
+    for t in range(500):
+        h.add(float(t), [member("r1")])
+    assert len(h) == 50
+    assert h.series()["t"][0] == 450.0
+
+
+def test_fifty_robots_for_fifteen_minutes_stay_small() -> None:
+    h = History(window_s=900)
+    fleet = [
+        member(f"robot-{i}", r0={"rtt_ms": 1.0, "jitter_ms": 0.1, "loss": 0.0}) for i in range(50)
+    ]
+    for t in range(1000):
+        h.add(float(t), fleet)
+    assert len(h) == 901
+    assert h.bytes_used() <= 50 * len(METRICS) * 4 * 901  # float32 values, nothing per robot name
+
+
+STATUS = {
+    "allocator": {"name": "r2", "epoch": 1},
+    "plan": {"epoch": 1, "version": 1, "system": "s"},
+    "components": [
+        {
+            "component": "Cam",
+            "instance": "Cam",
+            "robot": "r1",
+            "state": "active",
+            "standbys": [{"instance": "Cam-s1", "robot": "r2", "state": "inactive", "mode": "hot"}],
+        }
+    ],
+}
+MOVED = {
+    "allocator": {"name": "r3", "epoch": 2},
+    "plan": {"epoch": 2, "version": 1, "system": "s"},
+    "components": [
+        {"component": "Cam", "instance": "Cam-s1", "robot": "r2", "state": "active", "standbys": []}
+    ],
+}
+
+
+def kinds(moments: list[dict[str, Any]]) -> list[tuple[Any, ...]]:
+    return [
+        (m["kind"], m.get("instance") or m.get("leader") or m.get("component"), m.get("state"))
+        for m in moments
+    ]
+
+
+def test_first_look_reports_every_state_and_the_plan() -> None:
+    assert kinds(diff_status(None, STATUS, 5.0)) == [
+        ("allocation", None, None),
+        ("state", "Cam", "active"),
+        ("state", "Cam-s1", "inactive"),
+    ]
+    assert diff_status(None, None, 5.0) == []
+    assert diff_status(STATUS, STATUS, 6.0) == []  # nothing changed, nothing said
+
+
+def test_a_move_reports_election_plan_states_and_the_move() -> None:
+    moments = diff_status(STATUS, MOVED, 9.0)
+    assert kinds(moments) == [
+        ("election", "r3", None),
+        ("allocation", None, None),
+        ("state", "Cam-s1", "active"),  # the standby's role and state changed
+        ("state", "Cam", "gone"),
+        ("move", "Cam", None),
+    ]
+    move = moments[-1]
+    assert (move["from"], move["to"], move["ts"]) == ("r1", "r2", 9.0)
+
+
+def test_moments_are_kept_for_the_window() -> None:
+    m = Moments(window_s=10)
+    m.observe(0.0, STATUS)
+    assert len(m) == 3
+    m.observe(5.0, MOVED)
+    assert len(m) == 8
+    m.observe(12.0, MOVED)  # the first look's moments are older than 10 s now
+    assert [x["ts"] for x in m.all()] == [5.0] * 5
+    assert m.observe(13.0, None) == []  # no status (an agent that deploys nothing): no moments
+
+
+@pytest.mark.parametrize("field", ["allocator", "plan", "components"])
+def test_missing_fields_are_no_crash(field: str) -> None:
+    partial = {k: v for k, v in STATUS.items() if k != field}
+    diff_status(STATUS, partial, 1.0)
+    diff_status(partial, STATUS, 1.0)
