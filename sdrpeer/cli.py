@@ -194,6 +194,7 @@ def cmd_robot_set(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The whole `sdrpeer` argument parser."""
     from sdrpeer.cli_lab import add_lab_parsers  # noqa: PLC0415 - cli_lab imports this module
+    from sdrpeer.cli_top import add_top_parser  # noqa: PLC0415 - same
     from sdrpeer.deploy.commands import add_deploy_parsers  # noqa: PLC0415 - same
     from sdrpeer.profile import add_profile_parser  # noqa: PLC0415 - heavy: only when parsing
     from sdrpeer.runtime.commands import add_instance_parsers  # noqa: PLC0415 - same
@@ -224,6 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_deploy_parsers(sub, client, as_json)
     add_system_parser(sub)
     add_lab_parsers(sub)
+    add_top_parser(sub, client)
     add_profile_parser(sub)  # `sdrpeer profile` (components issue; lives in sdrpeer.profile)
     return parser
 

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from sdrpeer.cli_format import want_color
+from sdrpeer.cli_status import format_status
 from sdrpeer.client import AgentClient
 from sdrpeer.deploy.status import all_active
 from sdrpeer.errors import ApiError, SdrpeerError
@@ -113,37 +117,13 @@ def _wait(
     raise SdrpeerError(f"not ACTIVE after {timeout:.0f}s: {', '.join(waiting) or 'no plan yet'}")
 
 
-def format_status(doc: dict[str, Any]) -> str:
-    """The status table."""
-    alloc = doc.get("allocator") or {}
-    plan = doc.get("plan")
-    lines = [f"allocator: {alloc.get('name') or '(none yet)'} (epoch {alloc.get('epoch')})"]
-    if plan is None:
-        lines.append("no system deployed")
-        return "\n".join(lines)
-    lines.append(
-        f"system: {plan.get('system') or '(undeployed)'}  plan {plan['epoch']}.{plan['version']}"
-        f" by {plan.get('allocator')}"
-    )
-    lines.append(f"{'COMPONENT':<28} {'ROBOT':<12} {'STATE':<10} {'SINCE':<9} STANDBYS")
-    for c in doc.get("components", []):
-        since = c.get("since")
-        when = time.strftime("%H:%M:%S", time.localtime(since)) if since else "-"
-        standbys = ", ".join(
-            f"{s['robot']}:{s['state']}{'/cold' if s.get('mode') == 'cold' else ''}"
-            for s in c.get("standbys", [])
-        )
-        lines.append(
-            f"{c['component']:<28} {c.get('robot') or '-':<12} {c.get('state'):<10} {when:<9}"
-            f" {standbys or '-'}"
-        )
-    return "\n".join(lines)
-
-
 def cmd_status(args: argparse.Namespace) -> int:
     """Print where each component runs."""
     doc = _client(args).get("/v1/status")
-    print(json.dumps(doc, indent=2, sort_keys=True) if args.json else format_status(doc))
+    if args.json:
+        print(json.dumps(doc, indent=2, sort_keys=True))
+    else:
+        print(format_status(doc, color=want_color(sys.stdout.isatty(), os.environ)))
     return 0
 
 

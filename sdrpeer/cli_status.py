@@ -1,0 +1,145 @@
+"""Pure text rendering of the deployment status and of `sdrpeer top`'s screen.
+
+Nothing here does I/O. `format_status` is `sdrpeer status`: the allocator, the plan, a table of
+components (robot, state, since, standbys, traffic) and the connections with their traffic, in
+colour on a terminal. `format_top` is one screen of `sdrpeer top`, built from one live sample of
+the agent's stream (`sdrpeer.dashboard.feed`): robots with their metrics and link summary, then
+components.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from sdrpeer.cli_format import (
+    MISSING,
+    STATE_COLORS,
+    human_bytes,
+    human_dbm,
+    human_ms,
+    human_percent,
+    paint,
+    render_table,
+)
+
+COMPONENT_COLORS = {
+    "active": "32",
+    "inactive": "36",
+    "error": "31",
+    "failed": "31",
+    "pending": "33",
+    "starting": "33",
+    "updating": "33",
+    "robot down": "31",
+    "unplaced": "31",
+    "cold": "90",
+}
+STATUS_COLUMNS = ("COMPONENT", "ROBOT", "STATE", "SINCE", "SENDS", "STANDBYS")
+ROBOT_COLUMNS = ("ROBOT", "STATE", "ROLE", "CPU", "MEM-FREE", "BATTERY", "RSSI", "RTT", "LOSS")
+
+
+def _rate(value: Any) -> str:
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return MISSING
+    return f"{human_bytes(value)}/s"
+
+
+def _clock(ts: Any, tz_local: bool = True) -> str:
+    if not isinstance(ts, int | float):
+        return MISSING
+    return time.strftime("%H:%M:%S", time.localtime(ts) if tz_local else time.gmtime(ts))
+
+
+def _state(state: Any, color: bool) -> str:
+    text = str(state or MISSING)
+    return paint(text, COMPONENT_COLORS.get(text, ""), color)
+
+
+def _sends(doc: Mapping[str, Any]) -> dict[str, Any]:
+    """Component -> bytes/s its active instance sends (from the connections' traffic)."""
+    out: dict[str, Any] = {}
+    for c in doc.get("connections") or []:
+        out[str(c.get("from", "")).split(".")[0]] = c.get("bytes_per_s")
+    return out
+
+
+def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = True) -> str:
+    """The `sdrpeer status` text (`local`: times in the local zone, else UTC)."""
+    alloc = doc.get("allocator") or {}
+    plan = doc.get("plan")
+    lines = [f"allocator: {alloc.get('name') or '(none yet)'} (epoch {alloc.get('epoch')})"]
+    if plan is None:
+        lines.append("no system deployed")
+        return "\n".join(lines)
+    lines.append(
+        f"system: {plan.get('system') or '(undeployed)'}  plan {plan['epoch']}.{plan['version']}"
+        f" by {plan.get('allocator')}"
+    )
+    sends = _sends(doc)
+    rows = []
+    for c in doc.get("components") or []:
+        standbys = ", ".join(
+            f"{s.get('robot')}:{_state(s.get('state'), color)}"
+            + ("/cold" if s.get("mode") == "cold" and s.get("state") != "cold" else "")
+            for s in c.get("standbys") or []
+        )
+        rows.append(
+            [
+                str(c.get("component")),
+                str(c.get("robot") or MISSING),
+                _state(c.get("state"), color),
+                _clock(c.get("since"), local),
+                _rate(sends.get(str(c.get("component")))),
+                standbys or MISSING,
+            ]
+        )
+    lines.append(render_table(STATUS_COLUMNS, rows))
+    conns = doc.get("connections") or []
+    if conns:
+        lines.append("")
+        edges = [[str(c.get("from")), str(c.get("to")), _rate(c.get("bytes_per_s"))] for c in conns]
+        lines.append(render_table(("FROM", "TO", "TRAFFIC"), edges))
+    return "\n".join(lines)
+
+
+def robot_rows(
+    members: Sequence[Mapping[str, Any]], leader: str | None, *, color: bool
+) -> list[list[str]]:
+    """ROBOT_COLUMNS cells of each robot of a live sample."""
+    rows = []
+    for m in members:
+        metrics = m.get("metrics") or {}
+        link = m.get("link") or {}
+        state = str(m.get("state", MISSING))
+        loss = link.get("loss")
+        rows.append(
+            [
+                str(m.get("name")),
+                paint(state, STATE_COLORS.get(state, ""), color),
+                "allocator" if m.get("name") == leader else "",
+                human_percent(metrics.get("cpu_pct")),
+                human_bytes(metrics.get("mem_free")),
+                human_percent(metrics.get("battery_pct")),
+                human_dbm(metrics.get("rssi_dbm")),
+                human_ms(link.get("rtt_ms")),
+                MISSING if loss is None else human_percent(100 * loss),
+            ]
+        )
+    return rows
+
+
+def format_top(sample: Mapping[str, Any], *, color: bool = False, local: bool = True) -> str:
+    """One screen of `sdrpeer top` (`local`: times in the local zone, else UTC)."""
+    status = sample.get("status") or {}
+    leader = (status.get("allocator") or {}).get("name")
+    members = sample.get("members") or []
+    head = (
+        f"sdrpeer top — {sample.get('robot')} at {_clock(sample.get('ts'), local)}"
+        f"  ·  {len(members)} robots  ·  allocator {leader or '(none yet)'}"
+    )
+    parts = [head, "", render_table(ROBOT_COLUMNS, robot_rows(members, leader, color=color)), ""]
+    if status:
+        parts.append(format_status(status, color=color, local=local))
+    return "\n".join(parts)
