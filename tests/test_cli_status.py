@@ -73,7 +73,7 @@ def test_status_colours_states_and_keeps_the_columns() -> None:
 
 
 def test_status_without_a_plan() -> None:
-    doc = {"allocator": {"name": None, "epoch": 0}, "plan": None, "components": []}
+    doc: dict[str, Any] = {"allocator": {"name": None, "epoch": 0}, "plan": None, "components": []}
     assert format_status(doc) == "allocator: (none yet) (epoch 0)\nno system deployed"
 
 
