@@ -348,8 +348,12 @@ class Agent:
             if event.name == self.name:
                 return
             try:
-                self.records[event.name] = (event.version, decode_record(event.payload))
+                record = decode_record(event.payload)
+                old = self.records.get(event.name)
+                self.records[event.name] = (event.version, record)
                 self._wake_coordinator()
+                if old is None or _states_of(old[1]) != _states_of(record):
+                    self.dashboard.poke()  # a page shows another robot's state change at once
             except WireError as e:
                 self.events.add(wall, "record.malformed", event.name, error=str(e))
         elif isinstance(event, MemberChanged):
@@ -492,3 +496,7 @@ def run_agent(config: AgentConfig) -> int:
     except ConfigError as e:
         log.error("%s", e)
         return 2
+
+
+def _states_of(record: RobotRecord) -> list[tuple[str, str, str]]:
+    return [(i.name, i.state, i.role) for i in record.instances]

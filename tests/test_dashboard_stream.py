@@ -186,3 +186,21 @@ async def test_page_files_and_history(client: tuple[TestClient[Any, Any], Source
     doc = await (await c.get("/v1/history?since=5.5")).json()
     assert doc["t"] == [6.0]
     assert (await c.get("/v1/history?since=yesterday")).status == 400
+
+
+async def test_a_state_change_brings_a_fresh_sample_without_waiting_for_the_tick(
+    client: tuple[TestClient[Any, Any], Source],
+) -> None:
+    c, source = client
+    source.dashboard.tick(1.0)
+    resp = await c.get("/v1/stream")
+    await read_events(resp, 4)
+    source.status = {**STATUS, "components": [{**STATUS["components"][0], "state": "error"}]}
+    for _ in range(3):  # several changes at once make one sample
+        source.events.add(1.0, "instance.state", "r1", instance="Cam", state="error")
+    source.events.add(2.0, "trap", "r1")  # not a change the pages draw: no sample of its own
+    got = await read_events(resp, 5)
+    assert [k for k, _, _ in got] == ["event", "event", "event", "event", "sample"]
+    moments = got[-1][2]["moments"]
+    assert [(m["kind"], m["instance"], m["state"]) for m in moments] == [("state", "Cam", "error")]
+    resp.close()
