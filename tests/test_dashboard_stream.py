@@ -195,7 +195,9 @@ async def test_a_state_change_brings_a_fresh_sample_without_waiting_for_the_tick
     source.dashboard.tick(1.0)
     resp = await c.get("/v1/stream")
     await read_events(resp, 4)
-    source.status = {**STATUS, "components": [{**STATUS["components"][0], "state": "error"}]}
+    (cam,) = STATUS["components"]
+    assert isinstance(cam, dict)
+    source.status = {**STATUS, "components": [{**cam, "state": "error"}]}
     for _ in range(3):  # several changes at once make one sample
         source.events.add(1.0, "instance.state", "r1", instance="Cam", state="error")
     source.events.add(2.0, "trap", "r1")  # not a change the pages draw: no sample of its own
