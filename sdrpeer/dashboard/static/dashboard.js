@@ -28,7 +28,7 @@
   const S = {
     robot: null, windowS: 900, connected: false,
     t: [], series: {}, robots: [], members: [], status: null,
-    events: [], moments: [], charts: {}, chartRobots: "",
+    events: [], moments: [], charts: {}, chartRobots: null,
     dirty: new Set(), scheduled: false,
     perf: { renders: [], frames: [], samples: 0, events: 0, lastSampleAt: 0 },
   };
