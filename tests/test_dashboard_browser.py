@@ -74,10 +74,12 @@ def test_the_dashboard_in_a_real_browser(cluster: RealCluster, tmp_path: Path) -
         assert seen - logged[0] <= 1.0, f"shown {seen - logged[0]:.3f} s after the agent logged it"
         # the event log and its filter
         page.wait_for_selector('#events tbody tr[data-kind="recovery.decision"]')
+        every = "() => window.__sdrpeer.events.length > 0 && !window.__sdrpeer.scheduled"
         page.select_option("#event-kind", "recovery")
+        page.wait_for_function(every)  # drawn on the next animation frame
         kinds = page.eval_on_selector_all("#events tbody tr", "rs => rs.map(r => r.dataset.kind)")
         assert kinds
-        assert all(k.startswith("recovery") for k in kinds)
+        assert all(k.startswith("recovery") for k in kinds), kinds
         page.select_option("#event-kind", "")
         shot = tmp_path / "dashboard.png"
         page.screenshot(path=str(shot), full_page=True)

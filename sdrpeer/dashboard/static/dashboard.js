@@ -199,10 +199,17 @@
     for (const c of st.connections || []) {
       const a = pos[where[c.from.split(".")[0]]], b = pos[where[c.to.split(".")[0]]];
       if (!a || !b) continue;
+      const label = `${esc(c.from.split(".")[1])}: ${bytes(c.bytes_per_s)}`;
+      if (a[0] === b[0]) {  // same robot: a loop on the box's right side
+        const x = a[2], bulge = x + 22 + Math.min(40, Math.abs(b[1] - a[1]) / 3);
+        edges += `<path class="edge" d="M ${x} ${a[1]} C ${bulge} ${a[1]}, ${bulge} ${b[1]}, ${x} ${b[1]}"/>` +
+          `<text class="edge-label" x="${bulge - 4}" y="${(a[1] + b[1]) / 2 + 3}">${label}</text>`;
+        continue;
+      }
       const x1 = a[2], y1 = a[1], x2 = b[0], y2 = b[1];
       const dx = Math.max(40, Math.abs(x2 - x1) / 2);
       edges += `<path class="edge" d="M ${x1} ${y1} C ${x1 + dx} ${y1}, ${x2 - dx} ${y2}, ${x2} ${y2}"/>` +
-        `<text class="edge-label" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${esc(c.from.split(".")[1])}: ${bytes(c.bytes_per_s)}</text>`;
+        `<text class="edge-label" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${label}</text>`;
     }
     svg.setAttribute("viewBox", `-2 -2 ${width + 4} ${total + 4}`);
     svg.style.height = `${total + 4}px`;
@@ -236,12 +243,12 @@
       S.charts = {};
       box.innerHTML = "";
       S.chartRobots = key;
-      const width = Math.max(380, Math.min(640, (box.clientWidth || 900) / 2 - 12));
       for (const [metric, title] of METRICS) {
         const div = document.createElement("div");
         div.className = "chart";
         div.innerHTML = `<h3>${esc(title)}</h3>`;
         box.appendChild(div);
+        const width = Math.max(300, (div.clientWidth || 440) - 4);
         const opts = {
           width, height: 170, legend: { show: robots.length <= 12 },
           scales: { x: { time: true } },
@@ -274,8 +281,9 @@
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     ctx.clearRect(0, 0, width, height);
     const now = S.t.length ? S.t[S.t.length - 1] : Date.now() / 1000;
-    const t0 = now - S.windowS;
-    const xOf = (ts) => left + (width - left - 8) * Math.max(0, Math.min(1, (ts - t0) / S.windowS));
+    const first = Math.min(S.t.length ? S.t[0] : now, S.moments.length ? S.moments[0].ts : now);
+    const t0 = Math.max(now - S.windowS, first), span = Math.max(1, now - t0);
+    const xOf = (ts) => left + (width - left - 60) * Math.max(0, Math.min(1, (ts - t0) / span));
     const segs = {};
     for (const mo of S.moments) {
       if (mo.kind !== "state" || mo.role !== "active") continue;
@@ -372,6 +380,11 @@
     });
   }
 
+  let resized = null;
+  window.addEventListener("resize", () => {
+    clearTimeout(resized);
+    resized = setTimeout(() => { S.chartRobots = null; mark("charts", "topology", "states"); }, 200);
+  });
   $("event-kind").addEventListener("change", () => mark("events"));
   $("event-text").addEventListener("input", () => mark("events"));
   renderLegend();
