@@ -183,7 +183,7 @@ def serve(
         while not stop.is_set():
             fleet.step()
             fleet.dashboard.tick(time.time())
-            for _ in range(max(1, round(5 / rate))):
+            for _ in range(round(5 / rate)):  # 5 events a second
                 fleet.events.add(time.time(), "trap", fleet.rng.choice(fleet.names), n=n)
                 n += 1
             await asyncio.sleep(1 / rate)
@@ -236,7 +236,11 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     finally:
         stop.set()
         thread.join(10)
-    renders = [float(ms) for _, ms in perf["renders"]]
+    renders = [float(r[1]) for r in perf["renders"]]
+    parts: dict[str, list[float]] = {}
+    for r in perf["renders"]:
+        for part, ms in r[2].items():
+            parts.setdefault(part, []).append(float(ms))
     frames = [float(ms) for ms in perf["frames"]]
     return {
         "robots": args.robots,
@@ -258,6 +262,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             "p99": pct(frames, 0.99),
             "over_50ms": sum(1 for f in frames if f > 50) / max(1, len(frames)),
         },
+        "part_ms_median": {p: round(statistics.median(v), 2) for p, v in sorted(parts.items())},
         "console_errors": errors,
     }
 
@@ -276,7 +281,9 @@ def report(r: dict[str, Any]) -> str:
             f"{'frame interval (ms)':<34}{fm['median']:>9.2f}{'':>9}{fm['p99']:>9.2f}",
             f"frames over 50 ms: {100 * fm['over_50ms']:.1f} %   samples drawn: {r['samples']}   "
             f"console errors: {len(r['console_errors'])}",
-            f"render p95 vs the 60 Hz frame budget ({BUDGET_MS:.1f} ms): {verdict}",
+            "median ms by part: "
+        + ", ".join(f"{p} {ms:.2f}" for p, ms in r["part_ms_median"].items()),
+        f"render p95 vs the 60 Hz frame budget ({BUDGET_MS:.1f} ms): {verdict}",
         ]
     )
 

@@ -23,12 +23,12 @@
     "robot down": "#7f7f7f", gone: "#ffffff", stopped: "#bdbdbd",
   };
   const MARKERS = { allocation: "#f28e2b", move: "#8a3ffc", election: "#9ca3af" };
-  const MAX_EVENTS = 5000, MAX_ROWS = 400, MAX_PERF = 4000;
+  const MAX_EVENTS = 5000, MAX_ROWS = 200, MAX_PERF = 4000, MAX_POINTS = 300;
 
   const S = {
     robot: null, windowS: 900, connected: false,
     t: [], series: {}, robots: [], members: [], status: null,
-    events: [], moments: [], charts: {}, chartRobots: null,
+    events: [], moments: [], momentsVersion: 0, fleet: [], charts: {}, chartRobots: null,
     dirty: new Set(), scheduled: false,
     perf: { renders: [], frames: [], samples: 0, events: 0, lastSampleAt: 0 },
   };
@@ -54,6 +54,8 @@
       for (const [m] of METRICS) S.series[name][m] = lists[m].slice();
     }
     S.moments = (h.moments || []).slice();
+    S.momentsVersion += 1;
+    S.fleet = S.moments.filter((m) => m.kind !== "state").map(fleetEvent);
     mark("charts", "states", "events");
   }
 
@@ -86,7 +88,11 @@
       if (!seen.has(name)) for (const [metric] of METRICS) lists[metric].push(null);
     }
     trim(s.ts);
-    for (const mo of s.moments || []) S.moments.push(mo);
+    for (const mo of s.moments || []) {
+      S.moments.push(mo);
+      if (mo.kind !== "state") S.fleet.push(fleetEvent(mo));
+    }
+    if ((s.moments || []).length) S.momentsVersion += 1;
     mark("summary", "fleet", "topology", "charts", "states");
     if ((s.moments || []).some((mo) => mo.kind !== "state")) mark("events");
   }
@@ -100,7 +106,11 @@
     }
     let m = 0;
     while (m < S.moments.length && S.moments[m].ts < now - S.windowS) m++;
-    if (m > 0) S.moments.splice(0, m);
+    if (m > 0) {
+      S.moments.splice(0, m);
+      S.momentsVersion += 1;
+      S.fleet = S.fleet.filter((e) => e.ts >= now - S.windowS);
+    }
     for (const [name, lists] of Object.entries(S.series)) {
       if (lists.mem_free.every((v) => v === null)) delete S.series[name];
     }
@@ -127,9 +137,14 @@
     const t0 = performance.now();
     const parts = [...S.dirty];
     S.dirty.clear();
-    for (const p of parts) RENDER[p]();
+    const each = {};
+    for (const p of parts) {
+      const t1 = performance.now();
+      RENDER[p]();
+      each[p] = performance.now() - t1;
+    }
     const took = performance.now() - t0;
-    S.perf.renders.push([parts.join(","), took]);
+    S.perf.renders.push([parts.join(","), took, each]);
     if (S.perf.renders.length > MAX_PERF) S.perf.renders.splice(0, S.perf.renders.length - MAX_PERF);
   }
 
@@ -159,11 +174,43 @@
     $("fleet").tBodies[0].innerHTML = rows.join("");
   }
 
+  function topologyKey(width, robots, leader, st) {
+    const parts = [width, leader];
+    for (const m of robots) {
+      parts.push(m.name, m.state);
+      for (const i of m.instances || []) parts.push(i.name, i.role);
+    }
+    for (const c of st.components || []) parts.push(c.component, c.instance);
+    parts.push((st.connections || []).length);
+    return parts.join("\u0001");
+  }
+
   function renderTopology() {
     const svg = $("topology");
-    const width = Math.max(600, svg.clientWidth || 900);
+    S.topoWidth ||= Math.max(600, svg.clientWidth || 900);  // measured again only on resize
+    const width = S.topoWidth;
     const robots = S.members.filter((m) => m.state !== "left");
     const leader = (S.status && S.status.allocator || {}).name;
+    const key = topologyKey(width, robots, leader, S.status || {});
+    if (S.topo && S.topo.key === key) {  // same shapes: only states and traffic change
+      for (const m of robots) {
+        for (const inst of m.instances || []) {
+          const t = S.topo.inst[inst.name];
+          if (!t || t.state === inst.state) continue;
+          t.state = inst.state;
+          t.g.dataset.state = inst.state;
+          t.g.firstChild.setAttribute("fill", STATE_COLORS[inst.state] || "#cbd5e1");
+          t.g.lastChild.textContent = `${inst.name} · ${inst.state}`;
+        }
+      }
+      const conns = (S.status || {}).connections || [];
+      for (const [el, k] of S.topo.labels) {
+        const c = conns[k];
+        const text = c ? `${c.from.split(".")[1]}: ${bytes(c.bytes_per_s)}` : "";
+        if (el.textContent !== text) el.textContent = text;
+      }
+      return;
+    }
     const boxW = 200, rowH = 15, pad = 10, gap = 26;
     const cols = Math.max(1, Math.floor((width + gap) / (boxW + gap)));
     const pos = {};
@@ -196,24 +243,30 @@
     const st = S.status || {};
     const where = {};
     for (const c of st.components || []) if (c.instance) where[c.component] = c.instance;
-    for (const c of st.connections || []) {
+    (st.connections || []).forEach((c, k) => {
       const a = pos[where[c.from.split(".")[0]]], b = pos[where[c.to.split(".")[0]]];
-      if (!a || !b) continue;
+      if (!a || !b) return;
       const label = `${esc(c.from.split(".")[1])}: ${bytes(c.bytes_per_s)}`;
       if (a[0] === b[0]) {  // same robot: a loop on the box's right side
         const x = a[2], bulge = x + 22 + Math.min(40, Math.abs(b[1] - a[1]) / 3);
         edges += `<path class="edge" d="M ${x} ${a[1]} C ${bulge} ${a[1]}, ${bulge} ${b[1]}, ${x} ${b[1]}"/>` +
-          `<text class="edge-label" x="${bulge - 4}" y="${(a[1] + b[1]) / 2 + 3}">${label}</text>`;
-        continue;
+          `<text class="edge-label" data-edge="${k}" x="${bulge - 4}" y="${(a[1] + b[1]) / 2 + 3}">${label}</text>`;
+        return;
       }
       const x1 = a[2], y1 = a[1], x2 = b[0], y2 = b[1];
       const dx = Math.max(40, Math.abs(x2 - x1) / 2);
       edges += `<path class="edge" d="M ${x1} ${y1} C ${x1 + dx} ${y1}, ${x2 - dx} ${y2}, ${x2} ${y2}"/>` +
-        `<text class="edge-label" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${label}</text>`;
-    }
+        `<text class="edge-label" data-edge="${k}" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${label}</text>`;
+    });
     svg.setAttribute("viewBox", `-2 -2 ${width + 4} ${total + 4}`);
     svg.style.height = `${total + 4}px`;
     svg.innerHTML = html + boxes + edges;
+    const inst = {};
+    for (const g of svg.querySelectorAll("g.inst")) {
+      inst[g.dataset.instance] = { g, state: g.dataset.state };
+    }
+    const labels = [...svg.querySelectorAll("text.edge-label")].map((el) => [el, Number(el.dataset.edge)]);
+    S.topo = { key: topologyKey(width, robots, leader, st), inst, labels };
   }
 
   function markerHook(u) {
@@ -252,26 +305,43 @@
         const opts = {
           width, height: 170, legend: { show: robots.length <= 12 },
           scales: { x: { time: true } },
-          series: [{}, ...robots.map((r, i) => ({ label: r, stroke: color(i), width: 1.5, spanGaps: false }))],
+          series: [{}, ...robots.map((r, i) => ({ label: r, stroke: color(i), width: 1, spanGaps: false }))],
           hooks: { draw: [markerHook] },
         };
         S.charts[metric] = new uPlot(opts, dataFor(metric, robots), div);
       }
       return;
     }
-    for (const [metric] of METRICS) S.charts[metric].setData(dataFor(metric, robots));
+    const picks = decimate();
+    for (const [metric] of METRICS) S.charts[metric].setData(dataFor(metric, robots, picks));
   }
 
-  function dataFor(metric, robots) {
+  function decimate() {
+    // More points than a chart has pixels only costs drawing time: past MAX_POINTS keep the
+    // last sample of each time bucket (buckets aligned to the clock, so only the newest one
+    // changes as samples arrive and the lines do not shimmer).
+    const t = S.t;
+    if (t.length <= MAX_POINTS) return null;
+    const step = (t[t.length - 1] - t[0]) / MAX_POINTS;
+    const picks = [];
+    for (let i = 0; i < t.length; i++) {
+      if (i === t.length - 1 || Math.floor(t[i] / step) !== Math.floor(t[i + 1] / step)) picks.push(i);
+    }
+    return picks;
+  }
+
+  function dataFor(metric, robots, picks = decimate()) {
     const scale = METRICS.find((m) => m[0] === metric)[2];
-    return [S.t, ...robots.map((r) => S.series[r][metric].map((v) => v === null ? null : scale(v)))];
+    const pick = (a) => (picks ? picks.map((i) => a[i]) : a);
+    return [pick(S.t), ...robots.map((r) => pick(S.series[r][metric]).map((v) => v === null ? null : scale(v)))];
   }
 
   function renderStates() {
     const canvas = $("states");
     const comps = ((S.status && S.status.components) || []).map((c) => c.component);
     const rowH = 14, left = 190, top = 4;
-    const width = Math.max(600, canvas.clientWidth || 900);
+    S.statesWidth ||= Math.max(600, canvas.clientWidth || 900);  // no layout read per frame
+    const width = S.statesWidth;
     const height = top + Math.max(1, comps.length) * rowH + 18;
     const dpr = devicePixelRatio || 1;
     if (canvas.width !== width * dpr || canvas.height !== height * dpr) {
@@ -284,16 +354,31 @@
     const first = Math.min(S.t.length ? S.t[0] : now, S.moments.length ? S.moments[0].ts : now);
     const t0 = Math.max(now - S.windowS, first), span = Math.max(1, now - t0);
     const xOf = (ts) => left + (width - left - 60) * Math.max(0, Math.min(1, (ts - t0) / span));
-    const segs = {};
-    for (const mo of S.moments) {
-      if (mo.kind !== "state" || mo.role !== "active") continue;
-      (segs[mo.component] ||= []).push([mo.ts, mo.state, mo.robot]);
+    if (S.segsAt !== S.momentsVersion) {
+      S.segs = {};
+      for (const mo of S.moments) {
+        if (mo.kind !== "state" || mo.role !== "active") continue;
+        (S.segs[mo.component] ||= []).push([mo.ts, mo.state, mo.robot]);
+      }
+      S.segsAt = S.momentsVersion;
     }
+    const segs = S.segs;
+    const labelsKey = `${comps.join("|")}@${dpr}`;
+    if (S.labelsKey !== labelsKey) {  // component names drawn once, then copied
+      const lc = document.createElement("canvas");
+      lc.width = left * dpr; lc.height = height * dpr;
+      const lx = lc.getContext("2d");
+      lx.setTransform(dpr, 0, 0, dpr, 0, 0);
+      lx.font = "11px system-ui, sans-serif";
+      lx.fillStyle = "#1d2125";
+      comps.forEach((comp, i) => lx.fillText(comp, 4, top + i * rowH + 10));
+      S.labels = lc;
+      S.labelsKey = labelsKey;
+    }
+    ctx.drawImage(S.labels, 0, 0, left, height);
     ctx.font = "11px system-ui, sans-serif";
     comps.forEach((comp, i) => {
       const y = top + i * rowH;
-      ctx.fillStyle = "#1d2125";
-      ctx.fillText(comp, 4, y + 10);
       const list = segs[comp] || [];
       for (let k = 0; k < list.length; k++) {
         const [ts, state] = list[k];
@@ -316,28 +401,39 @@
     ctx.fillText(clock(now), width - 60, height - 4);
   }
 
-  function fleetEvents() {
-    return S.moments.filter((m) => m.kind !== "state").map((m) => ({
+  function fleetEvent(m) {
+    return {
       id: null, ts: m.ts, kind: `fleet.${m.kind}`, robot: m.to || m.leader || "",
       detail: Object.fromEntries(Object.entries(m).filter(([k]) => k !== "ts" && k !== "kind")),
-    }));
+    };
+  }
+
+  function row(e) {  // each event's row and search text are made once
+    if (e._row === undefined) {
+      const detail = JSON.stringify(e.detail);
+      e._text = `${e.kind} ${e.robot} ${detail}`.toLowerCase();
+      e._row = `<tr data-kind="${esc(e.kind)}"><td>${clock(e.ts)}</td><td>${esc(e.kind)}</td>` +
+        `<td>${esc(e.robot)}</td><td class="detail">${esc(detail)}</td></tr>`;
+    }
+    return e._row;
   }
 
   function renderEvents() {
     const kind = $("event-kind").value, text = $("event-text").value.toLowerCase();
-    const all = S.events.concat(fleetEvents()).sort((a, b) => b.ts - a.ts);
-    const match = (e) => (!kind || e.kind.startsWith(kind) || (kind === "allocation" && e.kind.startsWith("plan")) ||
-      (kind === "fleet" && e.kind.startsWith("fleet"))) &&
-      (!text || `${e.kind} ${e.robot} ${JSON.stringify(e.detail)}`.toLowerCase().includes(text));
+    const all = S.events.concat(S.fleet).sort((a, b) => b.ts - a.ts);
+    const match = (e) => (!kind || e.kind.startsWith(kind) || (kind === "allocation" && e.kind.startsWith("plan"))) &&
+      (!text || (row(e), e._text.includes(text)));
     const rows = [];
     let shown = 0;
     for (const e of all) {
       if (!match(e)) continue;
-      if (shown++ >= MAX_ROWS) continue;
-      rows.push(`<tr data-kind="${esc(e.kind)}"><td>${clock(e.ts)}</td><td>${esc(e.kind)}</td>` +
-        `<td>${esc(e.robot)}</td><td class="detail">${esc(JSON.stringify(e.detail))}</td></tr>`);
+      if (shown++ < MAX_ROWS) rows.push(row(e));
     }
-    $("events").tBodies[0].innerHTML = rows.join("");
+    const html = rows.join("");
+    if (html !== S.eventsHtml) {
+      $("events").tBodies[0].innerHTML = html;
+      S.eventsHtml = html;
+    }
     $("event-count").textContent = `${Math.min(shown, MAX_ROWS)} of ${shown} shown (${all.length} kept)`;
   }
 
@@ -383,7 +479,12 @@
   let resized = null;
   window.addEventListener("resize", () => {
     clearTimeout(resized);
-    resized = setTimeout(() => { S.chartRobots = null; mark("charts", "topology", "states"); }, 200);
+    resized = setTimeout(() => {
+      S.chartRobots = null;
+      S.topoWidth = 0;
+      S.statesWidth = 0;
+      mark("charts", "topology", "states");
+    }, 200);
   });
   $("event-kind").addEventListener("change", () => mark("events"));
   $("event-text").addEventListener("input", () => mark("events"));
