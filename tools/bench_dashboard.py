@@ -282,8 +282,8 @@ def report(r: dict[str, Any]) -> str:
             f"frames over 50 ms: {100 * fm['over_50ms']:.1f} %   samples drawn: {r['samples']}   "
             f"console errors: {len(r['console_errors'])}",
             "median ms by part: "
-        + ", ".join(f"{p} {ms:.2f}" for p, ms in r["part_ms_median"].items()),
-        f"render p95 vs the 60 Hz frame budget ({BUDGET_MS:.1f} ms): {verdict}",
+            + ", ".join(f"{p} {ms:.2f}" for p, ms in r["part_ms_median"].items()),
+            f"render p95 vs the 60 Hz frame budget ({BUDGET_MS:.1f} ms): {verdict}",
         ]
     )
 
