@@ -163,22 +163,30 @@ async def test_repoint_between_ring_and_tcp_loses_nothing(tmp_path: Path) -> Non
     values = [os.urandom(200_000) if i % 3 else i for i in range(300)]
     sender = asyncio.create_task(offer_all(conn, values))
     targets = [second.address("tcp"), first.address("unix"), second.address("unix")]
-    for step, to in enumerate(targets, start=1):
-        await until(lambda step=step: conn.seq > 60 * step)  # type: ignore[misc]
-        conn.repoint(to)
-    await asyncio.wait_for(sender, 20)
-    # the sender may finish before the last repoint's dial: wait for that link, then count rings
-    await asyncio.wait_for(conn.wait_connected(), 5)
-    received = lambda: first.port.frames + second.port.frames  # noqa: E731
-    await until(lambda: len(received()) == len(values), within=20)
-    by_seq = sorted(received(), key=lambda frame: frame[0])
-    assert [seq for seq, _, _ in by_seq] == list(range(1, len(values) + 1))  # no gap, no twice
-    assert [value for _, value, _ in by_seq] == values
-    assert first.server.counters["shm"] == 2
-    assert second.server.counters["shm"] == 1
-    await conn.close()
-    await first.server.close()
-    await second.server.close()
+    try:
+        mark = 0
+        for to in targets:
+            # frames only flow through a link that is up: 30 more after the last repoint mean
+            # that link's dial (and its ring) was made, however fast the sender runs
+            goal = min(mark + 30, len(values))
+            await until(lambda goal=goal: conn.seq >= goal)  # type: ignore[misc]
+            conn.repoint(to)
+            mark = conn.seq
+        await asyncio.wait_for(sender, 20)
+        # the sender may finish before the last repoint's dial: wait for that link
+        await asyncio.wait_for(conn.wait_connected(), 5)
+        received = lambda: first.port.frames + second.port.frames  # noqa: E731
+        await until(lambda: len(received()) == len(values), within=20)
+        by_seq = sorted(received(), key=lambda frame: frame[0])
+        assert [seq for seq, _, _ in by_seq] == list(range(1, len(values) + 1))  # no gap, twice
+        assert [value for _, value, _ in by_seq] == values
+        assert first.server.counters["shm"] == 2
+        assert second.server.counters["shm"] == 1
+    finally:
+        sender.cancel()
+        await conn.close()
+        await first.server.close()
+        await second.server.close()
     assert mapped_segments() == []
 
 
