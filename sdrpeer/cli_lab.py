@@ -23,6 +23,8 @@ from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError
 from sdrpeer.lab import DEFAULT_DIR, lab_down, lab_status
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.netlab import net
+from sdrpeer.netlab.commands import add_fault_parsers
 
 REFRESH = 1.0
 
@@ -41,9 +43,16 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     up.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for every agent")
     up.add_argument("--seconds", type=float, metavar="S", help="stop after S s (default: Ctrl-C)")
     up.add_argument("--timeout", type=float, default=20.0, metavar="S", help="start timeout")
+    up.add_argument(
+        "--netns", action="store_true", help="each robot in its own network namespace (root)"
+    )
     up.set_defaults(func=cmd_lab_up)
     down = lab_sub.add_parser("down", parents=[where], help="stop the lab's agents")
+    down.add_argument(
+        "--all-netns", action="store_true", help="also remove every lab namespace and bridge"
+    )
     down.set_defaults(func=cmd_lab_down)
+    add_fault_parsers(lab_sub, where)
     status = lab_sub.add_parser("status", parents=[where], help="the lab's agents")
     status.add_argument("--json", action="store_true", help="print JSON")
     status.set_defaults(func=cmd_lab_status)
@@ -159,6 +168,7 @@ def cmd_lab_up(args: argparse.Namespace) -> int:
         robot_files=args.robot_files,
         scenario=args.scenario,
         timeout=args.timeout,
+        netns=args.netns,
     )
     return run_lab(options, detach=args.detach, seconds=args.seconds)
 
@@ -167,6 +177,13 @@ def cmd_lab_down(args: argparse.Namespace) -> int:
     """sdrpeer lab down."""
     for line in lab_down(args.dir):
         _say(line)
+    if (args.dir / net.STATE_FILE).exists():
+        left = net.destroy(args.dir)
+        _say(f"network removed{'; left: ' + ', '.join(left) if left else ''}")
+    if args.all_netns:
+        net.require_tools()
+        removed = net.sweep()
+        _say(f"removed {len(removed)} lab namespaces and bridges")
     return 0
 
 

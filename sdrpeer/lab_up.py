@@ -39,6 +39,8 @@ from sdrpeer.lab import (
     write_robot_file,
     write_secret,
 )
+from sdrpeer.netlab import net
+from sdrpeer.netlab.plan import NetPlan
 
 POLL = 0.1
 LOG_TAIL_LINES = 12
@@ -55,6 +57,8 @@ class UpOptions:
     """Where robot-K.yaml files are taken from (None = examples/robots, when there is one)."""
     scenario: Path | None = None
     timeout: float = 20.0
+    netns: bool = False
+    """Each robot in its own network namespace on a private bridge (root; sdrpeer.netlab)."""
 
 
 @dataclass(slots=True)
@@ -64,6 +68,8 @@ class RunningLab:
     lab_dir: Path
     lab: Lab
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+    net: NetPlan | None = None
+    """The namespace lab's network, if it has one."""
 
     def problems(self) -> list[str]:
         """One line per agent process that has exited."""
@@ -83,6 +89,8 @@ class RunningLab:
                 proc.kill()
                 proc.wait()
         lab_path(self.lab_dir).unlink(missing_ok=True)
+        if self.net is not None:
+            report += [f"not removed: {name}" for name in net.destroy(self.lab_dir)]
         return report
 
     def _log(self, name: str) -> str:
@@ -107,11 +115,20 @@ def _fail(robot: LabRobot, message: str) -> SdrpeerError:
 
 
 def agent_command(
-    robot: LabRobot, options: UpOptions, key_file: Path, join: str | None
+    robot: LabRobot,
+    options: UpOptions,
+    key_file: Path,
+    join: str | None,
+    network: NetPlan | None = None,
 ) -> list[str]:
-    """The command line that starts one lab agent."""
+    """The command line that starts one lab agent (inside its namespace in a namespace lab, its
+    gossip, API and component hosts on its bridge address; else on loopback, any free port)."""
     data_dir = Path(robot.data_dir)
+    host = "127.0.0.1" if network is None else network.address(robot.name)
+    ports = ("0", "0") if network is None else ("7946", "8080")
+    prefix = [] if network is None else network.in_ns(robot.name)
     command = [
+        *prefix,
         sys.executable,
         "-m",
         "sdrpeer",
@@ -119,9 +136,9 @@ def agent_command(
         "--name",
         robot.name,
         "--bind",
-        "127.0.0.1:0",
+        f"{host}:{ports[0]}",
         "--api",
-        "127.0.0.1:0",
+        f"{host}:{ports[1]}",
         "--data-dir",
         str(data_dir),
         "--key-file",
@@ -246,17 +263,20 @@ def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> Running
     key_file = Path(lab.key_file)
     deadline = time.monotonic() + options.timeout
     try:
+        if options.netns:
+            running.net = net.create(options.lab_dir, options.robots)
+            say(f"network: bridge {running.net.bridge}, robots on 10.213.{running.net.lab_id}.0/24")
         first, *others = lab.robots
         say(f"starting {len(lab.robots)} agents in {options.lab_dir} (preset {options.preset})")
         running.procs[first.name] = _spawn(
-            agent_command(first, options, key_file, None), Path(first.log)
+            agent_command(first, options, key_file, None, running.net), Path(first.log)
         )
         first.pid = running.procs[first.name].pid
         write_lab(options.lab_dir, lab)
         _wait_addresses(running, first, deadline)
         write_lab(options.lab_dir, lab)
         for robot in others:
-            command = agent_command(robot, options, key_file, first.gossip)
+            command = agent_command(robot, options, key_file, first.gossip, running.net)
             running.procs[robot.name] = _spawn(command, Path(robot.log))
             robot.pid = running.procs[robot.name].pid
             write_lab(options.lab_dir, lab)

@@ -1,0 +1,155 @@
+"""The network-namespace lab for real (root): three agents each in its own namespace, a partition
+that kills and a heal that revives, packet loss the agents measure, a shaped link, and `lab down`
+leaving nothing behind — also when the lab process itself died."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pytest
+
+from sdrpeer.client import AgentClient
+from sdrpeer.errors import ApiError
+from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.netlab import net
+
+pytestmark = [
+    pytest.mark.realnet,
+    pytest.mark.skipif(
+        os.geteuid() != 0 or not all(shutil.which(t) for t in ("ip", "iptables", "tc")),
+        reason="NAMESPACE LAB NOT TESTED: needs root with ip, iptables and tc "
+        "(tools/check installs iptables as root)",
+    ),
+]
+T = TypeVar("T")
+
+
+def until(probe: Callable[[], T], ok: Callable[[T], bool], what: str, within: float = 20) -> T:
+    deadline = time.monotonic() + within
+    last: Any = None
+    while time.monotonic() < deadline:
+        try:
+            value = probe()
+        except ApiError as exc:
+            last = exc
+        else:
+            if ok(value):
+                return value
+            last = value
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for {what}; last: {last!r:.800}")
+
+
+def states(lab: RunningLab, robot: str) -> dict[str, str]:
+    api = lab.lab.robot(robot).api  # type: ignore[union-attr]
+    return {m["name"]: m["state"] for m in AgentClient(str(api), timeout=2).members()}
+
+
+def sdrpeer(*args: str) -> str:
+    done = subprocess.run(
+        [sys.executable, "-m", "sdrpeer", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def output(argv: list[str]) -> str:
+    """What a command printed (whatever its exit code)."""
+    return subprocess.run(argv, capture_output=True, text=True, timeout=15, check=False).stdout
+
+
+def text_of(path: Path) -> str:
+    return path.read_text() if path.exists() else ""
+
+
+@pytest.fixture
+def lab(tmp_path: Path) -> Iterator[RunningLab]:
+    running = start_lab(UpOptions(3, tmp_path / "lab", netns=True, timeout=30), say=lambda _: None)
+    try:
+        yield running
+    finally:
+        running.stop(grace=3)
+        assert net.load(tmp_path / "lab") is None
+
+
+def test_robots_live_in_their_namespaces_and_faults_act_on_the_network(
+    lab: RunningLab, tmp_path: Path
+) -> None:
+    plan = lab.net
+    assert plan is not None
+    lab_dir = str(tmp_path / "lab")
+    for robot in lab.lab.robots:
+        assert robot.api == f"http://{plan.address(robot.name)}:8080"
+        assert robot.gossip == f"{plan.address(robot.name)}:7946"
+    assert states(lab, "robot-1") == dict.fromkeys(plan.names(), "alive")
+
+    sdrpeer("lab", "partition", "robot-1", "/", "robot-2,robot-3", "--dir", lab_dir)
+    until(lambda: states(lab, "robot-1"), lambda s: s["robot-2"] == s["robot-3"] == "dead", "cut")
+    until(lambda: states(lab, "robot-2"), lambda s: s["robot-1"] == "dead", "cut, other side")
+    assert states(lab, "robot-2")["robot-3"] == "alive"  # inside a side nothing changes
+
+    sdrpeer("lab", "heal", "--dir", lab_dir)
+    for name in plan.names():
+        until(
+            lambda name=name: states(lab, name),  # type: ignore[misc]
+            lambda s: set(s.values()) == {"alive"},
+            f"healed, as {name} sees it",
+        )
+
+    out = sdrpeer("lab", "fault", "robot-2", "loss", "60%", "--dir", lab_dir)
+    assert "60% of arriving packets dropped" in out
+    rules = output(plan.in_ns("robot-2", "iptables", "-S", "SDRPEER-FAULT"))
+    assert "--probability 0.6" in rules
+
+    def loss_seen() -> float:
+        api = lab.lab.robot("robot-1").api  # type: ignore[union-attr]
+        members = {m["name"]: m for m in AgentClient(str(api), timeout=2).members()}
+        return float(members["robot-1"]["links"].get("robot-2", {}).get("loss") or 0)
+
+    until(loss_seen, lambda x: x >= 0.2, "robot-1 measuring loss to robot-2", 30)
+    sdrpeer("lab", "fault", "robot-2", "bandwidth", "1mbit", "--dir", lab_dir)
+    qdisc = output(["tc", "qdisc", "show", "dev", plan.veth("robot-2")])
+    assert "tbf" in qdisc
+    assert "rate 1Mbit" in qdisc
+    sdrpeer("lab", "fault", "robot-2", "clear", "--dir", lab_dir)
+    rules = output(plan.in_ns("robot-2", "iptables", "-S", "SDRPEER-FAULT"))
+    assert "DROP" not in rules
+    assert "tbf" not in output(["tc", "qdisc", "show", "dev", plan.veth("robot-2")])
+
+
+def test_lab_down_removes_everything_after_the_lab_process_died(tmp_path: Path) -> None:
+    lab_dir = tmp_path / "lab"
+    up = subprocess.Popen(  # a foreground lab, killed as a crash would
+        [sys.executable, "-m", "sdrpeer", "lab", "up", "--netns", "--robots", "2",
+         "--dir", str(lab_dir), "--seconds", "60"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        until(lambda: net.load(lab_dir), lambda p: p is not None, "netns.json")
+        until(lambda: text_of(lab_dir / "lab.json"), lambda t: '"api": "http' in t, "agents")
+    finally:
+        up.kill()
+        up.wait(10)
+    plan = net.load(lab_dir)
+    assert plan is not None
+    namespaces = output(["ip", "netns", "list"])
+    assert plan.namespace("robot-1") in namespaces  # the crash left the network behind
+    out = sdrpeer("lab", "down", "--dir", str(lab_dir))
+    assert "network removed" in out
+    namespaces = output(["ip", "netns", "list"])
+    assert f"sdrlab{plan.lab_id}-" not in namespaces
+    links = output(["ip", "link", "show"])
+    assert plan.bridge not in links
+    assert plan.veth("robot-1") not in links
