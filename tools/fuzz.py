@@ -1,0 +1,416 @@
+"""Fuzz the three surfaces a peer or a host can reach: gossip datagrams, the control channel
+(both directions) and port streams.
+
+Usage: python tools/fuzz.py [--inputs 100000] [--seed 1] [--only gossip,control,stream]
+                            [--json out.json]
+
+How it works: each surface gets `--inputs` inputs, a third each of
+- random bytes (any length up to a few kB);
+- byte mutations of valid inputs (flip, insert, delete, duplicate or truncate a span);
+- structure mutations: a valid message decoded, one node of its msgpack tree replaced by a
+  hostile value (huge, negative or fractional numbers, NaN, long strings, bytes, deep nesting,
+  wrong types), removed or duplicated, and encoded again.
+Gossip inputs are signed with the cluster key after mutation (with a fresh sequence number), so
+they get past authentication and reach the parser, the replay guard, the membership core (which
+processes them, with its timers run every 64 inputs) and the record decoder. Control inputs go
+to the agent's report decoder and to the host's command decoder; stream inputs to the receiver's
+hello and frame decoder. An input may be refused only with the surface's own error
+(WireError, ControlProtocolError, FrameError), which is counted by reason; any other exception
+is a crash (reported with the input). Also reported: the slowest input (a hang would show) and
+the peak RSS of this process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import random
+import resource
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from sdrpeer.control_stream import ControlProtocolError, encode
+from sdrpeer.dataplane.frames import (
+    FrameDecoder,
+    FrameError,
+    Hello,
+    encode_frame,
+    encode_hello,
+    parse_hello,
+)
+from sdrpeer.errors import WireError
+from sdrpeer.gossip.config import preset
+from sdrpeer.gossip.core import Membership
+from sdrpeer.gossip.events import RecordChanged
+from sdrpeer.gossip.messages import (
+    Ack,
+    Alive,
+    Dead,
+    Event,
+    Gossip,
+    Ping,
+    PingReq,
+    Record,
+    Suspect,
+    Sync,
+)
+from sdrpeer.host.control import ControlDecoder as HostDecoder
+from sdrpeer.keyring import Keyring
+from sdrpeer.record import decode_record, encode_record, reference_record
+from sdrpeer.runtime.control import ControlDecoder as AgentDecoder
+from sdrpeer.wire import MAGIC, PROTOCOL_VERSION, Codec, packet_body
+
+NOW = 1_800_000_000.0
+
+
+# -- hostile values and mutations ---------------------------------------------------------------
+
+
+def hostile(rng: random.Random, depth: int = 0) -> Any:
+    """A value meant to break a parser that trusts types and sizes."""
+    pick = rng.randrange(14 if depth < 3 else 10)
+    if pick == 0:
+        return rng.choice([0, -1, 1, 2**31, 2**63 - 1, -(2**63), 2**64 - 1])
+    if pick == 1:
+        return rng.randint(-(2**40), 2**40)
+    if pick == 2:
+        return rng.choice([math.nan, math.inf, -math.inf, -0.0, 1e308, 0.5])
+    if pick == 3:
+        return "".join(chr(rng.randrange(32, 0x2FFF)) for _ in range(rng.randrange(0, 40)))
+    if pick == 4:
+        return "x" * rng.choice([256, 1000, 70_000])
+    if pick == 5:
+        return rng.randbytes(rng.randrange(0, 64))
+    if pick == 6:
+        return None
+    if pick == 7:
+        return rng.random() < 0.5
+    if pick == 8:
+        return ""
+    if pick == 9:
+        return rng.randbytes(rng.choice([300, 5000]))
+    if pick == 10:
+        return [hostile(rng, depth + 1) for _ in range(rng.randrange(0, 6))]
+    if pick == 11:
+        return {str(hostile(rng, 3)): hostile(rng, depth + 1) for _ in range(rng.randrange(0, 4))}
+    if pick == 12:
+        nested: Any = 1
+        for _ in range(rng.randrange(10, 60)):
+            nested = [nested]
+        return nested
+    return {hostile(rng, 3) if rng.random() < 0.3 else "t": hostile(rng, depth + 1)}
+
+
+def mutate_tree(rng: random.Random, value: Any) -> Any:
+    """`value` with one node replaced, removed or duplicated."""
+    if isinstance(value, list) and value and rng.random() < 0.8:
+        i = rng.randrange(len(value))
+        out = list(value)
+        action = rng.randrange(4)
+        if action == 0:
+            out[i] = hostile(rng)
+        elif action == 1:
+            del out[i]
+        elif action == 2:
+            out.insert(i, out[i])
+        else:
+            out[i] = mutate_tree(rng, out[i])
+        return out
+    if isinstance(value, dict) and value and rng.random() < 0.8:
+        out_map = dict(value)
+        key = rng.choice(list(out_map))
+        action = rng.randrange(4)
+        if action == 0:
+            out_map[key] = hostile(rng)
+        elif action == 1:
+            del out_map[key]
+        elif action == 2:
+            out_map[hostile(rng, 3) if rng.random() < 0.5 else key + "x"] = hostile(rng)
+        else:
+            out_map[key] = mutate_tree(rng, out_map[key])
+        return out_map
+    return hostile(rng)
+
+
+def mutate_bytes(rng: random.Random, data: bytes) -> bytes:
+    """`data` with a span flipped, inserted, deleted, duplicated or the tail cut."""
+    b = bytearray(data)
+    n = len(b)
+    action = rng.randrange(5)
+    i = rng.randrange(n + 1)
+    span = rng.randrange(1, 9)
+    if action == 0 and n:
+        for k in range(i, min(n, i + span)):
+            b[k] ^= 1 << rng.randrange(8)
+    elif action == 1:
+        b[i:i] = rng.randbytes(span)
+    elif action == 2:
+        del b[i : i + span]
+    elif action == 3:
+        b[i:i] = b[i : i + span * 8]
+    else:
+        del b[i:]
+    return bytes(b)
+
+
+def unpack_all(data: bytes) -> list[Any]:
+    """Every msgpack value of a valid concatenation."""
+    return list(msgpack.Unpacker(raw=False, strict_map_key=False, use_list=True).feed(data) or [])
+
+
+def _values(data: bytes) -> list[Any]:
+    unpacker = msgpack.Unpacker(raw=False, strict_map_key=False)
+    unpacker.feed(data)
+    return list(unpacker)
+
+
+def pack_all(values: list[Any]) -> bytes | None:
+    """The values packed again (None if one cannot be: the mutation is skipped)."""
+    try:
+        return b"".join(msgpack.packb(v, use_bin_type=True) for v in values)
+    except (TypeError, ValueError, OverflowError):
+        return None
+
+
+# -- the surfaces ----------------------------------------------------------------------------
+
+
+class GossipSurface:
+    """Signed datagrams -> Codec.decode -> Membership.receive -> decode_record."""
+
+    errors = (WireError,)
+
+    def __init__(self, rng: random.Random) -> None:
+        self.rng = rng
+        self.keyring = Keyring([Keyring.generate()])
+        self.sender = Codec("robot-2", self.keyring)
+        self.codec = Codec("robot-1", self.keyring)
+        self.core = Membership("robot-1", ("10.0.0.1", 7946), preset("lan"), now=0.0, rng=rng)
+        self.now = 0.0
+        self.seq = 1
+        record = encode_record(reference_record(peers=3, instances=3))
+        alive = Alive("robot-2", ("10.0.0.2", 7946), 1)
+        trap = Event("robot-2", 9, "trap", b"\x93\x01\x02\x03")
+        ups = (alive, Suspect("robot-3", 2, "robot-2"), Dead("robot-4", 1, "robot-2"),
+               Record("robot-2", 5, record), trap)  # fmt: skip
+        entry = ("robot-2", ("10.0.0.2", 7946), 0, 1, 5)
+        self.seeds = [
+            packet_body(Ping("robot-2", 7, "robot-1", ups[:2]), 1, 1),
+            packet_body(PingReq("robot-2", 8, "robot-3", ("10.0.0.3", 7946), True, ups[2:3]), 1, 1),
+            packet_body(Ack("robot-2", 7, ups), 1, 1),
+            packet_body(Gossip("robot-2", ups), 1, 1),
+            packet_body(Sync("robot-2", False, (entry,), ups[3:4]), 1, 1),
+        ]  # fmt: skip
+        self.records = [record]
+
+    def input(self, kind: int) -> bytes:
+        rng = self.rng
+        if kind == 0:
+            return rng.randbytes(rng.randrange(0, 3000))
+        body = rng.choice(self.seeds)
+        if kind == 1:
+            return self.sign(mutate_bytes(rng, body), fresh=False)
+        values = _values(body)
+        k = rng.randrange(len(values))
+        values[k] = mutate_tree(rng, values[k])
+        packed = pack_all(values)
+        return self.sign(packed if packed is not None else body, fresh=True)
+
+    def sign(self, body: bytes, *, fresh: bool) -> bytes:
+        if fresh:  # a new seq and a current time in the head, so the replay guard lets it by
+            values = _values(body) if body else []
+            if values and isinstance(values[0], list) and len(values[0]) >= 4:
+                self.seq += 1
+                values[0][2], values[0][3] = self.seq, int(NOW * 1000)
+                body = pack_all(values) or body
+        prefix = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0]
+        _, mac = self.keyring.sign(prefix + body)
+        return prefix + mac + body
+
+    def feed(self, data: bytes) -> None:
+        packet = self.codec.decode(data, NOW)
+        self.now += 0.01
+        self.core.receive(self.now, ("10.0.0.2", 7946), packet)
+        if self.seq % 64 == 0:
+            self.core.handle_timer(self.now + 5.0)
+        self.core.datagrams_to_send()
+        while (event := self.core.next_event()) is not None:
+            if isinstance(event, RecordChanged):
+                decode_record(event.payload)
+
+    def reasons(self) -> Counter[str]:
+        return Counter({k: v for k, v in self.codec.counters.items() if k != "accepted"})
+
+
+class ControlSurface:
+    """Byte streams -> the agent's report decoder, and -> the host's command decoder."""
+
+    errors = (ControlProtocolError,)
+
+    def __init__(self, rng: random.Random) -> None:
+        self.rng = rng
+        self.seeds = [
+            {"t": "hello", "protocol": 1, "pid": 42, "data": {"tcp": "127.0.0.1:1"}, "ports": {}},
+            {"t": "state", "state": "ACTIVE", "ts": 1.5},
+            {"t": "reply", "id": 3, "ok": True},
+            {"t": "heartbeat", "ts": 2.0, "ports": {"out": {"frames_out": 1, "bytes_out": 9}}},
+            {"t": "fault", "kind": "emergency_stop", "detail": "x", "ts": 1.0},
+            {"t": "part", "id": 4, "seq": 0, "data": b"abc"},
+            {"t": "activate", "id": 1},
+            {
+                "t": "connect",
+                "id": 2,
+                "conn": {"id": "c", "out": "o", "to": "tcp://h:1", "in": "i"},
+            },
+            {"t": "restore", "id": 5, "size": 3},
+        ]
+        self.reasons: Counter[str] = Counter()
+
+    def input(self, kind: int) -> bytes:
+        rng = self.rng
+        if kind == 0:
+            return rng.randbytes(rng.randrange(0, 3000))
+        msgs = rng.sample(self.seeds, rng.randrange(1, 4))
+        if kind == 1:
+            return mutate_bytes(rng, b"".join(encode(m) for m in msgs))
+        values: list[Any] = [dict(m) for m in msgs]
+        k = rng.randrange(len(values))
+        values[k] = mutate_tree(rng, values[k])
+        return pack_all(values) or b""
+
+    def feed(self, data: bytes) -> None:
+        failures: list[ControlProtocolError] = []
+        for side, decoder in (("agent", AgentDecoder()), ("host", HostDecoder())):
+            try:
+                decoder.feed(data)
+            except ControlProtocolError as error:
+                failures.append(error)
+                self.reasons[f"{side}: {type(error).__name__}"] += 1
+        if failures:
+            raise failures[0]
+
+
+class StreamSurface:
+    """A connection's bytes -> the receiver's hello and frame decoder."""
+
+    errors = (FrameError,)
+
+    def __init__(self, rng: random.Random) -> None:
+        self.rng = rng
+        hello = encode_hello(Hello("c1", "image", "Cam.image", {"push": "fifo", "buffer": 4}))
+        frames = b"".join(
+            encode_frame(i, v) for i, v in enumerate([1, b"\x00" * 300, "x", {"a": [1]}], 1)
+        )
+        self.seeds = [hello + frames, hello, hello + encode_frame(1, b"\x01" * 5000)]
+        self.reasons: Counter[str] = Counter()
+
+    def input(self, kind: int) -> bytes:
+        rng = self.rng
+        if kind == 0:
+            return rng.randbytes(rng.randrange(0, 3000))
+        seed = rng.choice(self.seeds)
+        if kind == 1:
+            return mutate_bytes(rng, seed)
+        values = _values(seed)
+        k = rng.randrange(len(values))
+        values[k] = mutate_tree(rng, values[k])
+        return pack_all(values) or b""
+
+    def feed(self, data: bytes) -> None:
+        decoder = FrameDecoder(max_frame=64 * 1024)
+        try:
+            cut = self.rng.randrange(len(data) + 1)
+            decoder.feed(data[:cut])
+            first = decoder.next_map()
+            decoder.feed(data[cut:])
+            if first is None:
+                first = decoder.next_map()
+            if first is not None:
+                parse_hello(first)
+                decoder.frames()
+        except FrameError as exc:
+            self.reasons[exc.reason] += 1
+            raise
+
+
+SURFACES: dict[str, Callable[[random.Random], Any]] = {
+    "gossip": GossipSurface,
+    "control": ControlSurface,
+    "stream": StreamSurface,
+}
+
+
+def fuzz(name: str, inputs: int, seed: int) -> dict[str, Any]:
+    """Run one surface; its figures."""
+    rng = random.Random(seed)
+    surface = SURFACES[name](rng)
+    crashes: list[dict[str, Any]] = []
+    refused = slowest = 0.0
+    accepted = 0
+    t0 = time.perf_counter()
+    for i in range(inputs):
+        data = surface.input(i % 3)
+        start = time.perf_counter()
+        try:
+            surface.feed(data)
+            accepted += 1
+        except surface.errors:
+            refused += 1
+        except Exception as exc:  # a crash: what the surface must never do
+            if len(crashes) < 20:
+                crashes.append({"input": data[:200].hex(), "error": f"{type(exc).__name__}: {exc}"})
+            else:
+                crashes.append({})
+        slowest = max(slowest, time.perf_counter() - start)
+    elapsed = time.perf_counter() - t0
+    reasons = surface.reasons() if callable(surface.reasons) else surface.reasons
+    return {
+        "surface": name,
+        "inputs": inputs,
+        "accepted": accepted,
+        "refused": int(refused),
+        "refused_by_reason": dict(sorted(reasons.items())),
+        "crashes": len(crashes),
+        "crash_samples": [c for c in crashes if c][:5],
+        "slowest_input_ms": round(slowest * 1000, 3),
+        "inputs_per_s": round(inputs / elapsed),
+        "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--inputs", type=int, default=100_000, help="inputs per surface")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--only", default=",".join(SURFACES))
+    p.add_argument("--json", type=Path)
+    args = p.parse_args(argv)
+    logging.disable(logging.WARNING)  # the host decoder logs every map it ignores
+    results = [fuzz(n, args.inputs, args.seed) for n in args.only.split(",") if n]
+    print(f"{'surface':<9}{'inputs':>9}{'accepted':>10}{'refused':>9}{'crashes':>9}"
+          f"{'slowest ms':>12}{'inputs/s':>10}{'peak RSS MiB':>14}")  # fmt: skip
+    for r in results:
+        print(f"{r['surface']:<9}{r['inputs']:>9}{r['accepted']:>10}{r['refused']:>9}"
+              f"{r['crashes']:>9}{r['slowest_input_ms']:>12.2f}{r['inputs_per_s']:>10}"
+              f"{r['peak_rss_mib']:>14.1f}")  # fmt: skip
+        top = sorted(r["refused_by_reason"].items(), key=lambda kv: -kv[1])[:6]
+        print("  refused: " + ", ".join(f"{k} {v}" for k, v in top))
+        for c in r["crash_samples"]:
+            print(f"  crash: {c['error']}  input {c['input'][:80]}...")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(results, indent=2))
+        print(f"wrote {args.json}")
+    return 1 if any(r["crashes"] for r in results) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
