@@ -27,7 +27,7 @@ from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
 from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
 from sdrpeer.deploy.coordinator import ClusterState, Coordinator
-from sdrpeer.deploy.peers import peer_token
+from sdrpeer.deploy.peers import peer_token, peer_tokens
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.eventlog import EventLog
@@ -96,6 +96,8 @@ class Agent:
         self._last_publish = -1e9
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
+        self.peer_tokens: list[str] = []
+        """Tokens the API takes from other agents (one per cluster key; updated on reload)."""
         self.instances = self._make_instances()
         self.coordinator: Coordinator | None = None
         self.dashboard = Feed(self)
@@ -124,6 +126,7 @@ class Agent:
         else:
             assert cfg.key_file is not None
             self.keyring = Keyring.from_file(cfg.key_file)
+        self.peer_tokens[:] = peer_tokens(self.keyring)
         token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
             robot_file = RobotFile.load(cfg.robot_file)
@@ -206,7 +209,7 @@ class Agent:
             host,
             port,
             extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES],
-            peer_token=peer_token(self.keyring),
+            peer_tokens=self.peer_tokens,
         )
 
     # ----------------------------------------------------------------- monitoring
@@ -298,6 +301,31 @@ class Agent:
         r["t"], r["in"], r["out"] = now, c["bytes_in"], c["bytes_out"]
 
     # ----------------------------------------------------------------- component instances
+    def reload_keys(self) -> bool:
+        """Read the key file again (SIGHUP): keys rotate without a restart — add the new key
+        everywhere, then put it first (it signs), then retire the old one. A file that cannot be
+        read changes nothing. True when the new keys are in use."""
+        key_file = self.config.key_file
+        if self.keyring is None or key_file is None:
+            log.warning("key reload asked, but this agent runs without a key file")
+            return False
+        try:
+            ring = Keyring.from_file(key_file)
+        except (ConfigError, OSError, ValueError) as exc:
+            log.error("key reload failed, the old keys stay: %s", exc)
+            self.events.add(time.time(), "keys.reload_failed", self.name, error=str(exc))
+            return False
+        self.keyring = ring
+        if self.shell is not None:
+            self.shell.codec.keyring = ring
+        self.peer_tokens[:] = peer_tokens(ring)
+        if self.coordinator is not None:
+            self.coordinator.token = self.coordinator.handoff.token = peer_token(ring)
+        ids = [k.hex() for k in ring.key_ids]
+        log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
+        self.events.add(time.time(), "keys.reloaded", self.name, key_ids=ids)
+        return True
+
     def _make_instances(self) -> InstanceManager:
         """The instance manager: hosts bind data servers on this robot's gossip address."""
         config = SupervisorConfig(data_host=parse_hostport(self.config.bind)[0])
@@ -474,6 +502,7 @@ async def _serve(config: AgentConfig) -> int:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal)
+    loop.add_signal_handler(signal.SIGHUP, agent.reload_keys)
     try:
         await agent.start()
     except (ConfigError, OSError) as e:

@@ -76,6 +76,11 @@ class Keyring:
         return self._keys[0]
 
     @property
+    def keys(self) -> tuple[bytes, ...]:
+        """Every key, the signing key first (to derive per-key secrets; never logged)."""
+        return self._keys
+
+    @property
     def key_ids(self) -> tuple[bytes, ...]:
         """Ids of every key, the signing key's first."""
         return self._ids

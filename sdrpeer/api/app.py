@@ -33,7 +33,8 @@ log = logging.getLogger(__name__)
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 VIEW_KEY = web.AppKey("view", AgentView)
 TOKEN_KEY = web.AppKey("token", str)
-PEER_TOKEN_KEY = web.AppKey("peer_token", str)
+PEER_TOKEN_KEY = web.AppKey("peer_tokens", list[str])
+"""Tokens other agents may present (one per cluster key); a list changed in place on rotation."""
 REGISTRY_KEY = web.AppKey("registry", CollectorRegistry)
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 MAX_EVENTS_LIMIT = 10_000
@@ -80,8 +81,8 @@ def _token_ok(request: web.Request) -> bool:
     given_b = given.strip().encode()
     if hmac.compare_digest(given_b, request.app[TOKEN_KEY].encode()):
         return True
-    peer = request.app.get(PEER_TOKEN_KEY)
-    return peer is not None and hmac.compare_digest(given_b, peer.encode())
+    peers = request.app.get(PEER_TOKEN_KEY) or []
+    return any(hmac.compare_digest(given_b, peer.encode()) for peer in peers)
 
 
 @web.middleware
@@ -296,19 +297,20 @@ def build_app(
     *,
     token: str,
     extra_routes: Iterable[Route] = (),
-    peer_token: str | None = None,
+    peer_tokens: list[str] | None = None,
 ) -> web.Application:
     """The API application for one agent; `token` guards every state-changing route.
 
-    `peer_token` (derived from the cluster key) is accepted too: other agents use it.
+    `peer_tokens` (derived from the cluster keys) are accepted too: other agents use them. The
+    list is kept as given, so the agent can change its contents when keys rotate.
     """
     if not token:
         raise ValueError("the API token must not be empty")
     app = web.Application(middlewares=[error_middleware, auth_middleware])
     app[VIEW_KEY] = view
     app[TOKEN_KEY] = token
-    if peer_token:
-        app[PEER_TOKEN_KEY] = peer_token
+    if peer_tokens is not None:
+        app[PEER_TOKEN_KEY] = peer_tokens
     app[REGISTRY_KEY] = metrics.make_registry(view)
     add_routes(app, [*ROUTES, *extra_routes])
     return app

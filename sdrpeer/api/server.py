@@ -18,10 +18,10 @@ async def serve_api(
     port: int,
     *,
     extra_routes: Iterable[Route] = (),
-    peer_token: str | None = None,
+    peer_tokens: list[str] | None = None,
 ) -> tuple[web.AppRunner, str]:
     """Start the API on host:port (0 picks a free port); returns the runner and the base URL."""
-    app = build_app(view, token=token, extra_routes=extra_routes, peer_token=peer_token)
+    app = build_app(view, token=token, extra_routes=extra_routes, peer_tokens=peer_tokens)
     runner = web.AppRunner(app, access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)

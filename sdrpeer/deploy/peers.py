@@ -22,9 +22,17 @@ _LABEL = b"sdrpeer peer api v1"
 
 
 def peer_token(keyring: Keyring | None) -> str:
-    """The bearer token agents present to each other."""
+    """The bearer token agents present to each other (derived from the signing key)."""
     key = b"" if keyring is None else keyring.signing_key
     return hmac.new(key, _LABEL, hashlib.sha256).hexdigest()
+
+
+def peer_tokens(keyring: Keyring | None) -> list[str]:
+    """The tokens an agent accepts from its peers: one per key of its ring, so that during a key
+    rotation a peer that already signs with the new key (or still with the old) gets in."""
+    if keyring is None:
+        return [peer_token(None)]
+    return [hmac.new(k, _LABEL, hashlib.sha256).hexdigest() for k in keyring.keys]
 
 
 async def fetch_plan(api: str, token: str) -> Plan:

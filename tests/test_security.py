@@ -1,0 +1,99 @@
+"""Security on real agents (docs/security.md): keys rotate with no downtime (add the new key
+everywhere, sign with it, retire the old: SIGHUP re-reads the key file), a robot left with only
+the retired key is locked out, and no state-changing route answers without a token."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from functools import partial
+from pathlib import Path
+
+import pytest
+
+from sdrpeer.config import AgentConfig
+from sdrpeer.keyring import Keyring
+from sdrpeer.wire import format_key
+from tests.realnet import Agent, RealCluster, http
+from tests.test_recovery_e2e import CRASHY, deploy
+
+pytestmark = pytest.mark.realnet
+
+
+def rotate(cluster: RealCluster, agents: list[Agent], keys: list[bytes]) -> None:
+    """Write the shared key file and make every agent re-read it."""
+    cluster.key_file.write_text("".join(format_key(k) + "\n" for k in keys))
+    for agent in agents:
+        os.kill(agent.pid, signal.SIGHUP)
+    want = [Keyring([k]).key_ids[0].hex() for k in keys]
+
+    def reloaded(agent: Agent) -> bool:
+        done = [e for e in agent.events() if e["kind"] == "keys.reloaded"]
+        return bool(done) and done[-1]["detail"]["key_ids"] == want
+
+    for agent in agents:
+        cluster.wait_until(partial(reloaded, agent), bool, f"{agent.name} reloaded")
+
+
+def test_keys_rotate_with_no_downtime_and_the_old_key_is_locked_out(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    agents = cluster.start_many(3)
+    old, new = cluster.key, Keyring.generate()
+    rotate(cluster, agents, [old, new])  # 1. everyone knows the new key, still signs with old
+    time.sleep(0.5)
+    rotate(cluster, agents, [new, old])  # 2. everyone signs with the new key
+    time.sleep(0.5)
+    rotate(cluster, agents, [new])  # 3. the old key is retired
+    time.sleep(1.0)
+    names = {a.name for a in agents}
+    for agent in agents:
+        assert {n: s for n, s in agent.states().items() if n in names} == dict.fromkeys(
+            names, "alive"
+        )
+        kinds = {e["kind"] for e in agent.events()}
+        assert not kinds & {"member.suspect", "member.dead"}, agent.name  # no downtime
+    # agents still talk to each other with the new peer tokens: a deploy goes everywhere
+    path = tmp_path / "crashy.yaml"
+    path.write_text(CRASHY)
+    deploy(cluster, agents[1], path)
+    # a robot that missed the rotation holds only the retired key: it cannot join
+    stale_key = tmp_path / "stale.key"
+    stale_key.write_text(format_key(old) + "\n")
+    cluster.key_file, kept = stale_key, cluster.key_file
+    outsider = cluster.start("robot-9", join=[agents[0]])
+    cluster.key_file = kept
+    time.sleep(2.0)
+    assert "robot-9" not in agents[0].states()
+    assert agents[0].agent_info()["rejected"]["unknown_key"] > 0
+    assert outsider.states().get("robot-1") != "alive"
+
+
+STATE_CHANGING = [
+    ("POST", "/v1/deploy", {"system": {}}),
+    ("POST", "/v1/undeploy", {}),
+    ("POST", "/v1/plan", {"plan": {}}),
+    ("POST", "/v1/recovery", {}),
+    ("POST", "/v1/robot", {"rssi": "-80dBm"}),
+    ("POST", "/v1/instances", {"instances": []}),
+    ("DELETE", "/v1/instances/x", None),
+    ("POST", "/v1/instances/x/restart", None),
+    ("GET", "/v1/plan", None),  # the plan is only for peers and the operator
+]
+
+
+def test_no_state_change_without_the_token_and_loopback_by_default(cluster: RealCluster) -> None:
+    assert AgentConfig(name="r").api.startswith("127.0.0.1:")
+    agent = cluster.start("robot-1")
+    assert agent.api.startswith("http://127.0.0.1:")
+    before = agent.member("robot-1")["metrics"]["rssi_dbm"]
+    for method, path, body in STATE_CHANGING:
+        for token in (None, "wrong-token"):
+            code, doc = http(method, agent.api + path, body, token)
+            assert code == 401, (method, path, token, doc)
+    code, _ = http("POST", agent.api + "/v1/state", None, None)  # msgpack body: none at all
+    assert code == 401
+    assert agent.member("robot-1")["metrics"]["rssi_dbm"] == before  # nothing changed
+    code, _ = http("POST", agent.api + "/v1/robot", {"rssi": "-80dBm"}, agent.token)
+    assert code == 200
