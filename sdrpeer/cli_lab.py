@@ -20,7 +20,7 @@ from typing import TextIO
 
 from sdrpeer.cli_format import format_members, render_table, want_color
 from sdrpeer.client import AgentClient
-from sdrpeer.errors import ApiError
+from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab import DEFAULT_DIR, lab_down, lab_status
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
@@ -175,9 +175,14 @@ def cmd_lab_up(args: argparse.Namespace) -> int:
 
 def cmd_lab_down(args: argparse.Namespace) -> int:
     """sdrpeer lab down."""
-    for line in lab_down(args.dir):
-        _say(line)
-    if (args.dir / net.STATE_FILE).exists():
+    has_net = (args.dir / net.STATE_FILE).exists()
+    try:
+        for line in lab_down(args.dir):
+            _say(line)
+    except SdrpeerError:
+        if not (has_net or args.all_netns):
+            raise
+    if has_net:
         left = net.destroy(args.dir)
         _say(f"network removed{'; left: ' + ', '.join(left) if left else ''}")
     if args.all_netns:

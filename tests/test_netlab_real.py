@@ -139,9 +139,12 @@ def test_lab_down_removes_everything_after_the_lab_process_died(tmp_path: Path) 
     try:
         until(lambda: net.load(lab_dir), lambda p: p is not None, "netns.json")
         until(lambda: text_of(lab_dir / "lab.json"), lambda t: '"api": "http' in t, "agents")
-    finally:
+    except BaseException:
         up.kill()
-        up.wait(10)
+        net.destroy(lab_dir)  # a failure here must not leave namespaces behind either
+        raise
+    up.kill()
+    up.wait(10)
     plan = net.load(lab_dir)
     assert plan is not None
     namespaces = output(["ip", "netns", "list"])
