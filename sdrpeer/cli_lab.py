@@ -53,6 +53,16 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     down.set_defaults(func=cmd_lab_down)
     add_fault_parsers(lab_sub, where)
+    chaos = lab_sub.add_parser("chaos", help="a seeded chaos soak with invariants checked")
+    chaos.add_argument("--robots", type=int, default=10, metavar="N")
+    chaos.add_argument("--components", type=int, default=20, metavar="N")
+    chaos.add_argument("--minutes", type=float, default=1.0, metavar="M")
+    chaos.add_argument("--seed", type=int, default=1)
+    chaos.add_argument(
+        "--loopback", action="store_true", help="no namespaces (no partitions, loss)"
+    )
+    chaos.add_argument("--json", type=Path, metavar="FILE", help="also write the report as JSON")
+    chaos.set_defaults(func=cmd_lab_chaos)
     status = lab_sub.add_parser("status", parents=[where], help="the lab's agents")
     status.add_argument("--json", action="store_true", help="print JSON")
     status.set_defaults(func=cmd_lab_status)
@@ -204,3 +214,22 @@ def cmd_lab_status(args: argparse.Namespace) -> int:
     ]
     _say(render_table(["ROBOT", "PID", "PROCESS", "API"], rows))
     return 0 if all(s["running"] for s in status) else 1
+
+
+def cmd_lab_chaos(args: argparse.Namespace) -> int:
+    """sdrpeer lab chaos: exit 1 when an invariant was violated."""
+    from sdrpeer.chaos.run import ChaosOptions, format_report, run_chaos  # noqa: PLC0415
+
+    options = ChaosOptions(
+        robots=args.robots,
+        components=args.components,
+        minutes=args.minutes,
+        seed=args.seed,
+        netns=False if args.loopback else None,
+    )
+    report = run_chaos(options, _say)
+    _say(format_report(report))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2))
+    return 1 if report["violations"] else 0

@@ -70,6 +70,26 @@ class RunningLab:
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     net: NetPlan | None = None
     """The namespace lab's network, if it has one."""
+    options: UpOptions | None = None
+    """What the lab was started with (restarting an agent needs it)."""
+
+    def restart(self, name: str) -> None:
+        """Start robot `name`'s agent again (same data dir, key and token), joining an alive
+        robot; its new pid is recorded in lab.json."""
+        assert self.options is not None
+        robot = self.lab.robot(name)
+        assert robot is not None
+        seeds = [r.gossip for r in self.lab.robots if r.name != name and self._alive(r.name)]
+        command = agent_command(
+            robot, self.options, Path(self.lab.key_file), seeds[0] if seeds else None, self.net
+        )
+        self.procs[name] = _spawn(command, Path(robot.log))
+        robot.pid = self.procs[name].pid
+        write_lab(self.lab_dir, self.lab)
+
+    def _alive(self, name: str) -> bool:
+        proc = self.procs.get(name)
+        return proc is not None and proc.poll() is None
 
     def problems(self) -> list[str]:
         """One line per agent process that has exited."""
@@ -259,7 +279,7 @@ def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> Running
     if options.robots < 1:
         raise SdrpeerError(f"--robots must be at least 1, got {options.robots}")
     lab = _prepare(options)
-    running = RunningLab(options.lab_dir, lab)
+    running = RunningLab(options.lab_dir, lab, options=options)
     key_file = Path(lab.key_file)
     deadline = time.monotonic() + options.timeout
     try:

@@ -8,8 +8,9 @@ pair: `sdr<id>r<k>` on the host, enslaved to the bridge, and `eth0` inside with 
 robot sends crosses the bridge: faults act on the real network.
 
 - loss P: `iptables ... -m statistic --mode random --probability P -j DROP` on the robot's INPUT
-  (in its own chain, SDRPEER-FAULT): every packet *to* that robot is dropped with probability P,
-  so with the fault on every robot each link loses P in each direction;
+  (in its own chain, SDRPEER-FAULT): every packet *to* that robot from another robot is dropped
+  with probability P, so with the fault on every robot each link loses P in each direction
+  (what comes from the host — the command line, a soak's observer — is always let through);
 - bandwidth R: `tc tbf` on both ends of the robot's veth (into and out of the robot);
 - partition: each robot of a group drops (SDRPEER-PART) what comes from the other groups;
 - heal: both chains flushed and every qdisc removed; down: the namespaces (their veth ends and
@@ -116,6 +117,8 @@ class NetPlan:
                 ["ip", "-n", ns, "link", "set", "lo", "up"],
                 self.in_ns(robot, "iptables", "-N", FAULT_CHAIN),
                 self.in_ns(robot, "iptables", "-N", PART_CHAIN),
+                # the lab's own traffic (the host: CLI, soak observers) is never faulted
+                self.in_ns(robot, "iptables", "-A", "INPUT", "-s", self.gateway, "-j", "ACCEPT"),
                 self.in_ns(robot, "iptables", "-A", "INPUT", "-j", PART_CHAIN),
                 self.in_ns(robot, "iptables", "-A", "INPUT", "-j", FAULT_CHAIN),
             ]

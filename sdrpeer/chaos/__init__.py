@@ -1,0 +1,1 @@
+"""The chaos soak: seeded faults on a lab while invariants are checked all the time."""

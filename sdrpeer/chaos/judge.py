@@ -1,0 +1,161 @@
+"""The chaos soak's invariants, checked on every look at the fleet (pure: times passed in).
+
+How it works: the runner looks at every robot about twice a second and hands `Judge.observe` one
+`Look`: per component, the robots where an instance of it is ACTIVE as the active one (each
+robot's own word, from its instance manager), each robot's plan key, each agent's RSS, and
+whether a partition is on. The judge keeps:
+- **one active**: a component ACTIVE on two robots at once, while the network is whole, for longer
+  than `fence_window_s` is a violation (during a partition each side may run its own copy by
+  design; the clock starts at the heal);
+- **no plan lost**: a robot's plan key never goes backwards (plans are fenced and persisted, also
+  across an agent restart), and at the end the plan still places every component;
+- **memory bounded**: each agent's RSS stays below `rss_limit` bytes;
+- **recovery**: a look where every component is ACTIVE on exactly one robot is *whole*; every
+  fault started since the last whole look is recovered at this look (its recovery time is the
+  difference); after the last fault ends, the first whole look must come within `converge_s`.
+`report()` is the soak's result: faults, recovery times, violations.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["Judge", "Look"]
+
+PlanKey = tuple[int, str, int]
+
+
+@dataclass(frozen=True, slots=True)
+class Look:
+    """One look at the fleet."""
+
+    t: float
+    actives: Mapping[str, frozenset[str]]
+    """Component -> robots where its active instance is ACTIVE (components with none: empty)."""
+    plans: Mapping[str, PlanKey | None] = field(default_factory=dict)
+    """Robot -> the key of the plan it holds (robots that answered)."""
+    rss: Mapping[str, int] = field(default_factory=dict)
+    """Robot -> its agent's RSS in bytes."""
+    partitioned: bool = False
+
+
+def _pct(values: list[float], q: float) -> float | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    return round(ordered[min(len(ordered) - 1, int(q * len(ordered)))], 3)
+
+
+class Judge:
+    """Checks the soak's invariants look by look."""
+
+    def __init__(
+        self,
+        components: list[str],
+        *,
+        fence_window_s: float = 5.0,
+        converge_s: float = 3.0,
+        rss_limit: int = 200 * 1024 * 1024,
+    ) -> None:
+        self.components = components
+        self.fence_window_s = fence_window_s
+        self.converge_s = converge_s
+        self.rss_limit = rss_limit
+        self.violations: list[dict[str, Any]] = []
+        self.faults: Counter[str] = Counter()
+        self.recoveries: list[float] = []
+        self.peak_rss: dict[str, int] = {}
+        self.first_rss: dict[str, int] = {}
+        self.converged_after: float | None = None
+        self._pending: list[float] = []
+        self._double: dict[str, float] = {}
+        self._reported_double: set[str] = set()
+        self._plans: dict[str, PlanKey] = {}
+        self._faults_over: float | None = None
+        self._looks = 0
+
+    def fault(self, t: float, kind: str) -> None:
+        """A fault was injected at `t`."""
+        self.faults[kind] += 1
+        self._pending.append(t)
+
+    def faults_over(self, t: float) -> None:
+        """The last fault ended at `t`: the fleet must converge within `converge_s`."""
+        self._faults_over = t
+
+    def observe(self, look: Look) -> bool:
+        """Check one look; True when it is whole (every component ACTIVE on exactly one robot)."""
+        self._looks += 1
+        for comp in self.components:
+            where = look.actives.get(comp, frozenset())
+            if len(where) > 1 and look.partitioned:
+                self._double[comp] = look.t  # allowed while cut: the clock starts at the heal
+            elif len(where) > 1:
+                since = self._double.setdefault(comp, look.t)
+                if look.t - since > self.fence_window_s and comp not in self._reported_double:
+                    self._reported_double.add(comp)
+                    self._violate(
+                        look.t, "two_active", comp, robots=sorted(where), for_s=look.t - since
+                    )
+            else:
+                self._double.pop(comp, None)
+                self._reported_double.discard(comp)
+        for robot, key in look.plans.items():
+            if key is None:
+                continue
+            before = self._plans.get(robot)
+            if before is not None and key < before:
+                self._violate(look.t, "plan_went_back", robot, was=list(before), now=list(key))
+            self._plans[robot] = max(key, before) if before is not None else key
+        for robot, rss in look.rss.items():
+            self.first_rss.setdefault(robot, rss)
+            self.peak_rss[robot] = max(rss, self.peak_rss.get(robot, 0))
+            if rss > self.rss_limit:
+                self._violate(look.t, "memory", robot, rss=rss)
+        whole = all(len(look.actives.get(c, ())) == 1 for c in self.components)
+        if whole:
+            self.recoveries += [look.t - t for t in self._pending]
+            self._pending.clear()
+            if self._faults_over is not None and self.converged_after is None:
+                self.converged_after = round(max(0.0, look.t - self._faults_over), 3)
+                if self.converged_after > self.converge_s:
+                    self._violate(look.t, "slow_convergence", "fleet", after_s=self.converged_after)
+        return whole
+
+    def final_plan(self, placed: Mapping[str, int]) -> None:
+        """At the end: component -> active placements in the plan; every one must have one."""
+        for comp in self.components:
+            if placed.get(comp, 0) != 1:
+                self._violate(0.0, "plan_lost", comp, active_placements=placed.get(comp, 0))
+
+    def never_converged(self, t: float) -> None:
+        """The soak ended without a whole look after the faults."""
+        if self._faults_over is not None and self.converged_after is None:
+            self._violate(t, "never_converged", "fleet", waited_s=round(t - self._faults_over, 3))
+
+    def _violate(self, t: float, kind: str, subject: str, **detail: Any) -> None:
+        self.violations.append({"t": round(t, 3), "kind": kind, "subject": subject, **detail})
+
+    def report(self) -> dict[str, Any]:
+        """The soak's figures."""
+        growth = {r: self.peak_rss[r] - self.first_rss.get(r, 0) for r in self.peak_rss}
+        return {
+            "faults": dict(sorted(self.faults.items())),
+            "faults_total": sum(self.faults.values()),
+            "recoveries": len(self.recoveries),
+            "recovery_s": {
+                "p50": _pct(self.recoveries, 0.5),
+                "p99": _pct(self.recoveries, 0.99),
+                "max": round(max(self.recoveries), 3) if self.recoveries else None,
+                "mean": round(statistics.fmean(self.recoveries), 3) if self.recoveries else None,
+            },
+            "converged_after_s": self.converged_after,
+            "looks": self._looks,
+            "agent_rss_peak_mib": round(max(self.peak_rss.values(), default=0) / 2**20, 1),
+            "agent_rss_growth_mib": round(max(growth.values(), default=0) / 2**20, 1),
+            "violations": self.violations,
+        }

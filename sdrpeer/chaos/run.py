@@ -1,0 +1,316 @@
+"""`sdrpeer lab chaos`: a seeded chaos soak on a real lab, with its invariants checked all along.
+
+How it works: a lab of `robots` agents starts (each robot in its own network namespace when this
+is root with ip, iptables and tc, so partitions and packet loss are real; else on loopback,
+without those two faults). A system of `components` components is deployed — camera and
+anomaly-detector pairs, each with a hot standby on another robot, and Table III's rules for
+errors, lost signal, low battery and packet loss. Then, for `minutes`, the faults of
+`schedule.schedule(seed, ...)` are carried out (SIGKILL of a component host or of an agent,
+which is restarted later; RSSI or battery pushed past the rules through the robot's API; a
+partition; packet loss) while the fleet is looked at twice a second: every robot's own list of
+instances, its plan key and its agent's RSS go to `judge.Judge`. When the last fault has ended
+the soak waits (at most `settle_s`) for the fleet to be whole again, checks the final plan, stops
+the lab and returns the judge's report plus what was done.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+from sdrpeer.chaos.judge import Judge, Look
+from sdrpeer.chaos.schedule import Fault, schedule
+from sdrpeer.client import AgentClient, wait_for
+from sdrpeer.deploy.commands import post_when_elected
+from sdrpeer.errors import ApiError, SdrpeerError
+from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.netlab import net
+from sdrpeer.netlab.plan import PART_CHAIN
+from sdrpeer.system.loader import parse_system
+
+LOOK_EVERY = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class ChaosOptions:
+    """What `sdrpeer lab chaos` was asked for."""
+
+    robots: int = 10
+    components: int = 20
+    minutes: float = 1.0
+    seed: int = 1
+    netns: bool | None = None
+    """None: the namespace lab when this is root with the tools, else loopback."""
+    settle_s: float = 30.0
+    lab_dir: Path | None = None
+
+
+def chaos_system(components: int) -> dict[str, Any]:
+    """Camera -> AnomalyDetection pairs (small, real pixel work), hot standbys elsewhere."""
+    lines = ["name: chaos", "components:"]
+    conns = ["connections:"]
+    for k in range((components + 1) // 2):
+        lines += [
+            f"  - name: Cam{k}",
+            "    target: components.camera:Camera",
+            "    params: {reserve_mb: 0, rate: 2, width: 32, height: 24}",
+            "    standby: {other_robots: 1, mode: hot}",
+        ]
+        if 2 * k + 1 < components:
+            lines += [
+                f"  - name: Det{k}",
+                "    target: components.anomaly_detection:AnomalyDetection",
+                "    params: {reserve_mb: 0}",
+                "    standby: {other_robots: 1, mode: hot}",
+            ]
+            conns.append(f"  - {{from: Cam{k}.image, to: Det{k}.image, policy: {{push: new}}}}")
+    rules = [
+        "recovery:",
+        "  min_dwell: 5s",
+        "  rules:",
+        "    - {cause: component_error,"
+        " actions: [restart, standby_other_robot, launch_other_robot]}",
+        "    - {cause: communication_failure, when: rssi <= -52.5dBm, for: 2s, clear: -50dBm,"
+        " actions: [standby_other_robot, launch_other_robot]}",
+        "    - {cause: communication_failure, when: loss >= 30%, for: 3s, clear: 20%,"
+        " actions: [standby_other_robot, launch_other_robot]}",
+        "    - {cause: low_battery, when: battery <= 15%, for: 2s, clear: 20%,"
+        " actions: [standby_other_robot, launch_other_robot]}",
+    ]
+    text = "\n".join([*lines, *(conns if len(conns) > 1 else []), *rules]) + "\n"
+    return parse_system(text, "chaos.yaml").to_json()
+
+
+class Soak:
+    """One soak on a started lab."""
+
+    def __init__(self, lab: RunningLab, components: list[str], say: Callable[[str], None]) -> None:
+        self.lab = lab
+        self.say = say
+        self.clients = {
+            r.name: AgentClient(str(r.api), r.token, timeout=1.5) for r in lab.lab.robots
+        }
+        self.judge = Judge(components)
+        self.done: list[dict[str, Any]] = []
+        self.down: set[str] = set()
+        self.partitioned = False
+
+    # -- faults ----------------------------------------------------------------------------
+
+    def start(self, fault: Fault, t: float) -> None:
+        """Carry a fault out (and tell the judge)."""
+        robot = fault.robots[0]
+        what = ""
+        if fault.kind == "kill_host":
+            what = self._kill_host(robot, fault.pick)
+        elif fault.kind == "kill_agent":
+            self._kill_agent(robot)
+        elif fault.kind in ("rssi", "battery"):
+            value = "-60dBm" if fault.kind == "rssi" else "10%"
+            self._set(robot, {fault.kind: value})
+        elif fault.kind == "partition":
+            plan = self.lab.net
+            assert plan is not None
+            rest = [n for n in plan.names() if n not in fault.robots]
+            net.run(plan.partition([list(fault.robots), rest]))
+            self.partitioned = True
+        elif fault.kind == "loss":
+            assert self.lab.net is not None
+            net.run(self.lab.net.loss(robot, fault.amount))
+        if what != "skipped":
+            self.judge.fault(t, fault.kind)
+        self.done.append({"t": round(t, 2), "kind": fault.kind, "robots": list(fault.robots),
+                          "note": what})  # fmt: skip
+
+    def end(self, fault: Fault) -> None:
+        """Undo a fault that has an end."""
+        robot = fault.robots[0]
+        if fault.kind == "kill_agent":
+            self.lab.restart(robot)
+            self.down.discard(robot)
+        elif fault.kind == "rssi":
+            self._set(robot, {"rssi": "-45dBm"})
+        elif fault.kind == "battery":
+            self._set(robot, {"battery": "90%"})
+        elif fault.kind == "partition" and self.lab.net is not None:
+            plan = self.lab.net
+            net.run([plan.in_ns(r, "iptables", "-F", PART_CHAIN) for r in plan.names()])
+            self.partitioned = False
+        elif fault.kind == "loss" and self.lab.net is not None:
+            net.run(self.lab.net.loss(robot, 0.0))
+
+    def _kill_host(self, robot: str, pick: int) -> str:
+        if robot in self.down:
+            return "skipped"
+        try:
+            rows = self.clients[robot].get("/v1/instances")
+        except ApiError:
+            return "skipped"
+        pids = [r["pid"] for r in rows if r.get("state") == "ACTIVE" and r.get("pid")]
+        if not pids:
+            return "skipped"
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(int(pids[pick % len(pids)]), signal.SIGKILL)
+        return ""
+
+    def _kill_agent(self, robot: str) -> None:
+        proc = self.lab.procs[robot]
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        self.down.add(robot)
+
+    def _set(self, robot: str, changes: dict[str, str]) -> None:
+        if robot not in self.down:
+            with contextlib.suppress(ApiError):
+                self.clients[robot].post("/v1/robot", changes)
+
+    # -- looking ---------------------------------------------------------------------------
+
+    def look(self, t: float) -> Look:
+        """Every running robot's own word on its instances and plan, and its agent's RSS."""
+        actives: dict[str, set[str]] = {}
+        plans: dict[str, tuple[int, str, int] | None] = {}
+        rss: dict[str, int] = {}
+        for robot, client in self.clients.items():
+            if robot in self.down:
+                continue
+            try:
+                rows = client.get("/v1/instances")
+                status = client.get("/v1/status")
+            except ApiError:
+                continue
+            for row in rows:
+                if row.get("state") == "ACTIVE" and row.get("role") == "active":
+                    actives.setdefault(str(row["component"]), set()).add(robot)
+            p = status.get("plan")
+            plans[robot] = None if p is None else (p["epoch"], p["allocator"], p["version"])
+            with contextlib.suppress(psutil.Error):
+                rss[robot] = psutil.Process(self.lab.procs[robot].pid).memory_info().rss
+        frozen = {c: frozenset(r) for c, r in actives.items()}
+        return Look(t, frozen, plans, rss, self.partitioned)
+
+
+def run_chaos(opts: ChaosOptions, say: Callable[[str], None] = print) -> dict[str, Any]:
+    """Run one soak; its report."""
+    netns = opts.netns
+    if netns is None:
+        try:
+            net.require_tools()
+            netns = True
+        except SdrpeerError:
+            netns = False
+    with tempfile.TemporaryDirectory() as tmp:
+        lab_dir = opts.lab_dir or Path(tmp) / "lab"
+        say(f"chaos: {opts.robots} robots ({'namespaces' if netns else 'loopback'}), "
+            f"{opts.components} components, {opts.minutes:g} min, seed {opts.seed}")  # fmt: skip
+        lab = start_lab(
+            UpOptions(opts.robots, lab_dir, preset="lan", netns=netns, timeout=60),
+            say=lambda _: None,
+        )
+        try:
+            return _soak(lab, opts, netns, say)
+        finally:
+            lab.stop(grace=3)
+
+
+def _soak(
+    lab: RunningLab, opts: ChaosOptions, netns: bool, say: Callable[[str], None]
+) -> dict[str, Any]:
+    system = chaos_system(opts.components)
+    components = [c["name"] for c in system["components"]]
+    soak = Soak(lab, components, say)
+    first = soak.clients["robot-1"]
+    post_when_elected(first, "/v1/deploy", {"system": system}, 30.0)
+
+    def ready(doc: dict[str, Any]) -> bool:
+        comps = doc.get("components") or []
+        return bool(comps) and all(
+            c["state"] == "active" and all(s["state"] == "inactive" for s in c["standbys"])
+            for c in comps
+        )
+
+    wait_for(lambda: first.get("/v1/status"), ready, "the system deployed", 120)
+    duration = opts.minutes * 60
+    faults = schedule(opts.seed, opts.robots, duration, netns)
+    ends = sorted(((f.until, i) for i, f in enumerate(faults) if f.until is not None))
+    say(f"deployed; {len(faults)} faults over {duration:g} s")
+    t0 = time.monotonic()
+    started = ended = 0
+    next_look = 0.0
+    while True:
+        t = time.monotonic() - t0
+        while started < len(faults) and faults[started].at <= t:
+            soak.start(faults[started], t)
+            started += 1
+        while ended < len(ends) and ends[ended][0] <= t:
+            soak.end(faults[ends[ended][1]])
+            ended += 1
+        if started == len(faults) and ended == len(ends) and t >= duration:
+            break
+        if t >= next_look:
+            soak.judge.observe(soak.look(t))
+            next_look = t + LOOK_EVERY
+        time.sleep(0.05)
+    t_over = time.monotonic() - t0
+    soak.judge.faults_over(t_over)
+    deadline = t_over + opts.settle_s
+    while time.monotonic() - t0 < deadline:
+        if soak.judge.observe(soak.look(time.monotonic() - t0)):
+            break
+        time.sleep(0.1)
+    else:
+        soak.judge.never_converged(time.monotonic() - t0)
+    placed = _placed(soak)
+    soak.judge.final_plan(placed)
+    report = soak.judge.report()
+    report.update(
+        robots=opts.robots,
+        components=opts.components,
+        minutes=opts.minutes,
+        seed=opts.seed,
+        network="namespaces" if netns else "loopback",
+        faults_done=soak.done,
+    )
+    return report
+
+
+def _placed(soak: Soak) -> dict[str, int]:
+    """Component -> active placements in the plan one running robot holds at the end."""
+    for robot, client in soak.clients.items():
+        if robot in soak.down:
+            continue
+        try:
+            doc = client.get("/v1/status")
+        except ApiError:
+            continue
+        return {c["component"]: 1 if c.get("instance") else 0 for c in doc.get("components") or []}
+    return {}
+
+
+def format_report(r: dict[str, Any]) -> str:
+    """The soak's report for a person."""
+    rec = r["recovery_s"]
+    lines = [
+        f"chaos soak: {r['robots']} robots ({r['network']}), {r['components']} components, "
+        f"{r['minutes']:g} min, seed {r['seed']}",
+        f"faults injected: {r['faults_total']}  "
+        + ", ".join(f"{k} {v}" for k, v in r["faults"].items()),
+        f"recoveries: {r['recoveries']}  time to whole again: p50 {rec['p50']} s, "
+        f"p99 {rec['p99']} s, max {rec['max']} s",
+        f"after the last fault: whole again in {r['converged_after_s']} s (target <= 3 s)",
+        f"agents' RSS: peak {r['agent_rss_peak_mib']} MiB, largest growth "
+        f"{r['agent_rss_growth_mib']} MiB",
+        f"violations: {len(r['violations'])} (target 0)",
+    ]
+    lines += [f"  {v}" for v in r["violations"][:20]]
+    return "\n".join(lines)
