@@ -29,6 +29,18 @@ def _instances(doc: Doc | None) -> Iterator[tuple[str, dict[str, Any]]]:
             yield name, {**standby, "role": "standby"}
 
 
+def _state(ts: float, component: str, row: dict[str, Any], state: Any) -> dict[str, Any]:
+    return {
+        "ts": ts,
+        "kind": "state",
+        "component": component,
+        "instance": row.get("instance"),
+        "robot": row.get("robot"),
+        "role": row["role"],
+        "state": state,
+    }
+
+
 def diff_status(prev: Doc | None, cur: Doc | None, ts: float) -> list[dict[str, Any]]:
     """The moments between two statuses (`prev` None: the first look, every state is news)."""
     if cur is None:
@@ -67,30 +79,10 @@ def diff_status(prev: Doc | None, cur: Doc | None, ts: float) -> list[dict[str, 
         key = (row.get("instance"), row.get("robot"))
         current.add(key)
         if seen.get(key) != (row.get("state"), row["role"]):
-            out.append(
-                {
-                    "ts": ts,
-                    "kind": "state",
-                    "component": component,
-                    "instance": row.get("instance"),
-                    "robot": row.get("robot"),
-                    "role": row["role"],
-                    "state": row.get("state"),
-                }
-            )
+            out.append(_state(ts, component, row, row.get("state")))
     for component, row in _instances(prev):
         if (row.get("instance"), row.get("robot")) not in current:
-            out.append(
-                {
-                    "ts": ts,
-                    "kind": "state",
-                    "component": component,
-                    "instance": row.get("instance"),
-                    "robot": row.get("robot"),
-                    "role": row["role"],
-                    "state": "gone",
-                }
-            )
+            out.append(_state(ts, component, row, "gone"))
     was = {c.get("component"): c.get("robot") for c in (prev or {}).get("components") or []}
     for comp in cur.get("components") or []:
         src, dst = was.get(comp.get("component")), comp.get("robot")
