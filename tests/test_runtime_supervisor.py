@@ -172,3 +172,27 @@ async def test_the_agents_process_tree_meter_counts_hosts(sups):
     _, host_rss = sup.sample()
     _, tree_rss = ProcessTreeMeter(os.getpid(), include_root=False).measure()
     assert tree_rss >= host_rss > 0
+
+
+async def test_a_stop_while_the_host_is_being_made_leaves_no_orphan(
+    sups, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Under load the process exists before create_subprocess_exec returns: a stop in that
+    window must not leave it running (the chaos soak found such orphans piling up)."""
+    real = asyncio.create_subprocess_exec
+    forked: list[int] = []
+
+    async def slow(*args: object, **kw: object) -> asyncio.subprocess.Process:
+        proc = await real(*args, **kw)  # type: ignore[arg-type]
+        forked.append(proc.pid)
+        await asyncio.sleep(1.0)  # the rest of the set-up, slow on a loaded robot
+        return proc
+
+    monkeypatch.setattr(asyncio, "create_subprocess_exec", slow)
+    sup = sups(fake())
+    sup.start()
+    await until("the fork", lambda: forked)
+    await asyncio.wait_for(sup.stop(), 5.0)
+    assert sup.state == "STOPPED"
+    with pytest.raises(ProcessLookupError):  # reaped: not even a zombie left
+        os.kill(forked[0], 0)

@@ -268,8 +268,8 @@ class Supervisor:
         )
         out = open_log(self.data_dir, self.name, argv)
         self._spawned = asyncio.get_running_loop().time()
-        try:
-            proc = await asyncio.create_subprocess_exec(
+        creating = asyncio.ensure_future(
+            asyncio.create_subprocess_exec(
                 *argv,
                 stdin=subprocess.DEVNULL,
                 stdout=out,
@@ -279,6 +279,18 @@ class Supervisor:
                 preexec_fn=preexec(),
                 start_new_session=False,
             )
+        )
+        try:
+            proc = await asyncio.shield(creating)
+        except asyncio.CancelledError:
+            # stopped while the process was being made: it may exist already (the fork is done
+            # before the await ends), and nobody else knows its pid: make sure it dies
+            parent.close()
+            with contextlib.suppress(Exception):
+                orphan = await creating
+                orphan.kill()
+                await orphan.wait()
+            raise
         except OSError:
             parent.close()
             raise
