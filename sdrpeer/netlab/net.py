@@ -5,14 +5,15 @@ How it works: `create(lab_dir, robots)` picks a free lab id (no bridge `sdrbr<id
 `NetPlan.setup()`; if a command fails, what was made is removed again and the error names the
 command and what it printed. Because the file comes first, `destroy(lab_dir)` can remove
 everything after a crash of the lab at any point. `destroy` runs every teardown command whatever
-fails (a part may already be gone) and then deletes the file; `sweep()` removes every namespace
-and bridge with the lab's prefixes (for `sdrpeer lab down --all-netns`, when the file is lost).
+fails (a part may already be gone) and then deletes the file; `sweep()` removes every namespace,
+bridge and veth with the lab's names (for `sdrpeer lab down --all-netns`, when the file is lost).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 from collections.abc import Iterable
@@ -62,6 +63,12 @@ def _bridge_exists(name: str) -> bool:
     return done.returncode == 0
 
 
+def _free(plan: NetPlan) -> bool:
+    """No link of `plan` exists yet (a crashed lab may have left some behind)."""
+    names = [plan.bridge, *(plan.veth(r) for r in plan.names())]
+    return not any(_bridge_exists(name) for name in names)
+
+
 def load(lab_dir: Path) -> NetPlan | None:
     """The lab's network as recorded in `netns.json`, or None."""
     try:
@@ -77,7 +84,7 @@ def create(lab_dir: Path, robots: int) -> NetPlan:
     existing = load(lab_dir)
     if existing is not None:
         destroy(lab_dir)
-    lab_id = next((i for i in range(1, 251) if not _bridge_exists(f"{BRIDGE_PREFIX}{i}")), None)
+    lab_id = next((i for i in range(1, 251) if _free(NetPlan(i, robots))), None)
     if lab_id is None:
         raise SdrpeerError(
             "no free lab id: 250 namespace labs exist (sdrpeer lab down --all-netns)"
@@ -120,8 +127,12 @@ def sweep() -> list[str]:
     links = subprocess.run(
         ["ip", "-o", "link", "show", "type", "bridge"], capture_output=True, text=True, check=False
     ).stdout
-    for line in links.splitlines():
+    veths = subprocess.run(
+        ["ip", "-o", "link", "show", "type", "veth"], capture_output=True, text=True, check=False
+    ).stdout
+    for line in [*links.splitlines(), *veths.splitlines()]:
         name = line.split(":")[1].strip().split("@")[0] if ":" in line else ""
-        if name.startswith(BRIDGE_PREFIX) and not run([["ip", "link", "del", name]], check=False):
+        ours = name.startswith(BRIDGE_PREFIX) or re.fullmatch(r"sdr\d+r\d+", name)
+        if ours and not run([["ip", "link", "del", name]], check=False):
             removed.append(name)
     return removed
