@@ -4,7 +4,8 @@ How it works: a lab of `robots` agents starts (each robot in its own network nam
 is root with ip, iptables and tc, so partitions and packet loss are real; else on loopback,
 without those two faults). A system of `components` components is deployed — camera and
 anomaly-detector pairs, each with a hot standby on another robot, and Table III's rules for
-errors, lost signal, low battery and packet loss. Then, for `minutes`, the faults of
+errors, lost signal, low battery and packet loss, spread by the `objective` strategy (first_fit
+would put every active on robot-1 and every standby on robot-2). Then, for `minutes`, the faults of
 `schedule.schedule(seed, ...)` are carried out (SIGKILL of a component host or of an agent,
 which is restarted later; RSSI or battery pushed past the rules through the robot's API; a
 partition; packet loss) while the fleet is looked at twice a second: every robot's own list of
@@ -56,13 +57,14 @@ class ChaosOptions:
 
 def chaos_system(components: int) -> dict[str, Any]:
     """Camera -> AnomalyDetection pairs (small, real pixel work), hot standbys elsewhere."""
-    lines = ["name: chaos", "components:"]
+    lines = ["name: chaos", "allocation: {strategy: objective}", "components:"]
     conns = ["connections:"]
     for k in range((components + 1) // 2):
         lines += [
             f"  - name: Cam{k}",
             "    target: components.camera:Camera",
             "    params: {reserve_mb: 0, rate: 2, width: 32, height: 24}",
+            "    requires: {cpu: 2%, memory: 30MB}",
             "    standby: {other_robots: 1, mode: hot}",
         ]
         if 2 * k + 1 < components:
@@ -70,6 +72,7 @@ def chaos_system(components: int) -> dict[str, Any]:
                 f"  - name: Det{k}",
                 "    target: components.anomaly_detection:AnomalyDetection",
                 "    params: {reserve_mb: 0}",
+                "    requires: {cpu: 2%, memory: 30MB}",
                 "    standby: {other_robots: 1, mode: hot}",
             ]
             conns.append(f"  - {{from: Cam{k}.image, to: Det{k}.image, policy: {{push: new}}}}")
