@@ -6,7 +6,11 @@ robot's own word, from its instance manager), each robot's plan key, each agent'
 whether a partition is on. The judge keeps:
 - **one active**: a component ACTIVE on two robots at once, while the network is whole, for longer
   than `fence_window_s` is a violation (during a partition each side may run its own copy by
-  design; the clock starts at the heal);
+  design; the clock starts at the heal). The window is what fencing can promise after a heal:
+  the two sides must first hear of each other (anti-entropy contacts a dead member's address
+  about every third push-pull, 5 s apart in the `lan` preset) and the losing side then stops its
+  copy gracefully (the host's exit, up to 5 s). 10 s by default; every episode's length is kept
+  (`double_active_s`) so the report shows how close the fleet came;
 - **no plan lost**: a robot's plan key never goes backwards (plans are fenced and persisted, also
   across an agent restart), and at the end the plan still places every component;
 - **memory bounded**: each agent's RSS stays below `rss_limit` bytes;
@@ -57,7 +61,7 @@ class Judge:
         self,
         components: list[str],
         *,
-        fence_window_s: float = 5.0,
+        fence_window_s: float = 10.0,
         converge_s: float = 3.0,
         rss_limit: int = 200 * 1024 * 1024,
     ) -> None:
@@ -71,6 +75,8 @@ class Judge:
         self.peak_rss: dict[str, int] = {}
         self.first_rss: dict[str, int] = {}
         self.converged_after: float | None = None
+        self.double_active_s: list[float] = []
+        """How long each episode of two actives lasted once the network was whole."""
         self._pending: list[float] = []
         self._double: dict[str, float] = {}
         self._reported_double: set[str] = set()
@@ -102,7 +108,9 @@ class Judge:
                         look.t, "two_active", comp, robots=sorted(where), for_s=look.t - since
                     )
             else:
-                self._double.pop(comp, None)
+                began = self._double.pop(comp) if comp in self._double else None
+                if began is not None and not look.partitioned:
+                    self.double_active_s.append(round(look.t - began, 3))
                 self._reported_double.discard(comp)
         for robot, key in look.plans.items():
             if key is None:
@@ -154,6 +162,9 @@ class Judge:
                 "mean": round(statistics.fmean(self.recoveries), 3) if self.recoveries else None,
             },
             "converged_after_s": self.converged_after,
+            "double_active_episodes": len(self.double_active_s),
+            "double_active_max_s": max(self.double_active_s, default=None),
+            "fence_window_s": self.fence_window_s,
             "looks": self._looks,
             "agent_rss_peak_mib": round(max(self.peak_rss.values(), default=0) / 2**20, 1),
             "agent_rss_growth_mib": round(max(growth.values(), default=0) / 2**20, 1),

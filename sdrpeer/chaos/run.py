@@ -311,6 +311,8 @@ def format_report(r: dict[str, Any]) -> str:
         f"recoveries: {r['recoveries']}  time to whole again: p50 {rec['p50']} s, "
         f"p99 {rec['p99']} s, max {rec['max']} s",
         f"after the last fault: whole again in {r['converged_after_s']} s (target <= 3 s)",
+        f"two actives once the network was whole: {r['double_active_episodes']} episodes, longest "
+        f"{r['double_active_max_s']} s (window {r['fence_window_s']:g} s)",
         f"agents' RSS: peak {r['agent_rss_peak_mib']} MiB, largest growth "
         f"{r['agent_rss_growth_mib']} MiB",
         f"violations: {len(r['violations'])} (target 0)",
