@@ -15,12 +15,10 @@ import asyncio
 import logging
 import os
 import random
-import signal
 import time
-from collections import Counter
 from typing import TYPE_CHECKING, Any
 
-from sdrpeer import agent_views
+from sdrpeer import agent_keys, agent_views
 from sdrpeer.agent_files import load_token, write_agent_json
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
@@ -30,7 +28,7 @@ from sdrpeer.deploy.coordinator import ClusterState, Coordinator
 from sdrpeer.deploy.peers import peer_token, peer_tokens
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.errors import ConfigError, WireError
-from sdrpeer.eventlog import EventLog
+from sdrpeer.eventlog import EventLog, RecoveryTally
 from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import (
@@ -43,7 +41,6 @@ from sdrpeer.gossip.events import (
 )
 from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
-from sdrpeer.logs import setup_logging
 from sdrpeer.monitor.links import LinkTable
 from sdrpeer.monitor.publish import worth_publishing
 from sdrpeer.monitor.scenario import Scenario
@@ -103,9 +100,9 @@ class Agent:
         self.dashboard = Feed(self)
         """History and live streams of the dashboard (`sdrpeer.dashboard`)."""
         self.events.listeners.append(self.dashboard.on_event)
-        self.recovery_counts: dict[str, Counter[str]] = {"actions": Counter(), "moves": Counter()}
+        self.recovery = RecoveryTally()
         """Recovery steps decided here by action, and components moved by this allocator."""
-        self.events.listeners.append(self._count_recovery)
+        self.events.listeners.append(self.recovery.count)
         self.priority = config.priority
         """Election priority: --priority / the config file, else the robot file's `priority:`."""
 
@@ -302,29 +299,8 @@ class Agent:
 
     # ----------------------------------------------------------------- component instances
     def reload_keys(self) -> bool:
-        """Read the key file again (SIGHUP): keys rotate without a restart — add the new key
-        everywhere, then put it first (it signs), then retire the old one. A file that cannot be
-        read changes nothing. True when the new keys are in use."""
-        key_file = self.config.key_file
-        if self.keyring is None or key_file is None:
-            log.warning("key reload asked, but this agent runs without a key file")
-            return False
-        try:
-            ring = Keyring.from_file(key_file)
-        except (ConfigError, OSError, ValueError) as exc:
-            log.error("key reload failed, the old keys stay: %s", exc)
-            self.events.add(time.time(), "keys.reload_failed", self.name, error=str(exc))
-            return False
-        self.keyring = ring
-        if self.shell is not None:
-            self.shell.codec.keyring = ring
-        self.peer_tokens[:] = peer_tokens(ring)
-        if self.coordinator is not None:
-            self.coordinator.token = self.coordinator.handoff.token = peer_token(ring)
-        ids = [k.hex() for k in ring.key_ids]
-        log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
-        self.events.add(time.time(), "keys.reloaded", self.name, key_ids=ids)
-        return True
+        """Read the key file again (SIGHUP): rotate keys with no restart (`agent_keys`)."""
+        return agent_keys.reload_keys(self)
 
     def _make_instances(self) -> InstanceManager:
         """The instance manager: hosts bind data servers on this robot's gossip address."""
@@ -432,29 +408,9 @@ class Agent:
         """Event log entries after `since` (see AgentView)."""
         return self.events.since(since, limit)
 
-    def _count_recovery(self, entry: dict[str, Any]) -> None:
-        detail = entry["detail"]
-        if entry["kind"] == "recovery.decision":
-            self.recovery_counts["actions"][str(detail.get("action"))] += 1
-        elif entry["kind"] == "recovery.move":
-            for component in detail.get("moved") or {}:
-                self.recovery_counts["moves"][str(component)] += 1
-
     def deploy_view(self) -> dict[str, Any]:
         """Election, recovery and handoff counters, event counts (the Prometheus families)."""
-        coord = self.coordinator
-        info = None if coord is None else coord.election.info()
-        return {
-            "election": {
-                "epoch": 0 if info is None else info.epoch,
-                "leader": None if info is None else info.leader,
-            },
-            "recovery_actions": dict(self.recovery_counts["actions"]),
-            "recovery_moves": dict(self.recovery_counts["moves"]),
-            "handoff": {} if coord is None else dict(coord.handoff.counters),
-            "events": dict(self.events.counts),
-            "dashboard_streams": self.dashboard.hub.clients,
-        }
+        return agent_views.deploy_view(self)
 
     def status_view(self) -> dict[str, Any] | None:
         """The deployment status (GET /v1/status), for the dashboard."""
@@ -482,49 +438,6 @@ def _trap_json(trap: Any) -> dict[str, Any]:
         "threshold": trap.threshold,
         "state": trap.state,
     }
-
-
-async def _serve(config: AgentConfig) -> int:
-    agent = Agent(config)
-    loop = asyncio.get_running_loop()
-    stop = asyncio.Event()
-    signals = 0
-    main_task = asyncio.current_task()
-
-    def on_signal() -> None:
-        nonlocal signals
-        signals += 1
-        if signals == 1:
-            log.info("shutting down (again to force)")
-            stop.set()
-        elif main_task is not None:
-            main_task.cancel()
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, on_signal)
-    loop.add_signal_handler(signal.SIGHUP, agent.reload_keys)
-    try:
-        await agent.start()
-    except (ConfigError, OSError) as e:
-        log.error("cannot start: %s", e)
-        await agent.stop(leave=False)
-        return 2
-    await stop.wait()
-    await agent.stop()
-    return 0
-
-
-def run_agent(config: AgentConfig) -> int:
-    """Run an agent until SIGINT/SIGTERM; returns the process exit code."""
-    setup_logging(config.name, config.log_level, config.log_format)
-    try:
-        return asyncio.run(_serve(config))
-    except asyncio.CancelledError:
-        log.warning("forced exit")
-        return 1
-    except ConfigError as e:
-        log.error("%s", e)
-        return 2
 
 
 def _states_of(record: RobotRecord) -> list[tuple[str, str, str]]:

@@ -90,3 +90,20 @@ def agent_view(self: Agent) -> dict[str, Any]:
         "members": states,
         "gossip": dict(self.core.counters),
     }
+
+
+def deploy_view(self: Agent) -> dict[str, Any]:
+    """Election, recovery and handoff counters, event counts (see Agent.deploy_view)."""
+    coord = self.coordinator
+    info = None if coord is None else coord.election.info()
+    return {
+        "election": {
+            "epoch": 0 if info is None else info.epoch,
+            "leader": None if info is None else info.leader,
+        },
+        "recovery_actions": dict(self.recovery.actions),
+        "recovery_moves": dict(self.recovery.moves),
+        "handoff": {} if coord is None else dict(coord.handoff.counters),
+        "events": dict(self.events.counts),
+        "dashboard_streams": self.dashboard.hub.clients,
+    }

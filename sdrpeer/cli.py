@@ -67,7 +67,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     """Build the configuration and run the agent until it is told to stop."""
     file_values = load_agent_config(args.config) if args.config else None
     config = build_config(file_values, agent_flag_values(args))
-    from sdrpeer.agent import run_agent  # noqa: PLC0415 - heavy; only `agent` needs it
+    from sdrpeer.agent_main import run_agent  # noqa: PLC0415 - heavy; only `agent` needs it
 
     return run_agent(config)
 

@@ -49,3 +49,21 @@ class EventLog:
 
     def __len__(self) -> int:
         return len(self._entries)
+
+
+class RecoveryTally:
+    """Recovery steps by action and components moved, counted from the event log as it grows
+    (`count` is a listener), so Prometheus counters survive the log's bound."""
+
+    def __init__(self) -> None:
+        self.actions: Counter[str] = Counter()
+        self.moves: Counter[str] = Counter()
+
+    def count(self, entry: dict[str, Any]) -> None:
+        """Count one entry if it is a recovery decision or move."""
+        detail = entry["detail"]
+        if entry["kind"] == "recovery.decision":
+            self.actions[str(detail.get("action"))] += 1
+        elif entry["kind"] == "recovery.move":
+            for component in detail.get("moved") or {}:
+                self.moves[str(component)] += 1

@@ -8,15 +8,13 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import pytest
 
-from sdrpeer.client import AgentClient
-from sdrpeer.errors import ApiError
+from sdrpeer.client import AgentClient, wait_for
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 
@@ -32,19 +30,7 @@ T = TypeVar("T")
 
 
 def until(probe: Callable[[], T], ok: Callable[[T], bool], what: str, within: float = 20) -> T:
-    deadline = time.monotonic() + within
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            value = probe()
-        except ApiError as exc:
-            last = exc
-        else:
-            if ok(value):
-                return value
-            last = value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for {what}; last: {last!r:.800}")
+    return wait_for(probe, ok, what, within, poll=0.2)
 
 
 def states(lab: RunningLab, robot: str) -> dict[str, str]:

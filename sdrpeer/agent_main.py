@@ -1,0 +1,64 @@
+"""`sdrpeer agent`: run one robot's agent as a process until SIGINT or SIGTERM.
+
+How it works: `run_agent` sets up logging and runs `_serve`, which starts the `Agent`, waits for
+a signal and stops it gracefully (leaving the cluster); a second SIGINT/SIGTERM cancels the
+shutdown and exits at once. SIGHUP re-reads the key file (`sdrpeer.agent_keys`). Exit codes: 0
+after a clean stop, 1 after a forced one, 2 when the agent cannot start (configuration, address
+in use, key file).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+
+from sdrpeer.agent import Agent
+from sdrpeer.config import AgentConfig
+from sdrpeer.errors import ConfigError
+from sdrpeer.logs import setup_logging
+
+log = logging.getLogger("sdrpeer.agent")
+
+
+async def _serve(config: AgentConfig) -> int:
+    agent = Agent(config)
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    signals = 0
+    main_task = asyncio.current_task()
+
+    def on_signal() -> None:
+        nonlocal signals
+        signals += 1
+        if signals == 1:
+            log.info("shutting down (again to force)")
+            stop.set()
+        elif main_task is not None:
+            main_task.cancel()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, on_signal)
+    loop.add_signal_handler(signal.SIGHUP, agent.reload_keys)
+    try:
+        await agent.start()
+    except (ConfigError, OSError) as e:
+        log.error("cannot start: %s", e)
+        await agent.stop(leave=False)
+        return 2
+    await stop.wait()
+    await agent.stop()
+    return 0
+
+
+def run_agent(config: AgentConfig) -> int:
+    """Run an agent until SIGINT/SIGTERM; returns the process exit code."""
+    setup_logging(config.name, config.log_level, config.log_format)
+    try:
+        return asyncio.run(_serve(config))
+    except asyncio.CancelledError:
+        log.warning("forced exit")
+        return 1
+    except ConfigError as e:
+        log.error("%s", e)
+        return 2
