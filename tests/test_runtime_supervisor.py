@@ -196,3 +196,45 @@ async def test_a_stop_while_the_host_is_being_made_leaves_no_orphan(
     assert sup.state == "STOPPED"
     with pytest.raises(ProcessLookupError):  # reaped: not even a zombie left
         os.kill(forked[0], 0)
+
+
+async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotten(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The instance manager forgets a supervisor only when its life is over: one that was
+    started but whose process did not exist yet used to look STOPPED, was forgotten, and its
+    host ran on untracked (the 10-robot chaos soak found hundreds)."""
+    from sdrpeer.runtime.manager import InstanceManager  # noqa: PLC0415
+
+    real = asyncio.create_subprocess_exec
+    entered: list[bool] = []
+    forked: list[int] = []
+
+    async def slow(*args: object, **kw: object) -> asyncio.subprocess.Process:
+        entered.append(True)
+        await asyncio.sleep(0.5)  # a loaded robot: the fork comes late
+        proc = await real(*args, **kw)  # type: ignore[arg-type]
+        forked.append(proc.pid)
+        return proc
+
+    monkeypatch.setattr(asyncio, "create_subprocess_exec", slow)
+    manager = InstanceManager(tmp_path, SupervisorConfig.fast_test(), interval=0.02)
+    await manager.start()
+    try:
+        manager.set_desired([fake("A")])
+        await until("the start under way", lambda: entered)
+        assert manager.status_of("A")["state"] == "STARTING"  # not STOPPED from before
+        manager.remove("A")  # dropped before its host exists
+        await until("the fork", lambda: forked)
+        await until("the host gone and forgotten", lambda: manager.status() == [])
+
+        def gone() -> bool:
+            try:
+                os.kill(forked[0], 0)
+            except ProcessLookupError:
+                return True
+            return False
+
+        await until("the host process reaped", gone)
+    finally:
+        await manager.stop()

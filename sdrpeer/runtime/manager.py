@@ -166,7 +166,7 @@ class InstanceManager:
         """One reconcile pass: plan and launch the actions."""
         for name, sup in list(self._sups.items()):
             spec = self._desired.get(name)
-            if spec is None and sup.state == "STOPPED":
+            if spec is None and sup.state == "STOPPED" and not sup.running:
                 del self._sups[name]
             elif spec is not None and spec.same_process(sup.spec):
                 sup.spec = spec  # lifecycle or links changed: the running host stays
@@ -205,7 +205,9 @@ class InstanceManager:
 
     async def _perform(self, a: Action) -> None:
         if a.kind == "start":
-            spec = self._desired[a.instance]
+            spec = self._desired.get(a.instance)
+            if spec is None:  # no longer desired since the action was planned
+                return
             sup = self._sups.get(a.instance)
             if sup is None:
                 sup = Supervisor(
@@ -246,6 +248,10 @@ class InstanceManager:
         try:
             async with asyncio.timeout(self.before_stop_timeout):
                 await hook(name)
+        except TimeoutError:
+            log.warning(
+                "%s: before_stop took over %gs; stopping anyway", name, self.before_stop_timeout
+            )
         except Exception:  # the stop must happen whatever the hook does
             log.warning("%s: before_stop failed; stopping anyway", name, exc_info=True)
 

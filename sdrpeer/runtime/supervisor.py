@@ -155,6 +155,11 @@ class Supervisor:
             remove_dir(self._run_dir)
             self._run_dir = None
 
+    @property
+    def running(self) -> bool:
+        """Whether a life (spawn, run, backoff) is under way: stop() must come before forgetting."""
+        return self._life is not None and not self._life.done()
+
     def stop_requested(self) -> bool:
         """Whether stop() was called since the last start()."""
         return self._stopping
@@ -179,6 +184,10 @@ class Supervisor:
         if self.state == FAILED:
             self.policy.reset()
         self._life = asyncio.create_task(self._run(), name=f"supervisor-{self.name}")
+        # at once, not when the process exists: until then the instance manager must not take a
+        # supervisor still STOPPED from an earlier life for a finished one and forget it (its
+        # process would run on, untracked)
+        self._set(STARTING)
 
     async def stop(self) -> None:
         """Stop gracefully (exit, then SIGTERM, then SIGKILL) and do not restart."""
