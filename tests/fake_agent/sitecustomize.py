@@ -1,4 +1,5 @@
-"""Test helper: a stand-in `sdrpeer.agent` for lab failure tests (PYTHONPATH=tests/fake_agent).
+"""Test helper: a stand-in `sdrpeer.agent_main` for lab failure tests
+(PYTHONPATH=tests/fake_agent).
 
 `run_agent` exits with code 3 at once when $FAKE_AGENT_FAIL names this robot; otherwise it writes
 a DATA_DIR/agent.json with made-up addresses and sleeps until it is signalled. It binds nothing:
@@ -26,6 +27,6 @@ def run_agent(config: Any) -> int:
         time.sleep(60)
 
 
-_module = types.ModuleType("sdrpeer.agent")
+_module = types.ModuleType("sdrpeer.agent_main")
 _module.run_agent = run_agent  # type: ignore[attr-defined]
-sys.modules["sdrpeer.agent"] = _module
+sys.modules["sdrpeer.agent_main"] = _module
