@@ -120,18 +120,14 @@ class Feed:
     def _poked(self) -> None:
         self._poke = None
         if self.hub.clients:
-            members = self.source.members_view()
-            status = self.source.status_view()
-            now = time.time()
-            self.hub.publish(
-                "sample", self.sample(now, members, status, self.moments.observe(now, status))
-            )
+            self.tick(time.time(), history=False)
 
-    def tick(self, now: float) -> None:
-        """One frame: into the history and the moments; to the pages, if any listen."""
+    def tick(self, now: float, *, history: bool = True) -> None:
+        """One frame: into the history (unless a poke) and the moments; to the pages, if any."""
         members = self.source.members_view()
         status = self.source.status_view()
-        self.history.add(now, members)
+        if history:
+            self.history.add(now, members)
         moments = self.moments.observe(now, status)
         if self.hub.clients:
             self.hub.publish("sample", self.sample(now, members, status, moments))

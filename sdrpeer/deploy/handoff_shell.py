@@ -82,7 +82,7 @@ class HandoffShell:
     def tick(self) -> None:
         """Start due syncs, hand held states to instances that are ready."""
         now = asyncio.get_running_loop().time()
-        states = {s["name"]: s.get("state") for s in self.manager.status()}
+        states = self._states()
         active = {name for name, state in states.items() if state == "ACTIVE"}
         for send in self.schedule.due(now, self.plan(), self.robot, active):
             if send.source not in self._busy:
@@ -160,7 +160,7 @@ class HandoffShell:
         now = asyncio.get_running_loop().time()
         self._pending[msg.target] = (msg, now + self.hold_s)
         self.counters["held"] += 1
-        states = {s["name"]: s.get("state") for s in self.manager.status()}
+        states = self._states()
         self._retry(now, states)
         return verdict
 
@@ -189,6 +189,10 @@ class HandoffShell:
             self._event("state.restored", msg)
 
     # -- bookkeeping ---------------------------------------------------------------------------
+
+    def _states(self) -> dict[str, Any]:
+        """This robot's instances' lifecycle states, by name."""
+        return {s["name"]: s.get("state") for s in self.manager.status()}
 
     def _drop(self, msg: StateMsg, reason: str) -> None:
         self.counters["expired" if reason == "expired" else f"dropped_{reason}"] += 1

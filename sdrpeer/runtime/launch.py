@@ -6,7 +6,8 @@ exec, or a plugin) for the command; `host_env` adds the SDRPEER_* variables of d
 `open_log` appends a start banner to `DATA_DIR/instances/NAME.log` and returns the file the host's
 stdout and stderr go to. `die_with_parent` runs in the child between fork and exec: on Linux it
 asks the kernel to SIGKILL the host when the agent dies (prctl PR_SET_PDEATHSIG), so a crashed
-or killed agent leaves no orphan hosts behind. `wait_exit` and `exit_text` help stopping one.
+or killed agent leaves no orphan hosts behind. `create_process` starts one so that a cancelled
+caller cannot orphan it. `wait_exit` and `exit_text` help stopping one.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import tempfile
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from sdrpeer import launchers
 from sdrpeer.launchers import get_launcher
@@ -97,6 +98,22 @@ def die_with_parent() -> None:
 def preexec() -> Callable[[], None] | None:
     """The preexec_fn for hosts (None where there is no parent-death signal)."""
     return die_with_parent if _PRCTL is not None else None
+
+
+async def create_process(argv: list[str], **options: Any) -> asyncio.subprocess.Process:
+    """`asyncio.create_subprocess_exec(*argv, **options)`, safe to cancel: the fork happens before
+    that call returns, so a caller cancelled meanwhile would leave a process nobody knows; here
+    the creation finishes anyway and that process is killed and reaped before the cancel goes on.
+    """
+    creating = asyncio.ensure_future(asyncio.create_subprocess_exec(*argv, **options))
+    try:
+        return await asyncio.shield(creating)
+    except asyncio.CancelledError:
+        with contextlib.suppress(Exception):
+            orphan = await creating
+            orphan.kill()
+            await orphan.wait()
+        raise
 
 
 def private_dir(prefix: str) -> Path:

@@ -38,6 +38,7 @@ from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
 from sdrpeer.runtime.control import CommandError, ControlChannel, Report
 from sdrpeer.runtime.handoff import MAX_STATE, give_state, take_snapshot
 from sdrpeer.runtime.launch import (
+    create_process,
     exit_text,
     host_argv,
     host_env,
@@ -277,9 +278,9 @@ class Supervisor:
         )
         out = open_log(self.data_dir, self.name, argv)
         self._spawned = asyncio.get_running_loop().time()
-        creating = asyncio.ensure_future(
-            asyncio.create_subprocess_exec(
-                *argv,
+        try:
+            proc = await create_process(
+                argv,
                 stdin=subprocess.DEVNULL,
                 stdout=out,
                 stderr=out,
@@ -288,17 +289,8 @@ class Supervisor:
                 preexec_fn=preexec(),
                 start_new_session=False,
             )
-        )
-        try:
-            proc = await asyncio.shield(creating)
         except asyncio.CancelledError:
-            # stopped while the process was being made: it may exist already (the fork is done
-            # before the await ends), and nobody else knows its pid: make sure it dies
-            parent.close()
-            with contextlib.suppress(Exception):
-                orphan = await creating
-                orphan.kill()
-                await orphan.wait()
+            parent.close()  # stopped while the host was being made: create_process killed it
             raise
         except OSError:
             parent.close()
