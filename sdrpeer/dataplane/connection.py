@@ -18,6 +18,15 @@ dead socket show up as a gap in seq at the receiver). `repoint` detaches the lin
 later frames wait for the new peer, and shuts the old link, which still delivers what it was
 handed. seq counts frames written to this connection, starting at 1, across redials. The socket
 itself (and, on a Unix socket, the shared-memory ring big values take) is `link.Link`'s.
+
+Acknowledged streams (push all/fifo, when the receiver agrees): the writer keeps every frame
+until the receiver acknowledges it (sdrpeer.dataplane.retention), and writes nothing more while
+the window is full. A repointed link is only half-closed and kept (`_draining`) so the old
+receiver's last acknowledgements arrive; the next dial waits until it closed (at most
+`drain_timeout`, then it is aborted), and the new link first gets every frame still
+unacknowledged, with its seq, then what is pending. A planned move so loses no frame, and one
+after a crash of the receiver loses none the window held; the receiver's port drops a frame it
+already has (a reconnect to the same instance) and counts it in `duplicates`.
 """
 
 from __future__ import annotations
@@ -25,11 +34,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 
 from sdrpeer.dataplane.address import parse_address
-from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, FrameError, Hello
+from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, AckOffer, FrameError, Hello
 from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.pending import PolicyLike
+from sdrpeer.dataplane.retention import DEFAULT_BYTES, DEFAULT_FRAMES, Retention
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.writer import FrameWriter
 
@@ -56,6 +67,8 @@ class Connection:
         backoff: tuple[float, float] = (0.05, 2.0),
         hello_timeout: float = 5.0,
         shm_size: int = DEFAULT_SIZE,
+        window: tuple[int, int] | None = (DEFAULT_FRAMES, DEFAULT_BYTES),
+        drain_timeout: float = 2.0,
     ) -> None:
         parse_address(to)
         self.conn_id = conn_id
@@ -68,6 +81,12 @@ class Connection:
         self.hello_timeout = hello_timeout
         self.shm_size = shm_size
         """Bytes of the shared-memory ring offered on a Unix socket (0: none)."""
+        self.window = window if policy.push in ("all", "fifo") else None
+        """(frames, bytes) kept until acknowledged; None: no acknowledgements asked for."""
+        self.drain_timeout = drain_timeout
+        """Seconds a repointed link may take to deliver its last acknowledgements."""
+        self.session = os.urandom(8).hex()
+        """This sender's stream session (a receiver tells a replay from a restart by it)."""
         self.reconnects = 0
         """Successful redials after a dropped link."""
         self.refused = 0
@@ -78,6 +97,8 @@ class Connection:
         self._queue = self._writer.queue
         self._writer_offer = self._writer.offer
         self._link: Link | None = None
+        self._draining: set[Link] = set()
+        self._paused = self._never
         self._scheduled = False
         self._closing = False
         self._wake = asyncio.Event()
@@ -109,6 +130,17 @@ class Connection:
     def pending(self) -> int:
         """Values waiting for the socket (a big one half written counts too)."""
         return self._writer.pending
+
+    @property
+    def replayed(self) -> int:
+        """Frames written again to a new link because they had not been acknowledged."""
+        return self._writer.replayed
+
+    @property
+    def unacked(self) -> int:
+        """Frames written and not acknowledged yet (0 when the receiver does not acknowledge)."""
+        retention = self._writer.retention
+        return len(retention) if retention is not None else 0
 
     @property
     def connected(self) -> bool:
@@ -163,6 +195,8 @@ class Connection:
         link, self._link = self._link, None
         if link is not None:
             self._writer.finish_frame(link.write)  # the old receiver gets all of it
+            if link.acks:
+                self._draining.add(link)
             link.shut()
         self._wake.set()
 
@@ -192,6 +226,9 @@ class Connection:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+        for old in self._draining:
+            old.transport.abort()
+        self._draining.clear()
         if link is not None:
             link.shut()
             with contextlib.suppress(TimeoutError):
@@ -207,14 +244,24 @@ class Connection:
     def _flush(self) -> None:
         link = self._link
         if link is not None:
-            self._writer.flush(link.write, link.is_paused, link.ring)
+            self._writer.flush(link.write, self._paused, link.ring)
             self._room.set()  # wakes `drain` and `flushed`, which recheck
+
+    @staticmethod
+    def _never() -> bool:
+        return False
+
+    def _acked(self, seq: int) -> None:
+        retention = self._writer.retention
+        if retention is not None:
+            retention.ack(seq)
 
     def _resume(self, link: Link) -> None:
         if link is self._link:
             self._flush()
 
     def _lost(self, link: Link) -> None:
+        self._draining.discard(link)
         if link is self._link:
             self._link = None
             self._writer.drop_frame()  # the frame being written is lost with the link
@@ -224,12 +271,22 @@ class Connection:
         initial, cap = self.backoff
         delay = initial
         dropped = False
-        hello = Hello(self.conn_id, self.in_port, self.from_, self.policy.to_map())
         while not self._closing:
+            await self._settle()
             to = self.to
+            hello = Hello(
+                self.conn_id, self.in_port, self.from_, self.policy.to_map(), ack=self._offer()
+            )
             try:
                 async with asyncio.timeout(self.hello_timeout):
-                    link = await dial(to, hello, self._resume, self._lost, shm_size=self.shm_size)
+                    link = await dial(
+                        to,
+                        hello,
+                        self._resume,
+                        self._lost,
+                        shm_size=self.shm_size,
+                        on_ack=self._acked,
+                    )
             except (OSError, TimeoutError, FrameError, ValueError) as exc:
                 self.last_error = f"{to}: {exc}"
                 log.debug("data connection %s: dial failed: %s", self.conn_id, self.last_error)
@@ -245,10 +302,50 @@ class Connection:
             delay = initial
             if dropped:
                 self.reconnects += 1
-            self._link = link
+            self._adopt(link)
             self._wake.set()
             self._flush()
             while self._link is link:
                 self._wake.clear()
                 await self._wake.wait()
             dropped = self.to == to
+
+    def _offer(self) -> AckOffer | None:
+        """The hello's ack map: the first seq the next link carries (the oldest unacked)."""
+        if self.window is None:
+            return None
+        retention = self._writer.retention
+        first = retention.base if retention is not None else self._writer.seq + 1
+        return AckOffer(self.session, first)
+
+    def _adopt(self, link: Link) -> None:
+        """Make `link` the current one: replay what is unacknowledged, set up the window."""
+        writer = self._writer
+        writer.replay(link.write)
+        if link.acks and self.window is not None:
+            if writer.retention is None:
+                writer.retention = Retention(*self.window)
+                writer.retention.reset(writer.seq + 1)
+
+            def paused() -> bool:
+                return link.is_paused() or writer.window_full
+
+            self._paused = paused
+        else:
+            writer.retention = None
+            self._paused = link.is_paused
+        self._link = link
+
+    async def _settle(self) -> None:
+        """Wait (at most `drain_timeout`) for repointed links to deliver their last acks."""
+        if not self._draining:
+            return
+        waits = [asyncio.shield(link.closed) for link in self._draining]
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(self.drain_timeout):
+                await asyncio.gather(*waits)
+        for link in self._draining:
+            if not link.closed.done():
+                log.info("data connection %s: old link still open; aborted", self.conn_id)
+                link.transport.abort()
+        self._draining.clear()

@@ -63,6 +63,22 @@ class Hello:
     """The data stream protocol version."""
     shm: object = None
     """A shared-memory ring the sender offers (sdrpeer.dataplane.shm), or None."""
+    ack: AckOffer | None = None
+    """The sender keeps frames until they are acknowledged (sdrpeer.dataplane.retention)."""
+
+
+@dataclass(frozen=True, slots=True)
+class AckOffer:
+    """A hello's ``"ack"`` map: the sender's session and the first seq this socket carries."""
+
+    session: str
+    """Random, per sending connection object: a new one means the sender restarted."""
+    next: int
+    """The seq of the first frame on this socket (earlier ones were acknowledged)."""
+
+    def to_map(self) -> dict[str, Any]:
+        """The protocol map."""
+        return {"session": self.session, "next": self.next}
 
 
 def encode_hello(hello: Hello) -> bytes:
@@ -76,6 +92,8 @@ def encode_hello(hello: Hello) -> bytes:
     }
     if hello.shm is not None:
         obj["shm"] = hello.shm
+    if hello.ack is not None:
+        obj["ack"] = hello.ack.to_map()
     return _packb(obj)
 
 
@@ -92,15 +110,31 @@ def parse_hello(obj: object) -> Hello:
     policy = obj.get("policy", {})
     if not isinstance(policy, dict):
         raise FrameError("malformed", "hello: 'policy' must be a map")
-    return Hello(obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"))
+    ack = obj.get("ack")
+    offer = None
+    if ack is not None:
+        if not isinstance(ack, dict):
+            raise FrameError("malformed", "hello: 'ack' must be a map")
+        session, nxt = ack.get("session"), ack.get("next")
+        if not isinstance(session, str) or not 0 < len(session) <= 64:
+            raise FrameError("malformed", "hello: 'ack.session' must be a string of 1-64 chars")
+        if type(nxt) is not int or nxt < 1:
+            raise FrameError("malformed", "hello: 'ack.next' must be an integer >= 1")
+        offer = AckOffer(session, nxt)
+    return Hello(obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"), offer)
 
 
-def encode_reply(error: str | None, *, shm: bool = False) -> bytes:
-    """The receiver's answer to a hello: ok (saying whether it took the offered ring), or the
-    error that closes the connection."""
+def encode_reply(error: str | None, *, shm: bool = False, ack: bool = False) -> bytes:
+    """The receiver's answer to a hello: ok (saying whether it took the offered ring and
+    whether it acknowledges), or the error that closes the connection."""
     if error is not None:
         return _packb({"ok": False, "error": error})
-    return _packb({"ok": True, "shm": True} if shm else {"ok": True})
+    reply: dict[str, bool] = {"ok": True}
+    if shm:
+        reply["shm"] = True
+    if ack:
+        reply["ack"] = True
+    return _packb(reply)
 
 
 def parse_reply(obj: object) -> str | None:

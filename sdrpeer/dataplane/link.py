@@ -13,6 +13,11 @@ must still all arrive (a repoint, a close): a plain socket is closed after its b
 a socket with a ring is only half-closed, so the receiver can still send credits while it reads
 the rest (a write to a closed socket would make it drop what it has not read), and closes when
 it reaches the end.
+
+A receiver that acknowledges (it said ``"ack": true`` in its reply) writes ``[seq]`` on the same
+reverse direction as the credits (a credit is a bare uint): `on_ack` gets each seq. Such a link
+is also only half-closed by `shut`, so the acknowledgements of what the old receiver still takes
+arrive; it closes once it has acknowledged everything or its instance stops.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import asyncio
 import contextlib
 import socket
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any, Final
 
 import msgpack
@@ -35,12 +41,20 @@ _SNDBUF: Final = 4 * 1024 * 1024
 class Link(asyncio.Protocol):
     """One socket of a Connection (and its ring, if the receiver took one)."""
 
-    def __init__(self, on_resume: Callable[[Link], None], on_lost: Callable[[Link], None]) -> None:
+    def __init__(
+        self,
+        on_resume: Callable[[Link], None],
+        on_lost: Callable[[Link], None],
+        on_ack: Callable[[int], None] | None = None,
+    ) -> None:
         self.on_resume = on_resume
         self.on_lost = on_lost
+        self.on_ack = on_ack
         loop = asyncio.get_running_loop()
-        self.reply: asyncio.Future[tuple[str | None, bool]] = loop.create_future()
-        """The receiver's answer: (error or None, whether it took the ring)."""
+        self.reply: asyncio.Future[tuple[str | None, bool, bool]] = loop.create_future()
+        """The receiver's answer: (error or None, whether it took the ring, whether it acks)."""
+        self.acks = False
+        """True when the receiver acknowledges frames."""
         self.closed: asyncio.Future[None] = loop.create_future()
         self.paused = False
         """True while the kernel's buffer is full."""
@@ -49,7 +63,8 @@ class Link(asyncio.Protocol):
         self.transport: asyncio.Transport
         self.write: Callable[[bytes | memoryview], None]
         self._decoder: FrameDecoder | None = FrameDecoder(4096)
-        self._credits: msgpack.Unpacker | None = None
+        self._reverse: msgpack.Unpacker | None = None  # credits and acks, after the reply
+        self._early = b""  # bytes that came in the same read as the reply
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -60,37 +75,67 @@ class Link(asyncio.Protocol):
     def use_ring(self, ring: SenderRing) -> None:
         """Send big values through `ring` (the receiver took it)."""
         self.ring = ring
-        self._credits = msgpack.Unpacker(max_buffer_size=64 * 1024)
+        self._listen()
+
+    def use_acks(self) -> None:
+        """The receiver acknowledges frames: read its `[seq]`s."""
+        self.acks = True
+        self._listen()
+
+    def _listen(self) -> None:
+        if self._reverse is None:
+            self._reverse = msgpack.Unpacker(max_buffer_size=64 * 1024)
 
     def data_received(self, data: bytes) -> None:
         if self._decoder is None:
-            if self._credits is not None:
-                self._credit(data)
+            if self._reverse is not None:
+                self._back(data)
             return  # nothing else is expected after the reply
+        decoder = self._decoder
         try:
-            self._decoder.feed(data)
-            obj = self._decoder.next_map()
+            decoder.feed(data)
+            obj = decoder.next_map()
             if obj is None:
                 return
             error = parse_reply(obj)
-            self.reply.set_result((error, isinstance(obj, dict) and obj.get("shm") is True))
+            shm = isinstance(obj, dict) and obj.get("shm") is True
+            self.reply.set_result((error, shm, isinstance(obj, dict) and obj.get("ack") is True))
         except FrameError as exc:
             self.reply.set_exception(exc)
+            self._decoder = None
+            return
         self._decoder = None
+        if decoder.partial:  # credits or acks right behind the reply: kept for _back
+            self._early = bytes(data[len(data) - decoder.partial :])
 
-    def _credit(self, data: bytes) -> None:
+    def take_early(self) -> None:
+        """Read what came right behind the reply (once `use_ring`/`use_acks` said how)."""
+        early, self._early = self._early, b""
+        if early and self._reverse is not None:
+            self._back(early)
+
+    def _back(self, data: bytes) -> None:
+        """Credits (uints) and acks (``[seq]``) from the receiver."""
+        assert self._reverse is not None
         ring = self.ring
-        if ring is None:
-            return  # shut: credits for frames already written, nothing waits for them
-        assert self._credits is not None
+        credited = False
         try:
-            self._credits.feed(data)
-            for consumed in self._credits:
-                ring.credit(consumed)
-        except Exception:  # a bad credit: the receiver is broken, so is the link
+            self._reverse.feed(data)
+            for obj in self._reverse:
+                if type(obj) is int:
+                    if ring is not None:  # else shut: nothing waits for credits
+                        ring.credit(obj)
+                        credited = True
+                elif type(obj) is list and len(obj) == 1 and type(obj[0]) is int and self.acks:
+                    if self.on_ack is not None:
+                        self.on_ack(obj[0])
+                else:
+                    raise ValueError(f"unexpected {obj!r:.40}")
+        except Exception:  # a bad credit or ack: the receiver is broken, so is the link
             self.transport.abort()
             return
-        self.on_resume(self)
+        if credited or self.acks:
+            self.on_resume(self)
 
     def is_paused(self) -> bool:
         """True while the kernel's buffer is full or the ring has no room for the next value."""
@@ -106,10 +151,11 @@ class Link(asyncio.Protocol):
     def shut(self) -> None:
         """End the link once what was written has arrived (see the module docstring)."""
         ring, self.ring = self.ring, None
-        if ring is None:
+        if ring is None and not self.acks:
             self.transport.close()
             return
-        ring.close()  # our mapping only: the receiver's stays
+        if ring is not None:
+            ring.close()  # our mapping only: the receiver's stays
         if not self.transport.is_closing():
             self.transport.write_eof()
 
@@ -132,6 +178,7 @@ async def dial(
     on_lost: Callable[[Link], None],
     *,
     shm_size: int,
+    on_ack: Callable[[int], None] | None = None,
 ) -> Link:
     """Open a link to `to` and get the receiver's ok (bound it with `asyncio.timeout`);
     FrameError("refused") with the receiver's error, OSError when it cannot be reached."""
@@ -139,18 +186,22 @@ async def dial(
     loop = asyncio.get_running_loop()
     ring: SenderRing | None = None
     link: Link | None = None
+
+    def protocol() -> Link:
+        return Link(on_resume, on_lost, on_ack)
+
     try:
         if kind == "tcp":
-            _, link = await loop.create_connection(lambda: Link(on_resume, on_lost), host, port)
+            _, link = await loop.create_connection(protocol, host, port)
         else:
-            _, link = await loop.create_unix_connection(lambda: Link(on_resume, on_lost), host)
+            _, link = await loop.create_unix_connection(protocol, host)
             sock = link.transport.get_extra_info("socket")
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, _SNDBUF)
             ring = SenderRing.create(shm_size) if shm_size > 0 else None
         offer: Any = None if ring is None else ring.offer_map()
-        link.transport.write(encode_hello(_with_shm(hello, offer)))
-        error, took_ring = await link.reply
+        link.transport.write(encode_hello(replace(hello, shm=offer)))
+        error, took_ring, acks = await link.reply
     except BaseException:
         if link is not None:
             link.transport.abort()
@@ -166,8 +217,7 @@ async def dial(
     if error is not None:
         link.transport.close()
         raise FrameError("refused", error)
+    if acks and hello.ack is not None:
+        link.use_acks()
+    link.take_early()
     return link
-
-
-def _with_shm(hello: Hello, offer: object) -> Hello:
-    return Hello(hello.conn, hello.in_port, hello.from_, hello.policy, hello.version, offer)

@@ -16,6 +16,12 @@ more throughput with 1 MB frames; every wake-up costs a trip through the event l
 A hello that offers a shared-memory ring (sdrpeer.dataplane.shm) gets it mapped (and its name
 unlinked); then a ``[seq, pos, length]`` frame's value is copied out of the ring just before it
 is delivered, and after each read the position consumed is written back as the sender's credit.
+A hello that asks for acknowledgements (``"ack"``) to an InPort that can give them
+(`attach_stream`, sdrpeer.sdk.inport) is answered ``"ack": true``; the port then calls back with
+the seq up to which the component took every frame, written as ``[seq]`` on the same reverse
+direction as the credits. Such a connection outlives the sender's end of stream until everything
+it delivered is acknowledged (so a repointed sender hears the last of it); `close` sends what is
+due and closes gracefully, so a stopping instance tells its senders exactly what it never took.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import os
 import socket
 from collections import Counter
 from collections.abc import Callable
-from typing import Any, Final, Protocol
+from typing import Any, Final, Protocol, cast
 
 import msgpack
 
@@ -57,6 +63,24 @@ class InPortLike(Protocol):
 
     def refuse(self) -> None:
         """Count one refused (oversized or malformed) frame."""
+
+
+class AckingPort(InPortLike, Protocol):
+    """An InPort that acknowledges what its component took (sdrpeer.sdk.inport's does)."""
+
+    def attach_stream(
+        self, conn: str, session: str, next_seq: int, send: Callable[[int], None]
+    ) -> None:
+        """A socket of an acknowledged stream opened; acks go to `send`."""
+
+    def detach_stream(self, conn: str, send: Callable[[int], None]) -> None:
+        """That socket closed."""
+
+    def acked(self, conn: str) -> int:
+        """The seq up to which the stream's frames were taken."""
+
+    def flush_acks(self) -> None:
+        """Send every acknowledgement due now."""
 
 
 class DataServer:
@@ -124,7 +148,7 @@ class DataServer:
         for server in self._servers:
             server.close()
         for receiver in list(self._receivers):
-            receiver.abort()
+            receiver.finish()
         for server in self._servers:
             await server.wait_closed()
         self._servers.clear()
@@ -152,6 +176,10 @@ class _Receiver(asyncio.BufferedProtocol):
         self.conn = "?"
         self.in_port = ""
         self.ring: ReceiverRing | None = None
+        self.acking: AckingPort | None = None
+        """The port, when this stream is acknowledged."""
+        self._last_seq = 0  # the highest seq delivered on this socket
+        self._eof = False  # the sender ended its side; we close once all is acknowledged
         self._credited = 0
         self._sock: Any = None
         self._lowat = 1
@@ -232,6 +260,8 @@ class _Receiver(asyncio.BufferedProtocol):
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
                 self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+        if frames and self.acking is not None:
+            self._last_seq = max(self._last_seq, frames[-1][0])
 
     def _deliver_from_ring(self, frames: list[list[Any]]) -> None:
         """Deliver frames, taking each ``[seq, pos, length]`` value out of the ring just before
@@ -256,6 +286,8 @@ class _Receiver(asyncio.BufferedProtocol):
                 self.server.counters["deliver_error"] += 1
                 self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
             del value  # the next value may reuse its memory
+        if frames and self.acking is not None:
+            self._last_seq = max(self._last_seq, frames[-1][0])
 
     def _hello(self) -> bool:
         """Handle the hello if it has arrived; True when frames may follow."""
@@ -277,7 +309,8 @@ class _Receiver(asyncio.BufferedProtocol):
         assert self.transport is not None
         if error is None and hello.shm is not None and self.server.shm:
             self._attach(hello.shm)
-        self.transport.write(encode_reply(error, shm=self.ring is not None))
+        acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
+        self.transport.write(encode_reply(error, shm=self.ring is not None, ack=acks))
         if error is not None or port is None:
             self.server.counters["rejected"] += 1
             self.server._report("rejected", hello.conn, error or "")
@@ -285,7 +318,37 @@ class _Receiver(asyncio.BufferedProtocol):
             return False
         self.port = port
         self.in_port = hello.in_port
+        if acks and hello.ack is not None:
+            self.acking = cast(AckingPort, port)
+            self.acking.attach_stream(hello.conn, hello.ack.session, hello.ack.next, self._ack)
+            self.server.counters["acked"] += 1
         return True
+
+    def _ack(self, seq: int) -> None:
+        """The port acknowledges every frame up to `seq`."""
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            return
+        transport.write(_packb([seq]))
+        if self._eof and seq >= self._last_seq:
+            transport.close()  # the sender left and has heard everything
+
+    def eof_received(self) -> bool | None:
+        """The sender ended its side: close now, or once what we delivered is acknowledged."""
+        if self.acking is not None and self.acking.acked(self.conn) < self._last_seq:
+            self._eof = True
+            return True  # keep the socket open for the acks
+        return None
+
+    def finish(self) -> None:
+        """Close for the server's end: send the acknowledgements due, then close gracefully."""
+        acking, self.acking = self.acking, None
+        if acking is not None:
+            acking.flush_acks()
+            acking.detach_stream(self.conn, self._ack)
+        self.port = None
+        if self.transport is not None:
+            self.transport.close()
 
     def _attach(self, offer: object) -> None:
         """Map the ring the sender offered; without it the stream carries every value."""
@@ -326,6 +389,9 @@ class _Receiver(asyncio.BufferedProtocol):
     def connection_lost(self, exc: Exception | None) -> None:
         if self._timer is not None:
             self._timer.cancel()
+        if self.acking is not None:
+            self.acking.detach_stream(self.conn, self._ack)
+            self.acking = None
         self.port = None
         self.server._receivers.discard(self)
         if self.ring is not None:

@@ -11,7 +11,11 @@ socket gets a small ``[seq, pos, length]`` frame; when the ring is full the valu
 after it wait, unnumbered, for a credit), else written as its header, then its bytes in 1 MiB
 slices, each only while `paused()` is false, so the socket's buffer, not ours, holds what the
 kernel has not taken. seq is given when a frame is written (starting at 1), so values dropped
-by the policy leave no gap; frames lost with a broken link do."""
+by the policy leave no gap; frames lost with a broken link do.
+
+When the link's receiver acknowledges, `retention` (sdrpeer.dataplane.retention) keeps every
+frame written until it is acknowledged, and is the sender's window: while it is full nothing more
+is written. `replay(write)` writes the frames it holds again, with their seqs, to a new link."""
 
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ import msgpack
 
 from sdrpeer.dataplane.frames import FRAME_OVERHEAD, FrameError, frame_header
 from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
+from sdrpeer.dataplane.retention import Retention
 from sdrpeer.dataplane.shm import SenderRing, ref_frame
 
 BIG: Final = 64 * 1024
@@ -70,6 +75,36 @@ class FrameWriter:
         self._taken: deque[Item] = deque()  # taken from the queue, not yet written
         self._rest: memoryview | None = None  # the unwritten tail of a big value
         self._pack = msgpack.Packer().pack
+        self.retention: Retention[Item] | None = None
+        """Frames written and not acknowledged (None: the receiver does not acknowledge)."""
+        self.replayed = 0
+        """Frames written again to a new link (they had not been acknowledged)."""
+
+    @property
+    def window_full(self) -> bool:
+        """True while unacknowledged frames fill the window (nothing more is written)."""
+        return self.retention is not None and self.retention.full
+
+    def replay(self, write: Write) -> int:
+        """Write every unacknowledged frame again, with its seq; returns how many."""
+        retention = self.retention
+        if retention is None or not len(retention):
+            return 0
+        parts: list[bytes] = []
+        for seq, item in retention.unacked():
+            parts.append(frame_header(seq))
+            if isinstance(item, _Big):
+                parts.append(item.prefix)
+                write(b"".join(parts))
+                parts = []
+                write(item.data)
+            else:
+                parts.append(item)
+        if parts:
+            write(b"".join(parts))
+        n = len(retention)
+        self.replayed += n
+        return n
 
     @property
     def pending(self) -> int:
@@ -106,6 +141,7 @@ class FrameWriter:
             or self._rest is not None
             or self.seq + 1 >= _SEQ32
             or (type(value) is bytes and len(value) >= BIG)
+            or (self.retention is not None and self.retention.full)
         ):
             return self.offer(value)
         try:
@@ -120,6 +156,8 @@ class FrameWriter:
         seq = self.seq = self.seq + 1
         data = _HEADER32(seq) + item
         write(data)
+        if self.retention is not None:
+            self.retention.wrote(item)
         self.frames_out += 1
         self.bytes_out += len(data)
         return True
@@ -172,6 +210,8 @@ class FrameWriter:
             self._write_slowly(write, items, ring)
             return
         write(data)
+        if self.retention is not None:
+            self.retention.written(items)
         self.seq, self.frames_out, self.bytes_out = (
             seq + n,
             self.frames_out + n,
@@ -212,4 +252,6 @@ class FrameWriter:
             break
         if parts:
             write(b"".join(parts))
+        if self.retention is not None:
+            self.retention.written(items[:n])
         self.seq, self.frames_out, self.bytes_out = seq, self.frames_out + n, self.bytes_out + size

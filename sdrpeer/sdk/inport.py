@@ -7,6 +7,14 @@ sdrpeer.sdk.policy) to one shared arrival-ordered queue, remembers the newest va
 and wakes waiting readers and the OnInput execution context. It is synchronous, allocation-free
 on the common path, and never raises for a well-typed call. The component reads with `read()`
 (newest), `get_nowait()`/`get()`/`async for` (oldest first).
+
+Acknowledged streams (sdrpeer.sdk.acks): a data-plane socket whose sender keeps frames until
+they are acknowledged calls `attach_stream(conn, session, next_seq, send)`. From then on every
+queued value has a tag (the stream's `AckState` and the seq) in `_tags`, parallel to the queue,
+so taking or evicting it moves the stream's acknowledged seq; acknowledgements are sent once per
+event-loop iteration at most (`flush_acks`). Within one session a seq already received is a
+replay of a frame this port has: it is dropped and counted in `duplicates`. A new session (the
+sender restarted) starts the stream afresh at its `next_seq`.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any, Final
 
+from sdrpeer.sdk.acks import AckState, SendAck
 from sdrpeer.sdk.errors import NoData
 from sdrpeer.sdk.policy import ConnectorPolicy
 
@@ -27,12 +36,13 @@ _NOTHING: Final = object()
 class _Conn:
     """What an InPort tracks per incoming connection."""
 
-    __slots__ = ("arrivals", "last_seq", "policy")
+    __slots__ = ("acks", "arrivals", "last_seq", "policy")
 
     def __init__(self, policy: ConnectorPolicy, last_seq: int) -> None:
         self.policy = policy
         self.last_seq = last_seq
         self.arrivals = 0
+        self.acks: AckState | None = None
 
 
 def _size(value: Any) -> int:
@@ -47,16 +57,20 @@ class InPortRuntime:
     """One component instance's input port: per-connection policy, one arrival-ordered queue."""
 
     __slots__ = (
+        "_ack_soon",
         "_conns",
+        "_dirty",
         "_listener",
         "_new",
         "_newest",
         "_queue",
         "_space_waiter",
+        "_tags",
         "_waiter",
         "bytes_in",
         "doc",
         "dropped",
+        "duplicates",
         "frames_in",
         "lost",
         "name",
@@ -72,7 +86,12 @@ class InPortRuntime:
         """The default policy, for connections that were not registered with their own."""
         self.frames_in = self.bytes_in = self.dropped = self.lost = self.refused = 0
         self.skipped = 0
+        self.duplicates = 0
+        """Frames of an acknowledged stream received twice (a replay after a reconnect)."""
         self._queue: deque[Any] = deque()
+        self._tags: deque[tuple[AckState, int] | None] | None = None  # see the module doc
+        self._dirty: set[AckState] = set()
+        self._ack_soon = False
         self._newest: Any = _NOTHING
         self._new = False
         self._conns: dict[str, _Conn] = {}
@@ -85,7 +104,8 @@ class InPortRuntime:
     def connect(self, conn: str, policy: ConnectorPolicy | None = None) -> None:
         """Register connection `conn` with its policy (None: the port's default)."""
         old = self._conns.get(conn)
-        self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
+        c = self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
+        c.acks = old.acks if old else None
 
     def disconnect(self, conn: str) -> None:
         """Forget connection `conn` (frames already queued stay readable)."""
@@ -97,6 +117,10 @@ class InPortRuntime:
         if c is None:
             c = self._conns[conn] = _Conn(self.policy, -1)
         last = c.last_seq
+        a = c.acks
+        if a is not None and seq <= last:
+            self.duplicates += 1  # a replay of a frame this port has had
+            return
         if last >= 0 and seq > last + 1:
             self.lost += seq - last - 1
         c.last_seq = seq
@@ -104,23 +128,38 @@ class InPortRuntime:
         self.bytes_in += _size(value)
         p = c.policy
         q = self._queue
+        tags = self._tags
         if p.push == "skip":
             c.arrivals += 1
             if (c.arrivals - 1) % (p.skip + 1):
                 self.skipped += 1
+                if a is not None:
+                    self._refused(a, seq)
                 return
         elif p.push == "new" and q:
             self.dropped += len(q)
             q.clear()
+            if tags is not None:
+                self._taken_all()
         if len(q) >= p.buffer:
             if p.full == "drop":
                 self.dropped += 1
+                if a is not None:
+                    self._refused(a, seq)
                 return
             if p.full == "overwrite":
                 q.popleft()
                 self.dropped += 1
-            # "block": never drop here; the data plane pauses reading (see wait_space).
+                if tags is not None:
+                    self._taken_one()
+            # "block": never drop here; an acknowledged stream's sender stops at its window.
         q.append(value)
+        if tags is not None:
+            if a is not None:
+                a.enq += 1
+                tags.append((a, seq))
+            else:
+                tags.append(None)
         self._newest = value
         self._new = True
         w = self._waiter
@@ -130,6 +169,78 @@ class InPortRuntime:
                 w.set_result(None)
         if self._listener is not None:
             self._listener()
+
+    # -- acknowledged streams (see the module doc) -------------------------------------------
+
+    def attach_stream(self, conn: str, session: str, next_seq: int, send: SendAck) -> None:
+        """A socket of an acknowledged stream opened: its acks go to `send` from now on."""
+        c = self._conns.get(conn)
+        a = c.acks if c is not None else None
+        if c is None or a is None or a.session != session:
+            policy = c.policy if c is not None else self.policy
+            c = self._conns[conn] = _Conn(policy, next_seq - 1)
+            a = c.acks = AckState(session, next_seq, send)
+            if self._tags is None:
+                self._tags = deque([None] * len(self._queue))
+            return
+        a.send = send  # the same sender again (a reconnect): tell it where we are
+        a.dirty = True
+        self._schedule_acks(a)
+
+    def detach_stream(self, conn: str, send: SendAck) -> None:
+        """The socket whose acks went to `send` closed."""
+        c = self._conns.get(conn)
+        if c is not None and c.acks is not None and c.acks.send is send:
+            c.acks.send = None
+
+    def acked(self, conn: str) -> int:
+        """The seq up to which every frame of `conn`'s stream was handled (-1: not a stream)."""
+        c = self._conns.get(conn)
+        return c.acks.acked if c is not None and c.acks is not None else -1
+
+    def flush_acks(self) -> None:
+        """Send every acknowledgement due now."""
+        self._ack_soon = False
+        dirty, self._dirty = self._dirty, set()
+        for a in dirty:
+            a.flush()
+
+    def _schedule_acks(self, a: AckState) -> None:
+        self._dirty.add(a)
+        if self._ack_soon:
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no loop (a unit test): at once
+            self.flush_acks()
+            return
+        self._ack_soon = True
+        loop.call_soon(self.flush_acks)
+
+    def _refused(self, a: AckState, seq: int) -> None:
+        a.refused(seq)
+        if a.dirty:
+            self._schedule_acks(a)
+
+    def _taken_one(self) -> None:
+        assert self._tags is not None
+        tag = self._tags.popleft()
+        if tag is not None:
+            a = tag[0]
+            a.taken(tag[1])
+            if a.dirty:
+                self._schedule_acks(a)
+
+    def _taken_all(self) -> None:
+        tags = self._tags
+        assert tags is not None
+        for tag in tags:
+            if tag is not None:
+                a = tag[0]
+                a.taken(tag[1])
+                if a.dirty:
+                    self._schedule_acks(a)
+        tags.clear()
 
     def refuse(self) -> None:
         """Count a refused frame (oversized or malformed; the data plane closes the stream)."""
@@ -156,6 +267,8 @@ class InPortRuntime:
         self._new = False
         if self._queue:
             self._queue.clear()
+            if self._tags is not None:
+                self._taken_all()
             self._space_freed()
         return self._newest
 
@@ -169,6 +282,8 @@ class InPortRuntime:
         if not q:
             raise NoData(f"in-port {self.name!r}: queue is empty")
         value = q.popleft()
+        if self._tags is not None:
+            self._taken_one()
         if not q:
             self._new = False
         self._space_freed()
@@ -203,6 +318,7 @@ class InPortRuntime:
             "lost": self.lost,
             "refused": self.refused,
             "skipped": self.skipped,
+            "duplicates": self.duplicates,
         }
 
     def policy_for(self, conn: str) -> ConnectorPolicy:

@@ -1,0 +1,315 @@
+"""Acknowledged streams: the sender's window, the InPort's acks, replay on repoint and crash."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest
+
+from sdrpeer.dataplane import Connection, DataServer
+from sdrpeer.dataplane.retention import Retention
+from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.sdk.acks import AckState
+from sdrpeer.sdk.inport import InPortRuntime
+from sdrpeer.sdk.policy import ConnectorPolicy
+
+# ---- the pure parts ------------------------------------------------------------------------
+
+
+def test_retention_holds_frames_until_acknowledged() -> None:
+    r: Retention[bytes] = Retention(max_frames=4, max_bytes=1000)
+    r.written([b"a", b"bb", b"ccc"])
+    r.wrote(b"dddd")
+    assert r.full and r.bytes == 10
+    assert r.unacked() == [(1, b"a"), (2, b"bb"), (3, b"ccc"), (4, b"dddd")]
+    assert r.ack(2) == 2
+    assert not r.full and r.bytes == 7 and r.base == 3
+    assert r.ack(2) == 0 and r.ack(1) == 0  # old news
+    assert r.ack(9) == 0  # not written yet: ignored
+    assert r.unacked() == [(3, b"ccc"), (4, b"dddd")]
+    assert r.next_seq == 5
+    r.reset(12)
+    assert len(r) == 0 and r.next_seq == 12 and r.acked == 11
+
+
+def test_retention_window_counts_bytes_too() -> None:
+    r: Retention[bytes] = Retention(max_frames=100, max_bytes=10)
+    r.wrote(b"x" * 9)
+    assert not r.full
+    r.wrote(b"y")
+    assert r.full
+    with pytest.raises(ValueError, match="at least one"):
+        Retention(max_frames=0)
+
+
+def test_ack_state_waits_for_older_frames_before_a_refused_one() -> None:
+    sent: list[int] = []
+    a = AckState("s", 1, sent.append)
+    a.enq = 2  # frames 1 and 2 queued
+    a.refused(3)  # 3 dropped on arrival while 1, 2 wait
+    assert a.acked == 0
+    a.taken(1)
+    a.flush()
+    assert sent == [1]
+    a.enq += 1  # frame 4 queued
+    a.taken(2)  # now 3 is handled too
+    a.flush()
+    assert sent == [1, 3]
+    a.taken(4)
+    a.flush()
+    a.flush()  # nothing new: nothing sent
+    assert sent == [1, 3, 4]
+
+
+# ---- the InPort's side ---------------------------------------------------------------------
+
+
+def port_with_stream(policy: ConnectorPolicy | None = None) -> tuple[InPortRuntime, list[int]]:
+    port = InPortRuntime("in", policy or ConnectorPolicy("fifo", 100, "block"))
+    acks: list[int] = []
+    port.attach_stream("c", "session-1", 1, acks.append)
+    return port, acks
+
+
+def test_inport_acknowledges_what_the_component_took() -> None:
+    port, acks = port_with_stream()
+    for seq in range(1, 6):
+        port.deliver(seq * 10, seq, "c")
+    assert acks == []  # delivered is not taken
+    assert port.get_nowait() == 10 and port.get_nowait() == 20
+    assert acks == [1, 2]  # no loop running: sent at once
+    assert port.read() == 50
+    assert acks[-1] == 5 and port.acked("c") == 5
+
+
+def test_inport_acknowledges_what_its_policy_discarded() -> None:
+    port, acks = port_with_stream(ConnectorPolicy("fifo", 2, "overwrite"))
+    for seq in (1, 2, 3):
+        port.deliver(seq, seq, "c")
+    assert acks == [1]  # 1 was evicted by 3: it can never be needed again
+    port, acks = port_with_stream(ConnectorPolicy("fifo", 2, "drop"))
+    for seq in (1, 2, 3):
+        port.deliver(seq, seq, "c")
+    assert acks == []  # 3 was refused, but 1 and 2 still wait
+    assert port.get_nowait() == 1
+    assert port.get_nowait() == 2
+    assert acks == [1, 3]
+
+
+def test_inport_drops_a_replay_within_a_session_and_restarts_on_a_new_one() -> None:
+    port, acks = port_with_stream()
+    for seq in (1, 2, 3):
+        port.deliver(seq, seq, "c")
+    port.get_nowait()
+    again: list[int] = []
+    port.attach_stream("c", "session-1", 2, again.append)  # the same sender reconnects
+    assert again == [1]  # told at once where the port is
+    for seq in (2, 3, 4):
+        port.deliver(seq, seq, "c")
+    assert port.duplicates == 2 and port.lost == 0
+    assert [port.get_nowait() for _ in range(3)] == [2, 3, 4]
+    assert again[-1] == 4 and acks == [1]  # the old socket hears nothing more
+    fresh: list[int] = []
+    port.attach_stream("c", "session-2", 1, fresh.append)  # the sender restarted
+    port.deliver("x", 1, "c")
+    assert port.get_nowait() == "x" and fresh == [1] and port.duplicates == 2
+
+
+def test_inport_counts_a_gap_from_the_first_seq_announced() -> None:
+    port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
+    port.attach_stream("c", "s", 5, lambda seq: None)
+    port.deliver("a", 7, "c")
+    assert port.lost == 2
+
+
+# ---- over real sockets ---------------------------------------------------------------------
+
+
+class Instance:
+    """One receiving instance: a DataServer whose InPort is the SDK's, and a consumer task."""
+
+    def __init__(self, path: Path) -> None:
+        self.port = InPortRuntime("in", ConnectorPolicy("fifo", 100_000, "block"))
+        self.server = DataServer(
+            lambda name: self.port if name == "in" else None, unix_path=str(path)
+        )
+        self.taken: list[int] = []
+        self._consumer: asyncio.Task[None] | None = None
+
+    async def start(self, *, consume: bool = True) -> Instance:
+        await self.server.start()
+        if consume:
+            self.resume()
+        return self
+
+    def address(self, kind: str) -> str:
+        return f"{kind}://{self.server.addresses[kind]}"
+
+    def resume(self) -> None:
+        self._consumer = asyncio.create_task(self._consume())
+
+    async def _consume(self) -> None:
+        async for value in self.port:
+            self.taken.append(value)
+            if len(self.taken) % 7 == 0:
+                await asyncio.sleep(0)  # a component that takes its time
+
+    async def deactivate(self) -> None:
+        if self._consumer is not None:
+            self._consumer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._consumer
+            self._consumer = None
+
+    async def stop(self) -> None:
+        """A planned stop: take nothing more, tell the senders, close."""
+        await self.deactivate()
+        await self.server.close()
+
+    async def crash(self) -> None:
+        """Like SIGKILL: the sockets vanish, no last acknowledgement."""
+        await self.deactivate()
+        for receiver in list(self.server._receivers):
+            receiver.acking = None
+            receiver.abort()
+        await self.server.close()
+
+
+@pytest.fixture
+async def instances(tmp_path: Path) -> AsyncIterator[list[Instance]]:
+    made: list[Instance] = []
+    yield made
+    for inst in made:
+        await inst.stop()
+
+
+async def new_instance(made: list[Instance], tmp: Path, *, consume: bool = True) -> Instance:
+    inst = Instance(tmp / f"rx{len(made)}.sock")
+    made.append(inst)
+    return await inst.start(consume=consume)
+
+
+async def publish(conn: Connection, n: int) -> None:
+    for value in range(1, n + 1):
+        while not conn.offer(value):
+            await conn.drain()
+        if value % 50 == 0:
+            await asyncio.sleep(0.001)  # a sensor's pace, so moves land mid-stream
+
+
+@pytest.mark.parametrize("kind", ["tcp", "unix"])
+async def test_planned_moves_lose_and_duplicate_nothing(
+    instances: list[Instance], tmp_path: Path, kind: str
+) -> None:
+    n, moves = 6000, 5
+    current = await new_instance(instances, tmp_path)
+    conn = Connection("c", current.address(kind), "in", "cam.out", make_policy("fifo", 64, "block"))
+    conn.start()
+    sender = asyncio.create_task(publish(conn, n))
+    try:
+        for _ in range(moves):
+            await until(lambda: len(current.taken) > 10 or conn.seq >= n)
+            await asyncio.sleep(0.01)
+            nxt = await new_instance(instances, tmp_path)
+            await current.deactivate()  # the plan moved it: it stops taking frames
+            conn.repoint(nxt.address(kind))
+            await current.stop()  # its unconsumed frames are not acknowledged
+            current = nxt
+        await asyncio.wait_for(sender, 30)
+        taken = lambda: [v for inst in instances for v in inst.taken]  # noqa: E731
+        await until(lambda: len(taken()) >= n, within=20)
+        assert sorted(taken()) == list(range(1, n + 1))  # every frame once, none lost
+        assert conn.replayed > 0  # the moves did leave frames to replay
+        assert all(inst.port.duplicates == 0 for inst in instances)
+    finally:
+        sender.cancel()
+        await conn.close(linger=0.5)
+
+
+async def test_a_crashed_receiver_loses_nothing_the_window_held(
+    instances: list[Instance], tmp_path: Path
+) -> None:
+    n = 4000
+    first = await new_instance(instances, tmp_path)
+    conn = Connection("c", first.address("tcp"), "in", "cam.out", make_policy("fifo", 64, "block"))
+    conn.start()
+    sender = asyncio.create_task(publish(conn, n))
+    try:
+        await until(lambda: len(first.taken) > 1000)
+        await first.crash()
+        second = await new_instance(instances, tmp_path)
+        conn.repoint(second.address("tcp"))
+        await asyncio.wait_for(sender, 30)
+        await until(lambda: len(set(first.taken) | set(second.taken)) >= n, within=20)
+        assert set(first.taken) | set(second.taken) == set(range(1, n + 1))
+        assert sorted(second.taken) == second.taken  # in order
+    finally:
+        sender.cancel()
+        await conn.close(linger=0.5)
+
+
+async def test_a_reconnect_to_the_same_instance_replays_without_duplicates(
+    instances: list[Instance], tmp_path: Path
+) -> None:
+    n = 3000
+    inst = await new_instance(instances, tmp_path)
+    conn = Connection("c", inst.address("tcp"), "in", "cam.out", make_policy("fifo", 64, "block"))
+    conn.start()
+    sender = asyncio.create_task(publish(conn, n))
+    try:
+        for _ in range(3):
+            await until(lambda: conn.unacked > 0, within=10)
+            for receiver in list(inst.server._receivers):
+                receiver.abort()  # the network broke; the instance lives on
+            await until(lambda: conn.reconnects > 0, within=10)
+        await asyncio.wait_for(sender, 30)
+        await until(lambda: len(inst.taken) >= n, within=20)
+        assert inst.taken == list(range(1, n + 1))
+        assert conn.replayed > 0
+    finally:
+        sender.cancel()
+        await conn.close(linger=0.5)
+
+
+async def test_the_window_stops_the_sender_until_frames_are_taken(
+    instances: list[Instance], tmp_path: Path
+) -> None:
+    inst = await new_instance(instances, tmp_path, consume=False)
+    policy = make_policy("fifo", 10, "block")
+    conn = Connection("c", inst.address("tcp"), "in", "cam.out", policy, window=(50, 1 << 20))
+    conn.start()
+    sender = asyncio.create_task(publish(conn, 500))
+    try:
+        await until(lambda: conn.seq >= 50)
+        await asyncio.sleep(0.1)
+        assert conn.seq == 50 and conn.unacked == 50  # nothing past the window
+        assert conn.pending == 10 and not sender.done()  # the queue is full: block
+        inst.resume()
+        await asyncio.wait_for(sender, 10)
+        await until(lambda: len(inst.taken) == 500)
+        assert inst.taken == list(range(1, 501))
+    finally:
+        sender.cancel()
+        await conn.close(linger=0.5)
+
+
+async def test_a_receiver_that_does_not_acknowledge_gets_a_plain_stream(tmp_path: Path) -> None:
+    port = RecordingPort()  # no attach_stream
+    server = DataServer(lambda name: port)
+    await server.start()
+    conn = Connection(
+        "c", f"tcp://{server.addresses['tcp']}", "in", "o.p", make_policy("fifo", 100)
+    )
+    conn.start()
+    try:
+        await asyncio.wait_for(conn.wait_connected(), 5)
+        for value in range(20):
+            assert conn.offer(value)
+        await until(lambda: len(port.frames) == 20)
+        assert conn.unacked == 0 and server.counters["acked"] == 0
+    finally:
+        await conn.close()
+        await server.close()
