@@ -60,7 +60,7 @@ def test_standbys_hot_started_cold_not_and_standbys_do_not_send() -> None:
 def test_remote_receiver_waits_for_address_then_for_active() -> None:
     plan = _plan(_system(), {"Cam": "r1", "Det": "r2", "Ctl": "r2"})
     (cam,) = specs_for_robot(plan, "r1", {})
-    assert cam.connections == ()
+    assert [(c.to_instance, c.to_addr, c.pending) for c in cam.connections] == [("Det", None, True)]
     assert cam.desired == "inactive"
     started = {"Det": Remote("r2", "inactive", "tcp://127.0.0.1:4000")}
     (cam,) = specs_for_robot(plan, "r1", started)
@@ -75,7 +75,7 @@ def test_running_sender_is_not_held_back_when_receiver_moves() -> None:
     plan = _plan(_system(), {"Cam": "r1", "Det": "r3", "Ctl": "r3"})
     stale = {"Det": Remote("r2", "active", "tcp://127.0.0.1:4000")}  # old robot
     (cam,) = specs_for_robot(plan, "r1", stale, active_here={"Cam"})
-    assert cam.connections == ()
+    assert [c.pending for c in cam.connections] == [True]  # kept as made until Det is known
     assert cam.desired == "active"
 
 

@@ -95,6 +95,21 @@ def test_final_target(
     assert final_target(plan, component, instance) == expected
 
 
+def test_final_target_follows_a_name_that_moved_to_another_robot() -> None:
+    est = next(p for p in PLAN.placements if p.instance == "Est")
+    moved = replace(
+        PLAN,
+        placements=tuple(replace(p, robot="r3") if p is est else p for p in PLAN.placements),
+    )
+    assert final_target(moved, "Est", "Est", est.robot) == ("r3", "Est")
+    assert final_target(PLAN, "Est", "Est", est.robot) is None  # it stays
+    same_name = StateMsg("final", "Est", "Est", "Est", moved.key, {}, est.robot)
+    assert admit(moved, "r3", same_name) == "apply"
+    assert admit(moved, "r3", replace(same_name, origin="r3")) == "not_the_active"
+    assert admit(moved, "r3", replace(same_name, origin="")) == "not_the_active"
+    assert StateMsg.decode(same_name.encode()) == same_name
+
+
 @pytest.mark.parametrize(
     ("plan", "robot", "message", "verdict"),
     [

@@ -113,6 +113,24 @@ CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[
         [("repoint", "Cam"), ("activate", "View")],
     ),
     (
+        "remote receiver moving (address unknown): the connection stays as made",
+        {"Cam": spec("Cam", ConnectionSpec("c1", "image", "View", "image", pending=True))},
+        {"Cam": obs("ACTIVE", CAM, c1=(CAM_TO_VIEW, ADDR))},
+        [],
+    ),
+    (
+        "remote receiver's new address known: repoint",
+        {"Cam": spec("Cam", ConnectionSpec("c1", "image", "View", "image", to_addr="tcp://h:9"))},
+        {"Cam": obs("ACTIVE", CAM, c1=(CAM_TO_VIEW, ADDR))},
+        [("repoint", "Cam")],
+    ),
+    (
+        "pending connection not made yet: none made (derive decides whether it activates)",
+        {"Cam": spec("Cam", ConnectionSpec("c1", "image", "View", "image", pending=True))},
+        {"Cam": obs("INACTIVE", CAM)},
+        [("activate", "Cam")],
+    ),
+    (
         "connection no longer desired: disconnect",
         {"Cam": spec("Cam"), "View": VIEW},
         {"Cam": obs("ACTIVE", CAM, c1=(CAM_TO_VIEW, ADDR)), "View": obs("ACTIVE", VIEW, ADDR)},

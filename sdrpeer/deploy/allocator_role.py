@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy import peers
+from sdrpeer.deploy.move import move_inputs, swap_to_standby
 from sdrpeer.deploy.placer import Infeasible, place
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import Plan
@@ -226,6 +227,41 @@ class AllocatorRole:
             self._publish_plan(new, state)
             return new
 
+    async def move_component(self, component: str, to: str | None) -> Plan | Infeasible:
+        """A planned move (`sdrpeer move`): the component's active leaves its robot, for `to`
+        when given; MoveError when it cannot be asked for. Allocator only."""
+        if not self.c.election.is_allocator():
+            raise NotAllocator(self.c.election.info().leader)
+        async with self._lock:
+            plan = self.c.store.plan
+            state = self.c.cluster()
+            inputs = move_inputs(plan, component, to, state.alive)
+            assert plan is not None
+            assert plan.system is not None
+            epoch = self.c.election.info().epoch
+            now = asyncio.get_running_loop().time()
+            result = place(
+                inputs.system,
+                self.view(state, None, frozenset(self.c.health.excluded(now))),
+                epoch=epoch,
+                version=plan.version + 1 if plan.epoch == epoch else 1,
+                allocator=self.c.name,
+                previous=inputs.previous,
+                avoid=inputs.avoid,
+            )
+            if isinstance(result, Infeasible):
+                self.c.events.add(
+                    time.time(), "allocation.infeasible", self.c.name, report=str(result)
+                )
+                return result
+            new = replace(result, system=plan.system)
+            moved = moved_components(plan, new)
+            reason = f"move {component} from {inputs.origin}" + (f" to {to}" if to else "")
+            self.c.events.add(time.time(), "allocation", self.c.name, reason=reason, epoch=epoch)
+            self.c.events.add(time.time(), "move", self.c.name, reason=reason, moved=moved)
+            self._publish_plan(new, state)
+            return new
+
     async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
         """Allocate `system` (None: undeploy) and publish the plan. Allocator only."""
         if not self.c.election.is_allocator():
@@ -275,23 +311,3 @@ def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:
         if before is not None and before.robot != p.robot:
             out[p.component] = [before.robot, p.robot]
     return out
-
-
-def swap_to_standby(plan: Plan, component: str, robot: str) -> Plan:
-    """`plan` with the component's standby on `robot` made active and its active dropped."""
-    standby = next(
-        (
-            p
-            for p in plan.placements
-            if p.component == component and p.robot == robot and p.role == "standby"
-        ),
-        None,
-    )
-    if standby is None:
-        return plan
-    kept = tuple(
-        replace(p, role="active", mode="hot") if p is standby else p
-        for p in plan.placements
-        if not (p.component == component and p.role == "active")
-    )
-    return replace(plan, placements=kept)

@@ -1,10 +1,12 @@
-"""`sdrpeer deploy FILE [--wait]`, `sdrpeer status [--json]`, `sdrpeer undeploy [--wait]`.
+"""`sdrpeer deploy FILE [--wait]`, `status [--json]`, `undeploy`, `move COMPONENT [--to ROBOT]`.
 
 How it works: `deploy` loads and validates the system file here first (every problem with
 file:line; nothing is sent when one is found), then posts the system to an agent, which hands
 it to the allocator. `--wait` polls `GET /v1/status` on the same agent and prints each change of
 a component's robot or state until all are ACTIVE, or fails after `--timeout` naming the ones
-that are not.
+that are not. `move` asks the allocator for a planned move of one component's active instance
+(the old instance hands its state and its untaken frames to the new one) and, with `--wait`,
+returns once the component is ACTIVE on its new robot.
 """
 
 from __future__ import annotations
@@ -55,6 +57,12 @@ def add_deploy_parsers(
     status.set_defaults(func=cmd_status)
     undeploy = sub.add_parser("undeploy", parents=[client, as_json], help="stop the system")
     undeploy.set_defaults(func=cmd_undeploy)
+    move = sub.add_parser("move", parents=[client, as_json], help="move a component (planned)")
+    move.add_argument("component", help="the component's name in the system file")
+    move.add_argument("--to", metavar="ROBOT", help="destination (default: the allocator's pick)")
+    move.add_argument("--wait", action="store_true", help="return when ACTIVE there")
+    move.add_argument("--timeout", type=float, default=60.0, metavar="S", help="for --wait")
+    move.set_defaults(func=cmd_move)
 
 
 def _client(args: argparse.Namespace) -> AgentClient:
@@ -133,3 +141,33 @@ def cmd_undeploy(args: argparse.Namespace) -> int:
     plan = answer.get("plan", {}) if isinstance(answer, dict) else {}
     print(f"undeployed: plan epoch {plan.get('epoch')} version {plan.get('version')}")
     return 0
+
+
+def cmd_move(args: argparse.Namespace) -> int:
+    """Ask for a planned move; with --wait, poll until the component is ACTIVE there."""
+    client = _client(args)
+    t0 = time.monotonic()
+    body = {"component": args.component, **({"to": args.to} if args.to else {})}
+    answer = post_when_elected(client, "/v1/move", body, args.timeout)
+    robot, instance = answer.get("robot"), answer.get("instance")
+    if not args.json:
+        print(
+            f"moving {args.component}: {instance} -> {robot} (allocator {answer.get('allocator')})"
+        )
+    if not args.wait:
+        if args.json:
+            print(json.dumps(answer, indent=2, sort_keys=True))
+        return 0
+    while time.monotonic() - t0 < args.timeout:
+        doc = client.get("/v1/status")
+        rows: list[dict[str, Any]] = doc.get("components", [])
+        row = next((c for c in rows if c["component"] == args.component), {})
+        if row.get("robot") == robot and row.get("state") == "active":
+            elapsed = time.monotonic() - t0
+            if args.json:
+                print(json.dumps({"elapsed_s": round(elapsed, 3), **answer}, indent=2))
+            else:
+                print(f"{args.component} ACTIVE on {robot} after {elapsed:.2f}s")
+            return 0
+        time.sleep(WAIT_POLL)
+    raise SdrpeerError(f"{args.component} not ACTIVE on {robot} after {args.timeout:.0f}s")

@@ -318,6 +318,10 @@ class Coordinator:
         """Allocate `system` (None: undeploy) and publish the plan (allocator only)."""
         return await self.role.deploy(system, origin)
 
+    async def move_component(self, component: str, to: str | None) -> Plan | Infeasible:
+        """A planned move of one component's active (allocator only; see deploy.move)."""
+        return await self.role.move_component(component, to)
+
     async def recover_component(
         self, robot: str, component: str, instance: str, action: str
     ) -> Plan | Infeasible:

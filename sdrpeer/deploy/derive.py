@@ -5,8 +5,9 @@ but not launched). Only active instances send: each connection of the system who
 active instance is here becomes a `ConnectionSpec` to the receiver's active instance. A receiver
 on this robot is resolved by the reconciler from its host's hello; a receiver on another robot
 by the data address that robot gossips for it (`Remote.data`). Until that address is known the
-connection is left out, and the sender is kept INACTIVE unless it is ACTIVE already, so senders
-start after their receivers across robots too. Likewise a sender waits for a remote receiver
+connection is `pending` (one already made stays as it is, to be re-pointed; none is made), and
+the sender is kept INACTIVE unless it is ACTIVE already, so senders start after their receivers
+across robots too. Likewise a sender waits for a remote receiver
 to be ACTIVE, except inside a cycle of connections, where no order can be respected.
 """
 
@@ -77,8 +78,7 @@ def specs_for_robot(
                 if receiver is None:
                     continue
                 spec, ok = _connection(c, receiver, robot, remote, reach)
-                if spec is not None:
-                    conns.append(spec)
+                conns.append(spec)
                 ready = ready and ok
         desired = "active" if ready or p.instance in active_here else "inactive"
         specs.append(
@@ -102,8 +102,8 @@ def _connection(
     robot: str,
     remote: Mapping[str, Remote],
     reach: Mapping[str, set[str]],
-) -> tuple[ConnectionSpec | None, bool]:
-    """(the connection spec or None while unresolvable, whether the sender may activate)."""
+) -> tuple[ConnectionSpec, bool]:
+    """(the connection spec, pending while unresolvable; whether the sender may activate)."""
     base = ConnectionSpec(
         id=c.id,
         out_port=c.from_port,
@@ -115,7 +115,7 @@ def _connection(
         return base, True
     seen = remote.get(receiver.instance)
     if seen is None or seen.robot != receiver.robot or seen.data is None:
-        return None, False
+        return replace(base, pending=True), False
     in_cycle = c.from_component in reach.get(c.to_component, set())
     ok = in_cycle or seen.state == "active"
     return replace(base, to_addr=seen.data), ok

@@ -55,10 +55,14 @@ class StateMsg:
     """The key of the plan the sender held."""
     state: Any
     """The value of the source's on_snapshot."""
+    origin: str = ""
+    """The robot the source ran on ("" when unknown: a sender of an older version)."""
 
     def encode(self) -> bytes:
         """msgpack form (`decode` inverts it)."""
         doc = [self.kind, self.component, self.source, self.target, list(self.plan), self.state]
+        if self.origin:
+            doc.append(self.origin)
         blob: bytes = msgpack.packb(doc, use_bin_type=True)
         return blob
 
@@ -69,9 +73,12 @@ class StateMsg:
             doc = msgpack.unpackb(blob, raw=False, strict_map_key=False)
         except (ValueError, msgpack.UnpackException) as exc:
             raise ValueError(f"not one msgpack value: {exc}") from None
-        if not isinstance(doc, list) or len(doc) != 6:
-            raise ValueError("expected [kind, component, source, target, plan, state]")
-        kind, component, source, target, key, state = doc
+        if not isinstance(doc, list) or len(doc) not in (6, 7):
+            raise ValueError("expected [kind, component, source, target, plan, state, origin?]")
+        kind, component, source, target, key, state = doc[:6]
+        origin = doc[6] if len(doc) == 7 else ""
+        if not isinstance(origin, str):
+            raise ValueError("origin must be a string")
         if kind not in KINDS:
             raise ValueError(f"kind {kind!r} is not one of {', '.join(KINDS)}")
         if not all(isinstance(x, str) and x for x in (component, source, target)):
@@ -85,7 +92,7 @@ class StateMsg:
         )
         if not ok_key:
             raise ValueError("plan must be [epoch, allocator, version]")
-        return cls(kind, component, source, target, (key[0], key[1], key[2]), state)
+        return cls(kind, component, source, target, (key[0], key[1], key[2]), state, origin)
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,13 +153,16 @@ class SyncSchedule:
         return min(times) if times else None
 
 
-def final_target(plan: Plan | None, component: str, instance: str) -> tuple[str, str] | None:
+def final_target(
+    plan: Plan | None, component: str, instance: str, robot: str = ""
+) -> tuple[str, str] | None:
     """(robot, instance) that takes a retiring instance's last state: the component's active
-    placement, when that is another instance; None when the component stays or is gone."""
+    placement, when that is another instance or the same name on another robot than `robot`
+    (the retiring one's); None when the component stays or is gone."""
     if plan is None or plan.system is None:
         return None
     active = plan.active_of(component)
-    if active is None or active.instance == instance:
+    if active is None or (active.instance == instance and active.robot == (robot or active.robot)):
         return None
     return (active.robot, active.instance)
 
@@ -176,4 +186,6 @@ def admit(plan: Plan | None, robot: str, msg: StateMsg) -> str:
         return APPLY
     if target is not None and target.role == "active" and msg.source != msg.target:
         return APPLY
+    if target is not None and target.role == "active" and msg.origin not in ("", robot):
+        return APPLY  # the same instance name, moved here from the origin robot
     return HOLD if behind else "not_the_active"

@@ -92,7 +92,7 @@ class HandoffShell:
     async def retire(self, instance: str) -> None:
         """Before an ACTIVE instance stops: its last state to its component's new instance."""
         component = self.manager.status_of(instance).get("component", "")
-        target = final_target(self.plan(), component, instance)
+        target = final_target(self.plan(), component, instance, self.robot)
         if target is not None:
             await self._send(Send("final", component, instance, (target,)))
 
@@ -119,7 +119,9 @@ class HandoffShell:
                 if send.kind == "sync" and self._sent.get((send.source, target)) == digest:
                     self.counters["sync_unchanged"] += 1
                     continue
-                msg = StateMsg(send.kind, send.component, send.source, target, key, state)
+                msg = StateMsg(
+                    send.kind, send.component, send.source, target, key, state, self.robot
+                )
                 if await self._deliver(robot, msg):
                     self._sent[(send.source, target)] = digest
                     self.counters[f"{send.kind}_sent"] += 1

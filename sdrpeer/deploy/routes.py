@@ -4,7 +4,8 @@ How it works: `POST /v1/deploy` takes a system (the JSON of a `SystemDef`, valid
 CLI's loader; re-checked here by rebuilding it) and gives it to the allocator: this agent if it
 holds the role, else it forwards the request to the allocator's API with the peer token. The
 answer is the plan (200), an infeasible report (409: which constraint ruled out each robot), or
-503 when no allocator is known yet. `GET/POST /v1/plan` are how agents fetch and push plans.
+503 when no allocator is known yet. `GET/POST /v1/plan` are how agents fetch and push plans;
+`POST /v1/move` asks the allocator for a planned move of one component (sdrpeer.deploy.move).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from sdrpeer.api.peer_client import call
 from sdrpeer.deploy.allocator_role import NotAllocator
 from sdrpeer.deploy.coordinator import Coordinator
 from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
+from sdrpeer.deploy.move import MoveError
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import plan_from_json
@@ -136,6 +138,35 @@ async def post_recovery(request: web.Request) -> web.Response:
     return web.json_response({"plan": [result.epoch, result.version], "allocator": coord.name})
 
 
+async def post_move(request: web.Request) -> web.Response:
+    """POST /v1/move {component, to?} (token): a planned move of the component's active, to
+    robot `to` or, without it, to wherever the allocation puts it off its current robot."""
+    body = await _body(request)
+    coord = _coord(request)
+    component, to = body.get("component"), body.get("to")
+    if not isinstance(component, str) or not component:
+        return json_error(400, "field 'component': a component name is required")
+    if to is not None and not isinstance(to, str):
+        return json_error(400, "field 'to': a robot name, or absent")
+    try:
+        result = await coord.move_component(component, to or None)
+    except NotAllocator as e:
+        return await _forward(request, e.leader, body)
+    except MoveError as e:
+        return json_error(409, f"cannot move {component}: {e}")
+    if isinstance(result, Infeasible):
+        return json_error(409, f"cannot move {component}:\n{result}")
+    active = result.active_of(component)
+    return web.json_response(
+        {
+            "plan": result.to_json(),
+            "allocator": coord.name,
+            "robot": None if active is None else active.robot,
+            "instance": None if active is None else active.instance,
+        }
+    )
+
+
 async def post_state(request: web.Request) -> web.Response:
     """POST /v1/state (token; a msgpack StateMsg): a component's state for an instance here."""
     handoff = _coord(request).handoff
@@ -165,5 +196,6 @@ ROUTES = [
     Route("GET", "/v1/plan", get_plan),
     Route("POST", "/v1/plan", post_plan),
     Route("POST", "/v1/recovery", post_recovery),
+    Route("POST", "/v1/move", post_move),
     Route("POST", "/v1/state", post_state),
 ]

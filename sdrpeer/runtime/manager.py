@@ -12,7 +12,8 @@ a component reports, `on_instance_problem(name, cause)` for `component_error` (E
 `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
 `restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when
 set, runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands
-the instance's last state to its successor there.
+the instance's last state to its successor there. The instance is deactivated first, so it takes
+no frame after that state (the frames it never took are replayed to its successor).
 """
 
 from __future__ import annotations
@@ -225,6 +226,7 @@ class InstanceManager:
         sup = self._sups[a.instance]
         if a.kind == "stop":
             if self.before_stop is not None and sup.state == "ACTIVE":
+                await self._quiesce(sup)  # it takes no more frames: the snapshot is its last
                 await self._before_stop(a.instance, self.before_stop)
             await sup.stop()
             if a.instance not in self._desired:
@@ -243,6 +245,16 @@ class InstanceManager:
         elif a.kind == "disconnect" and conn is not None:
             sup.connections.pop(conn.id, None)
             await sup.command("disconnect", conn_id=conn.id)
+
+    async def _quiesce(self, sup: Supervisor) -> None:
+        """Deactivate an instance about to stop, so that the state it hands over is the last
+        and the frames it never took stay unacknowledged (its senders replay them to the next
+        instance: docs/protocol.md, acknowledgements)."""
+        try:
+            async with asyncio.timeout(self.before_stop_timeout):
+                await sup.command("deactivate")
+        except (CommandError, TimeoutError) as e:
+            log.info("%s: deactivate before stop failed (%s); stopping anyway", sup.name, e)
 
     async def _before_stop(self, name: str, hook: Callable[[str], Awaitable[None]]) -> None:
         try:

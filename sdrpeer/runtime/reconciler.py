@@ -12,7 +12,8 @@ at most one `Action` for each, in name order. Rules, in the order they are tried
 4. INACTIVE or ACTIVE: connections first. An observed connection that is no longer desired, or
    whose ports or policy changed -> disconnect. A desired connection not made yet -> connect, once
    its address is known (`to_addr`, else the receiver's data address); made to another address
-   than the one now resolved -> repoint.
+   than the one now resolved -> repoint. A `pending` connection (its remote receiver's address
+   is not known yet) is left as it was made: it is re-pointed once known, never dropped for it.
 5. Then the lifecycle: ACTIVE is wanted when desired is active and the role is active (a standby
    is kept INACTIVE, warm). Activate only when every receiver the instance sends to that should be
    active already is (receivers before senders); deactivate a receiver only after the senders
@@ -66,7 +67,7 @@ class Action:
 
 
 def _bare(c: ConnectionSpec) -> ConnectionSpec:
-    return replace(c, to_addr=None)
+    return replace(c, to_addr=None, pending=False)
 
 
 def _reach(desired: Mapping[str, InstanceSpec]) -> dict[str, set[str]]:
@@ -160,6 +161,8 @@ def _desired(
 
 def resolve(conn: ConnectionSpec, observed: Mapping[str, Observed]) -> str | None:
     """The address a connection should send to now, or None while it is unknown."""
+    if conn.pending:
+        return None
     if conn.to_addr is not None:
         return conn.to_addr
     receiver = observed.get(conn.to_instance)

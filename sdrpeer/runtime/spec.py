@@ -58,6 +58,10 @@ class ConnectionSpec:
     """Connector policy (docs/protocol.md), as sorted (key, value) pairs so the spec hashes."""
     to_addr: str | None = None
     """Explicit data address of the receiver (tests, or a remote robot until gossip resolves it)."""
+    pending: bool = False
+    """The receiver is on another robot and its address is not known yet (it is starting, or
+    moving): the connection already made is kept as it is, and re-pointed once the address is
+    known; none is made meanwhile. (Dropping it would lose what its sender still holds.)"""
 
     def policy_map(self) -> dict[str, Any]:
         """The policy as the control channel's map."""

@@ -7,6 +7,7 @@ access, so `self.image.write(frame)` touches only that instance's port.
 - `OutPortRuntime.write(value)` hands the same object (never copied) to every attached sink's
   `offer(value) -> bool` (False: the sink dropped it) and counts it. The data plane writes the
   sinks (`FrameSink`); a sink may also have `bytes_out` (summed into the counters) and
+  `replayed` (frames written again to a new receiver: sdrpeer.dataplane.connection) and
   `async drain()`, which `send()` awaits first: it returns once the sink can take a frame (a
   `full="block"` sink that is full waits; others return at once).
 - `InPortRuntime` (sdrpeer.sdk.inport) is what the data plane delivers received frames to.
@@ -55,7 +56,16 @@ class PortInfo:
 class OutPortRuntime:
     """One component instance's output port: fan-out to the attached sinks."""
 
-    __slots__ = ("_bytes_gone", "_drainers", "_sinks", "doc", "dropped", "frames_out", "name")
+    __slots__ = (
+        "_bytes_gone",
+        "_drainers",
+        "_replayed_gone",
+        "_sinks",
+        "doc",
+        "dropped",
+        "frames_out",
+        "name",
+    )
 
     def __init__(self, name: str, doc: str = "") -> None:
         self.name = name
@@ -65,6 +75,7 @@ class OutPortRuntime:
         self._sinks: tuple[FrameSink, ...] = ()
         self._drainers: tuple[Callable[[], Awaitable[Any]], ...] = ()
         self._bytes_gone = 0  # bytes_out of sinks already detached
+        self._replayed_gone = 0  # and their frames replayed
 
     def write(self, value: Any) -> None:
         """Hand `value` to every sink (hot path: no copy, no await)."""
@@ -90,6 +101,7 @@ class OutPortRuntime:
         if sink in self._sinks:
             self._sinks = tuple(s for s in self._sinks if s is not sink)
             self._bytes_gone += int(getattr(sink, "bytes_out", 0))
+            self._replayed_gone += int(getattr(sink, "replayed", 0))
             self._rebuild()
 
     @property
@@ -100,6 +112,7 @@ class OutPortRuntime:
     def counters(self) -> dict[str, int]:
         """The protocol's port counters (input-side ones are zero)."""
         sent = self._bytes_gone + sum(int(getattr(s, "bytes_out", 0)) for s in self._sinks)
+        replayed = self._replayed_gone + sum(int(getattr(s, "replayed", 0)) for s in self._sinks)
         return {
             "frames_in": 0,
             "bytes_in": 0,
@@ -108,6 +121,7 @@ class OutPortRuntime:
             "dropped": self.dropped,
             "lost": 0,
             "refused": 0,
+            "replayed": replayed,
         }
 
     def _rebuild(self) -> None:
