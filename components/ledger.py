@@ -76,6 +76,29 @@ class Ledger(Component):
             self._file = None
 
 
+SYSTEM = """\
+name: moves
+components:
+  - name: Sequencer
+    target: components.ledger:Sequencer
+    params: {{rate: {rate}}}
+    pin: robot-1
+  - name: Ledger
+    target: components.ledger:Ledger
+    params: {{dir: '{dir}'}}
+    prefer: [robot-2]
+{standby}connections:
+  - {{from: Sequencer.out, to: Ledger.inp, policy: {{push: fifo, buffer: 256, full: block}}}}
+"""
+
+
+def ledger_system(directory: str, rate: float = 200.0, *, standby: bool = False) -> str:
+    """A system file: a Sequencer pinned to robot-1 feeding a Ledger (first on robot-2) over a
+    fifo/block connection; with `standby`, the Ledger has a hot standby on another robot."""
+    extra = "    standby: {other_robots: 1, mode: hot}\n" if standby else ""
+    return SYSTEM.format(rate=rate, dir=directory, standby=extra)
+
+
 def read_ledgers(directory: str) -> dict[str, Any]:
     """What the ledger files of `directory` say: taken, distinct, highest, lost, duplicates."""
     seen: list[int] = []

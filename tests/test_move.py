@@ -8,31 +8,16 @@ from pathlib import Path
 
 import pytest
 
-from components.ledger import read_ledgers
+from components.ledger import ledger_system, read_ledgers
 from sdrpeer.deploy.move import MoveError, move_inputs
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.system.loader import parse_system
 from tests.realnet import RealCluster, http
 from tests.test_recovery_e2e import deploy, status
 
-SYSTEM = """\
-name: moves
-components:
-  - name: Sequencer
-    target: components.ledger:Sequencer
-    params: {{rate: 200}}
-    pin: robot-1
-  - name: Ledger
-    target: components.ledger:Ledger
-    params: {{dir: '{dir}'}}
-    prefer: [robot-2]
-{standby}connections:
-  - {{from: Sequencer.out, to: Ledger.inp, policy: {{push: fifo, buffer: 256, full: block}}}}
-"""
 
-
-def plan_with(placements: tuple[Placement, ...], standby: str = "") -> Plan:
-    system = parse_system(SYSTEM.format(dir="", standby=standby), "moves.yaml")
+def plan_with(placements: tuple[Placement, ...], *, standby: bool = False) -> Plan:
+    system = parse_system(ledger_system("", standby=standby), "moves.yaml")
     return Plan(1, 1, system, placements, "robot-1")
 
 
@@ -53,7 +38,7 @@ def test_a_move_to_a_robot_pins_the_component_there_for_one_allocation() -> None
 
 
 def test_a_move_onto_the_robot_of_a_standby_promotes_it() -> None:
-    plan = plan_with((SEQ, LEDGER, STANDBY), standby="    standby: {other_robots: 1}\n")
+    plan = plan_with((SEQ, LEDGER, STANDBY), standby=True)
     inputs = move_inputs(plan, "Ledger", "robot-3", ALIVE)
     assert inputs.previous.active_of("Ledger") == replace(STANDBY, role="active")
 
@@ -85,7 +70,7 @@ def test_planned_moves_on_real_agents_lose_no_frame(cluster: RealCluster, tmp_pa
     one = agents[0]
     ledger = tmp_path / "ledger"
     path = tmp_path / "system.yaml"
-    path.write_text(SYSTEM.format(dir=ledger, standby=""))
+    path.write_text(ledger_system(str(ledger)))
     deploy(cluster, one, path)
 
     def ledger_on(robot: str) -> bool:

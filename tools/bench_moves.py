@@ -33,26 +33,11 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from components.ledger import read_ledgers  # noqa: E402
+from components.ledger import ledger_system, read_ledgers  # noqa: E402
 from sdrpeer.client import AgentClient, wait_for  # noqa: E402
 from sdrpeer.deploy.commands import post_when_elected  # noqa: E402
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab  # noqa: E402
 from sdrpeer.system.loader import parse_system  # noqa: E402
-
-SYSTEM = """\
-name: moves
-components:
-  - name: Sequencer
-    target: components.ledger:Sequencer
-    params: {{rate: {rate}}}
-    pin: robot-1
-  - name: Ledger
-    target: components.ledger:Ledger
-    params: {{dir: '{dir}'}}
-    prefer: [robot-2]
-{standby}connections:
-  - {{from: Sequencer.out, to: Ledger.inp, policy: {{push: fifo, buffer: 256, full: block}}}}
-"""
 
 
 def ledger_row(client: AgentClient) -> dict[str, Any]:
@@ -115,8 +100,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as scratch:
         tmp = args.keep or Path(scratch)
         ledger_dir = Path(tmp) / "ledger"
-        standby = "    standby: {other_robots: 1, mode: hot}\n" if args.standby else ""
-        text = SYSTEM.format(rate=args.rate, dir=ledger_dir, standby=standby)
+        text = ledger_system(str(ledger_dir), args.rate, standby=args.standby)
         system = parse_system(text, "moves.yaml")
         running = start_lab(
             UpOptions(3, Path(tmp) / "lab", preset="lan", netns=args.netns, timeout=60),
