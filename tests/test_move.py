@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from components.ledger import ledger_system, read_ledgers
+from sdrpeer.cli import main
 from sdrpeer.deploy.move import MoveError, move_inputs
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.system.loader import parse_system
@@ -65,7 +66,9 @@ def test_moves_that_cannot_be_asked_for_say_why(component: str, to: str, error: 
 
 
 @pytest.mark.realnet
-def test_planned_moves_on_real_agents_lose_no_frame(cluster: RealCluster, tmp_path: Path) -> None:
+def test_planned_moves_on_real_agents_lose_no_frame(
+    cluster: RealCluster, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     agents = cluster.start_many(3)
     one = agents[0]
     ledger = tmp_path / "ledger"
@@ -84,13 +87,22 @@ def test_planned_moves_on_real_agents_lose_no_frame(cluster: RealCluster, tmp_pa
         return int(read_ledgers(str(ledger))["highest"]) if ledger.exists() else 0
 
     cluster.wait_until(taken, lambda n: n > 50, "the Ledger taking numbers")
-    for to in ("robot-3", "robot-2", "robot-3"):
+    for to in ("robot-3", "robot-2"):
         code, doc = http("POST", one.api + "/v1/move", {"component": "Ledger", "to": to}, one.token)
         assert code == 200, doc
         assert doc["robot"] == to
         cluster.wait_until(lambda to=to: ledger_on(to), bool, f"Ledger ACTIVE on {to}", 30)  # type: ignore[misc]
         mark = taken()
         cluster.wait_until(taken, lambda n, mark=mark: n > mark + 50, "numbers flowing again")  # type: ignore[misc]
+    # the CLI does the same, and waits
+    where = ["--api", one.api, "--token", one.token]
+    assert main(["move", "Ledger", "--to", "robot-3", "--wait", *where]) == 0
+    assert "Ledger ACTIVE on robot-3 after" in capsys.readouterr().out
+    assert ledger_on("robot-3")
+    assert main(["move", "Ledger", "--to", "robot-3", *where]) == 1  # already there
+    assert "already runs on robot-3" in capsys.readouterr().err
+    mark = taken()
+    cluster.wait_until(taken, lambda n: n > mark + 50, "numbers flowing again")
     figures = read_ledgers(str(ledger))
     assert figures["files"] == 4  # one per instance that ran
     assert figures["lost"] == 0

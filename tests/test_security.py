@@ -75,6 +75,7 @@ STATE_CHANGING = [
     ("POST", "/v1/undeploy", {}),
     ("POST", "/v1/plan", {"plan": {}}),
     ("POST", "/v1/recovery", {}),
+    ("POST", "/v1/move", {"component": "x"}),
     ("POST", "/v1/robot", {"rssi": "-80dBm"}),
     ("POST", "/v1/instances", {"instances": []}),
     ("DELETE", "/v1/instances/x", None),
