@@ -131,6 +131,15 @@ CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[
         [("activate", "Cam")],
     ),
     (
+        "receiver is another instance now (a standby promoted): repoint, not reconnect",
+        {"Cam": spec("Cam", ConnectionSpec("c1", "image", "View-s1", "image")), "View-s1": VIEW},
+        {
+            "Cam": obs("ACTIVE", CAM, c1=(CAM_TO_VIEW, ADDR)),
+            "View-s1": obs("ACTIVE", VIEW, "unix:///run/standby.sock"),
+        },
+        [("repoint", "Cam")],
+    ),
+    (
         "connection no longer desired: disconnect",
         {"Cam": spec("Cam"), "View": VIEW},
         {"Cam": obs("ACTIVE", CAM, c1=(CAM_TO_VIEW, ADDR)), "View": obs("ACTIVE", VIEW, ADDR)},

@@ -14,7 +14,9 @@ sender and receiver are separate processes on this machine, as two component hos
 Contenders: sdrpeer (Connection -> DataServer; policy fifo + block; over TCP, over a Unix socket
 with the shared-memory ring turned off (`sdrpeer_unix`), and as a same-robot connection runs by
 default (`sdrpeer_shm`: a Unix socket, big values through the ring; 1 MB rows only, since small
-values never take the ring), pyzmq
+values never take the ring), and over TCP into the SDK's InPort with a consumer taking every
+frame (`sdrpeer_tcp_acked`: the stream a component gets, acknowledged, the sender keeping its
+unacknowledged frames for replay; the other sdrpeer rows count frames at the socket), pyzmq
 (PUSH/PULL, REQ/REP; blocking sockets), a plain length-prefixed socket loop (one sendall per
 frame; the receiver parses frames out of a recv_into buffer and makes each a bytes object) and
 the same loop sending frames coalesced by 256. Every cell is the median of --reps runs; the
@@ -77,10 +79,12 @@ async def _sdr_send(to: str, n: int, size: int, shm: bool) -> float:
 
 def sdr_throughput(kind: str, n: int, size: int) -> float:
     """Seconds the sdrpeer receiver took for n frames of `size` bytes; kind tcp, unix (the
-    socket alone) or shm (a Unix socket with the shared-memory ring, the default)."""
+    socket alone), shm (a Unix socket with the shared-memory ring, the default) or tcp_acked
+    (into the SDK's InPort, taken by a consumer: an acknowledged stream)."""
     with tempfile.TemporaryDirectory() as tmp:
-        peer = Peer("sdr-sink", n, os.path.join(tmp, "rx.sock"))
-        scheme = "tcp" if kind == "tcp" else "unix"
+        role = "sdr-inport" if kind == "tcp_acked" else "sdr-sink"
+        peer = Peer(role, n, os.path.join(tmp, "rx.sock"))
+        scheme = "unix" if kind in ("unix", "shm") else "tcp"
         to = f"{scheme}://{peer.addresses[scheme]}"
         start = asyncio.run(_sdr_send(to, n, size, shm=kind == "shm"))
         return float(peer.finish()["end"]) - start
@@ -128,6 +132,7 @@ def measure(
     n_small, n_big, m = (20_000, 20, 300) if quick else (300_000, 500, 5000)
     small: dict[str, Callable[[], float]] = {
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_small, SMALL),
+        "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_small, SMALL),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_small, SMALL),
         "zmq": lambda: zmq_throughput(n_small, SMALL),
         "plain_tcp": lambda: plain_throughput(n_small, SMALL),
@@ -135,6 +140,7 @@ def measure(
     }
     big: dict[str, Callable[[], float]] = {
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_big, BIG),
+        "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_big, BIG),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_big, BIG),
         "sdrpeer_shm": lambda: sdr_throughput("shm", n_big, BIG),
         "plain_tcp": lambda: plain_throughput(n_big, BIG),

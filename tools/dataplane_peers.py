@@ -5,7 +5,9 @@ Usage (by the benchmark): python tools/dataplane_peers.py ROLE N ARG
 How it works: `Peer` starts this file as a subprocess in one role; the peer prints one JSON line
 with the addresses it listens on, then (sinks) one with the CLOCK_MONOTONIC time its last frame
 arrived (`time.perf_counter`, the same clock in both processes), or (echoes) answers every ping
-until its stdin closes. Roles: sdr-sink (DataServer counting N frames), sdr-echo (DataServer
+until its stdin closes. Roles: sdr-sink (DataServer counting N frames), sdr-inport (DataServer
+into the SDK's InPort, a consumer task taking every frame as a component would, so the stream
+is acknowledged and the sender keeps its window), sdr-echo (DataServer
 whose frames go back through a Connection to ARG), asyncio-echo (a bare asyncio Protocol),
 plain-sink / plain-echo (blocking sockets, 4-byte length prefix per frame: the sink parses
 frames out of a recv_into buffer and makes each a bytes object), zmq-pull / zmq-rep (pyzmq).
@@ -64,6 +66,26 @@ async def _peer_sdr_sink(n: int, unix: str) -> None:
     _emit(server.addresses)
     await done
     _emit({"end": port.t1})
+    await server.close()
+
+
+async def _peer_sdr_inport(n: int, unix: str) -> None:
+    from sdrpeer.sdk.inport import InPortRuntime  # noqa: PLC0415 - only this role needs the SDK
+    from sdrpeer.sdk.policy import ConnectorPolicy  # noqa: PLC0415
+
+    port = InPortRuntime("sink", ConnectorPolicy("fifo", 1 << 20, "block"))
+    server = DataServer(lambda name: port, unix_path=unix)
+    await server.start()
+    _emit(server.addresses)
+    count = 0
+    while count < n:
+        await port.get()
+        count += 1
+        while port.qsize():
+            port.get_nowait()
+            count += 1
+    _emit({"end": time.perf_counter()})
+    await asyncio.sleep(0.05)  # the last acknowledgements go out
     await server.close()
 
 
@@ -188,6 +210,8 @@ def run_peer(role: str, n: int, arg: str) -> None:
 def _run_peer(role: str, n: int, arg: str) -> None:
     if role == "sdr-sink":
         asyncio.run(_peer_sdr_sink(n, arg))
+    elif role == "sdr-inport":
+        asyncio.run(_peer_sdr_inport(n, arg))
     elif role == "sdr-echo":
         asyncio.run(_peer_sdr_echo(arg))
     elif role == "plain-sink":

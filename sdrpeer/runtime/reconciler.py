@@ -10,10 +10,11 @@ at most one `Action` for each, in name order. Rules, in the order they are tried
    fields (component, launcher, target, params) changed -> stop (the next pass starts it).
 3. ERROR -> nothing (a person or the recovery layer resets it).
 4. INACTIVE or ACTIVE: connections first. An observed connection that is no longer desired, or
-   whose ports or policy changed -> disconnect. A desired connection not made yet -> connect, once
-   its address is known (`to_addr`, else the receiver's data address); made to another address
-   than the one now resolved -> repoint. A `pending` connection (its remote receiver's address
-   is not known yet) is left as it was made: it is re-pointed once known, never dropped for it.
+   whose ports or policy changed -> disconnect (a new receiver instance is no reason: repoint).
+   A desired connection not made yet -> connect, once its address is known (`to_addr`, else the
+   receiver's data address); made to another address than the one now resolved -> repoint. A
+   `pending` connection (its remote receiver's address is not known yet) is left as it was
+   made: it is re-pointed once known, never dropped for it.
 5. Then the lifecycle: ACTIVE is wanted when desired is active and the role is active (a standby
    is kept INACTIVE, warm). Activate only when every receiver the instance sends to that should be
    active already is (receivers before senders); deactivate a receiver only after the senders
@@ -67,7 +68,10 @@ class Action:
 
 
 def _bare(c: ConnectionSpec) -> ConnectionSpec:
-    return replace(c, to_addr=None, pending=False)
+    """What makes a connection another one: its ports and policy, not where its receiver is
+    (another address, robot or instance of the component: a repoint, which hands the frames
+    the old receiver never took to the new one)."""
+    return replace(c, to_addr=None, pending=False, to_instance="")
 
 
 def _reach(desired: Mapping[str, InstanceSpec]) -> dict[str, set[str]]:
