@@ -124,6 +124,7 @@ class Agent:
             assert cfg.key_file is not None
             self.keyring = Keyring.from_file(cfg.key_file)
         self.peer_tokens[:] = peer_tokens(self.keyring)
+        self.instances.data_keys = agent_keys.data_keys(self.keyring)
         token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
             robot_file = RobotFile.load(cfg.robot_file)

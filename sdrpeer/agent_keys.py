@@ -4,15 +4,17 @@ How it works: the key file lists keys, the first signs and all verify. Rotation 
 the file on every robot, each followed by SIGHUP: add the new key second (everyone accepts it),
 put it first (everyone signs with it and still accepts the old), remove the old key. On each
 reload the gossip codec takes the new keyring, the API accepts the peer token of every key in
-it, and the agent presents the token of the signing key. A file that cannot be read changes
+it, the agent presents the token of the signing key, and every component host gets the new data
+keys (sdrpeer.dataplane.auth). A file that cannot be read changes
 nothing (`keys.reload_failed` in the event log). docs/security.md tells the procedure.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from sdrpeer.deploy.peers import peer_token, peer_tokens
 from sdrpeer.errors import ConfigError
@@ -22,6 +24,17 @@ if TYPE_CHECKING:
     from sdrpeer.agent import Agent
 
 log = logging.getLogger("sdrpeer.agent")
+_DATA_PERSON: Final = b"sdrpeer-data-v1"
+
+
+def derive_data_key(cluster_key: bytes) -> bytes:
+    """The data key of one cluster key (one way: hosts never hold cluster keys)."""
+    return hashlib.blake2b(cluster_key[:64], digest_size=32, person=_DATA_PERSON).digest()
+
+
+def data_keys(ring: Keyring | None) -> tuple[bytes, ...]:
+    """The data keys of a keyring, the signing key's first (none without a keyring)."""
+    return () if ring is None else tuple(derive_data_key(k) for k in ring.keys)
 
 
 def reload_keys(agent: Agent) -> bool:
@@ -42,6 +55,7 @@ def reload_keys(agent: Agent) -> bool:
     agent.peer_tokens[:] = peer_tokens(ring)
     if agent.coordinator is not None:
         agent.coordinator.token = agent.coordinator.handoff.token = peer_token(ring)
+    agent.instances.set_data_keys(data_keys(ring))
     ids = [k.hex() for k in ring.key_ids]
     log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
     agent.events.add(time.time(), "keys.reloaded", agent.name, key_ids=ids)

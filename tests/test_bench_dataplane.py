@@ -28,9 +28,9 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     assert "Targets" in done.stdout
     figures = json.loads(out.read_text())
     assert figures["quick"] is True
-    small = {"sdrpeer_tcp", "sdrpeer_unix", "zmq", "plain_tcp", "plain_tcp_coalesced"}
-    assert set(figures["small"]) == small
-    assert set(figures["big"]) == {"sdrpeer_tcp", "sdrpeer_unix", "sdrpeer_shm", "plain_tcp", "zmq"}
+    small = {"sdrpeer_tcp", "sdrpeer_tcp_acked", "sdrpeer_unix", "zmq", "plain_tcp"}
+    assert set(figures["small"]) == small | {"plain_tcp_coalesced"}
+    assert set(figures["big"]) == small | {"sdrpeer_shm"}
     assert set(figures["rtt"]) == {"sdrpeer_tcp", "plain_tcp", "zmq", "asyncio_raw"}
     for section in ("small", "big"):
         for name, cell in figures[section].items():

@@ -100,3 +100,25 @@ def test_receiver_refuses_unknown_port_and_connection_keeps_retrying(hosts: Host
     assert frames_in(rec)["frames_in"] == 0
     assert pub.command("exit", timeout=2.0)["ok"] is True
     assert pub.wait_exit() == 0
+
+
+def test_hosts_with_data_keys_authenticate_and_take_new_keys(hosts: HostPool) -> None:
+    """Two hosts with the old key talk; the receiver alone moves to a new key and the sender
+    cannot get in any more; once the sender has the new key too, frames flow again."""
+    old, new = "11" * 32, "22" * 32
+    keys = {"SDRPEER_DATA_KEYS": old}
+    pub, _ = hosts.ready(f"{FX}:Counter", "--param", "rate=200", name="Pub", env=keys)
+    rec, rec_hello = hosts.ready(f"{FX}:Recorder", name="Rec", env=keys)
+    to = f"tcp://{rec_hello['data']['tcp']}"
+    assert rec.command("activate")["ok"] is True
+    assert pub.command("connect", conn=conn(to, push="fifo", buffer=64))["ok"] is True
+    assert pub.command("activate")["ok"] is True
+    wait_frames(rec, 20)
+    assert rec.command("data_keys", keys=[new])["ok"] is True
+    assert rec.command("data_keys", keys=["zz"])["error"] == "'keys': expected hex strings"
+    assert pub.command("disconnect", conn_id="c1")["ok"] is True
+    assert pub.command("connect", conn=conn(to, "c2", push="fifo", buffer=64))["ok"] is True
+    before = frames_in(rec)["frames_in"]
+    assert frames_in(rec)["frames_in"] == before  # the old key no longer opens a connection
+    assert pub.command("data_keys", keys=[new, old])["ok"] is True
+    wait_frames(rec, before + 20)  # the sender redials with the new key

@@ -37,6 +37,7 @@ import logging
 import os
 
 from sdrpeer.dataplane.address import parse_address
+from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, AckOffer, FrameError, Hello
 from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.pending import PolicyLike
@@ -69,6 +70,7 @@ class Connection:
         shm_size: int = DEFAULT_SIZE,
         window: tuple[int, int] | None = (DEFAULT_FRAMES, DEFAULT_BYTES),
         drain_timeout: float = 2.0,
+        auth: DataAuth | None = None,
     ) -> None:
         parse_address(to)
         self.conn_id = conn_id
@@ -85,6 +87,8 @@ class Connection:
         """(frames, bytes) kept until acknowledged; None: no acknowledgements asked for."""
         self.drain_timeout = drain_timeout
         """Seconds a repointed link may take to deliver its last acknowledgements."""
+        self.auth = auth
+        """The host's data keys (sdrpeer.dataplane.auth); with any, links are authenticated."""
         self.session = os.urandom(8).hex()
         """This sender's stream session (a receiver tells a replay from a restart by it)."""
         self.reconnects = 0
@@ -286,6 +290,7 @@ class Connection:
                         self._lost,
                         shm_size=self.shm_size,
                         on_ack=self._acked,
+                        auth=self.auth,
                     )
             except (OSError, TimeoutError, FrameError, ValueError) as exc:
                 self.last_error = f"{to}: {exc}"

@@ -65,6 +65,8 @@ class Hello:
     """A shared-memory ring the sender offers (sdrpeer.dataplane.shm), or None."""
     ack: AckOffer | None = None
     """The sender keeps frames until they are acknowledged (sdrpeer.dataplane.retention)."""
+    auth: bytes | None = None
+    """The sender's nonce when it authenticates (sdrpeer.dataplane.auth)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,6 +96,8 @@ def encode_hello(hello: Hello) -> bytes:
         obj["shm"] = hello.shm
     if hello.ack is not None:
         obj["ack"] = hello.ack.to_map()
+    if hello.auth is not None:
+        obj["auth"] = hello.auth
     return _packb(obj)
 
 
@@ -121,20 +125,46 @@ def parse_hello(obj: object) -> Hello:
         if type(nxt) is not int or nxt < 1:
             raise FrameError("malformed", "hello: 'ack.next' must be an integer >= 1")
         offer = AckOffer(session, nxt)
-    return Hello(obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"), offer)
+    auth = obj.get("auth")
+    if auth is not None and (type(auth) is not bytes or len(auth) != 16):
+        raise FrameError("malformed", "hello: 'auth' must be a 16-byte nonce")
+    return Hello(obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"), offer, auth)
 
 
-def encode_reply(error: str | None, *, shm: bool = False, ack: bool = False) -> bytes:
-    """The receiver's answer to a hello: ok (saying whether it took the offered ring and
-    whether it acknowledges), or the error that closes the connection."""
+def encode_reply(
+    error: str | None,
+    *,
+    shm: bool = False,
+    ack: bool = False,
+    auth: tuple[bytes, bytes] | None = None,
+) -> bytes:
+    """The receiver's answer to a hello: ok (saying whether it took the offered ring, whether
+    it acknowledges, and its nonce and proof when it authenticates), or the error that closes
+    the connection."""
     if error is not None:
         return _packb({"ok": False, "error": error})
-    reply: dict[str, bool] = {"ok": True}
+    reply: dict[str, object] = {"ok": True}
     if shm:
         reply["shm"] = True
     if ack:
         reply["ack"] = True
+    if auth is not None:
+        reply["auth"] = list(auth)
     return _packb(reply)
+
+
+def reply_auth(obj: object) -> tuple[bytes, bytes] | None:
+    """(nonce, proof) of a reply that has them; None without; FrameError when malformed."""
+    auth = obj.get("auth") if isinstance(obj, dict) else None
+    if auth is None:
+        return None
+    if (
+        not isinstance(auth, list)
+        or len(auth) != 2
+        or not all(type(x) is bytes and len(x) == 16 for x in auth)
+    ):
+        raise FrameError("malformed", "reply: 'auth' must be [nonce, proof] of 16 bytes each")
+    return auth[0], auth[1]
 
 
 def parse_reply(obj: object) -> str | None:

@@ -32,7 +32,15 @@ from typing import Any, Final
 import msgpack
 
 from sdrpeer.dataplane.address import parse_address
-from sdrpeer.dataplane.frames import FrameDecoder, FrameError, Hello, encode_hello, parse_reply
+from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.frames import (
+    FrameDecoder,
+    FrameError,
+    Hello,
+    encode_hello,
+    parse_reply,
+    reply_auth,
+)
 from sdrpeer.dataplane.shm import SenderRing
 
 _SNDBUF: Final = 4 * 1024 * 1024
@@ -51,8 +59,8 @@ class Link(asyncio.Protocol):
         self.on_lost = on_lost
         self.on_ack = on_ack
         loop = asyncio.get_running_loop()
-        self.reply: asyncio.Future[tuple[str | None, bool, bool]] = loop.create_future()
-        """The receiver's answer: (error or None, whether it took the ring, whether it acks)."""
+        self.reply: asyncio.Future[tuple[str | None, dict[str, Any]]] = loop.create_future()
+        """The receiver's answer: (error or None, the reply map)."""
         self.acks = False
         """True when the receiver acknowledges frames."""
         self.closed: asyncio.Future[None] = loop.create_future()
@@ -98,8 +106,8 @@ class Link(asyncio.Protocol):
             if obj is None:
                 return
             error = parse_reply(obj)
-            shm = isinstance(obj, dict) and obj.get("shm") is True
-            self.reply.set_result((error, shm, isinstance(obj, dict) and obj.get("ack") is True))
+            assert isinstance(obj, dict)  # parse_reply checked it
+            self.reply.set_result((error, obj))
         except FrameError as exc:
             self.reply.set_exception(exc)
             self._decoder = None
@@ -179,9 +187,13 @@ async def dial(
     *,
     shm_size: int,
     on_ack: Callable[[int], None] | None = None,
+    auth: DataAuth | None = None,
 ) -> Link:
     """Open a link to `to` and get the receiver's ok (bound it with `asyncio.timeout`);
-    FrameError("refused") with the receiver's error, OSError when it cannot be reached."""
+    FrameError("refused") with the receiver's error (or when it does not prove it holds a data
+    key, with `auth`), OSError when it cannot be reached."""
+    nonce = auth.nonce() if auth is not None and auth.enabled else None
+    hello = replace(hello, auth=nonce)
     kind, host, port = parse_address(to)
     loop = asyncio.get_running_loop()
     ring: SenderRing | None = None
@@ -201,23 +213,45 @@ async def dial(
             ring = SenderRing.create(shm_size) if shm_size > 0 else None
         offer: Any = None if ring is None else ring.offer_map()
         link.transport.write(encode_hello(replace(hello, shm=offer)))
-        error, took_ring, acks = await link.reply
+        error, reply = await link.reply
     except BaseException:
         if link is not None:
             link.transport.abort()
         if ring is not None:
             ring.close()
         raise
+    took_ring = reply.get("shm") is True
     if ring is not None:
         ring.unlink()
         if took_ring and error is None:
             link.use_ring(ring)
         else:
             ring.close()
+    if error is None and auth is not None and nonce is not None:
+        error = _prove(link, auth, nonce, hello, reply)
     if error is not None:
         link.transport.close()
         raise FrameError("refused", error)
-    if acks and hello.ack is not None:
+    if reply.get("ack") is True and hello.ack is not None:
         link.use_acks()
     link.take_early()
     return link
+
+
+def _prove(
+    link: Link, auth: DataAuth, nonce: bytes, hello: Hello, reply: dict[str, Any]
+) -> str | None:
+    """Check the receiver's proof and write ours; the error when the receiver's does not hold."""
+    try:
+        theirs = reply_auth(reply)
+    except FrameError as exc:
+        return str(exc)
+    if theirs is None:
+        return "the receiver did not authenticate (it has no data key)"
+    key = auth.check_receiver(nonce, theirs[0], hello.conn, theirs[1])
+    if key is None:
+        return "the receiver's proof does not hold under our data keys"
+    names = (hello.conn, hello.in_port, hello.from_)
+    proof = auth.sender_proof(key, theirs[0], nonce, names)
+    link.transport.write(msgpack.packb({"auth": proof}))
+    return None

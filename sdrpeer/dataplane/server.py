@@ -38,10 +38,12 @@ from typing import Any, Final, Protocol, cast
 import msgpack
 
 from sdrpeer.dataplane.address import format_tcp
+from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import (
     DEFAULT_MAX_FRAME,
     PROTOCOL_VERSION,
     FrameError,
+    Hello,
     encode_reply,
     parse_hello,
 )
@@ -97,6 +99,7 @@ class DataServer:
         max_connections: int = 256,
         hello_timeout: float = 10.0,
         shm: bool = True,
+        auth: DataAuth | None = None,
     ) -> None:
         self.resolve = resolve
         self.tcp_host = tcp_host
@@ -107,9 +110,12 @@ class DataServer:
         self.hello_timeout = hello_timeout
         self.shm = shm
         """Take the shared-memory rings senders on this machine offer."""
+        self.auth = auth
+        """The host's data keys: with any, only senders that prove they hold one get in."""
         self.counters: Counter[str] = Counter()
-        """accepted, rejected (hello refused or over the limit), refused_<reason>, deliver_error,
-        shm (connections that took a shared-memory ring)."""
+        """accepted, rejected (hello refused or over the limit), refused_<reason> (refused_auth:
+        a hello or proof without a valid data key), deliver_error, shm (connections that took a
+        shared-memory ring), acked (acknowledged streams)."""
         self.bytes_in: Counter[str] = Counter()
         """Bytes received after the hello, by in-port name (for the port's `bytes_in`)."""
         self._servers: list[asyncio.Server] = []
@@ -178,6 +184,7 @@ class _Receiver(asyncio.BufferedProtocol):
         self.ring: ReceiverRing | None = None
         self.acking: AckingPort | None = None
         """The port, when this stream is acknowledged."""
+        self._proving: tuple[Hello, InPortLike, bool, bytes] | None = None  # hello answered
         self._last_seq = 0  # the highest seq delivered on this socket
         self._eof = False  # the sender ended its side; we close once all is acknowledged
         self._credited = 0
@@ -290,18 +297,23 @@ class _Receiver(asyncio.BufferedProtocol):
             self._last_seq = max(self._last_seq, frames[-1][0])
 
     def _hello(self) -> bool:
-        """Handle the hello if it has arrived; True when frames may follow."""
+        """Handle the hello (and, when we authenticate, the sender's proof behind it) once it
+        has arrived; True when frames may follow."""
+        if self._proving is not None:
+            return self._proof()
         obj = self.reader.first_map()
         if obj is None:
             return False
-        if self._timer is not None:
-            self._timer.cancel()
         hello = parse_hello(obj)
         self.conn = hello.conn
         error = None
         port = None
+        auth = self.server.auth
         if hello.version != PROTOCOL_VERSION:
             error = f"protocol version {hello.version} not supported (this is {PROTOCOL_VERSION})"
+        elif auth is not None and auth.enabled and hello.auth is None:
+            error = "this receiver only takes authenticated connections (a data key's nonce)"
+            self.server.counters["refused_auth"] += 1
         else:
             port = self.server.resolve(hello.in_port)
             if port is None:
@@ -310,12 +322,51 @@ class _Receiver(asyncio.BufferedProtocol):
         if error is None and hello.shm is not None and self.server.shm:
             self._attach(hello.shm)
         acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
-        self.transport.write(encode_reply(error, shm=self.ring is not None, ack=acks))
+        proof = None
+        if error is None and auth is not None and auth.enabled and hello.auth is not None:
+            nonce = auth.nonce()
+            proof = (nonce, auth.receiver_proof(hello.auth, nonce, hello.conn))
+        reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof)
+        self.transport.write(reply)
         if error is not None or port is None:
             self.server.counters["rejected"] += 1
             self.server._report("rejected", hello.conn, error or "")
             self.transport.close()
             return False
+        self._proving = (hello, port, acks, proof[0] if proof is not None else b"")
+        return self._proof() if proof is not None else self._open()
+
+    def _proof(self) -> bool:
+        """The sender's proof, the first map after our reply; True once it holds."""
+        assert self._proving is not None
+        obj = self.reader.first_map()
+        if obj is None:
+            return False
+        hello, _, _, nonce = self._proving
+        auth = self.server.auth
+        assert auth is not None
+        proof = obj.get("auth") if isinstance(obj, dict) else None
+        names = (hello.conn, hello.in_port, hello.from_)
+        if (
+            type(proof) is not bytes
+            or hello.auth is None
+            or not auth.check_sender(nonce, hello.auth, names, proof)
+        ):
+            self._proving = None
+            self.server.counters["refused_auth"] += 1
+            self.server.counters["rejected"] += 1
+            self.server._report("refused_auth", hello.conn, "the sender's proof does not hold")
+            self.abort()
+            return False
+        return self._open()
+
+    def _open(self) -> bool:
+        """The connection is accepted: frames go to the port from now on."""
+        assert self._proving is not None
+        hello, port, acks, _ = self._proving
+        self._proving = None
+        if self._timer is not None:
+            self._timer.cancel()
         self.port = port
         self.in_port = hello.in_port
         if acks and hello.ack is not None:
@@ -389,6 +440,9 @@ class _Receiver(asyncio.BufferedProtocol):
     def connection_lost(self, exc: Exception | None) -> None:
         if self._timer is not None:
             self._timer.cancel()
+        if self._proving is not None and self._proving[3]:  # left without proving itself
+            self._proving = None
+            self.server.counters["refused_auth"] += 1
         if self.acking is not None:
             self.acking.detach_stream(self.conn, self._ack)
             self.acking = None

@@ -20,6 +20,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from sdrpeer.dataplane import Connection
+from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.errors import SdrpeerError
 from sdrpeer.host import control, handoff
 from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
@@ -64,8 +65,11 @@ class HostedInstance:
         report: Report,
         *,
         clock: Callable[[], float] = time.time,
+        auth: DataAuth | None = None,
     ) -> None:
         self.name = name
+        self.auth = auth if auth is not None else DataAuth(())
+        """The data keys of this host's connections, both ways (sdrpeer.dataplane.auth)."""
         self.component = component
         self.runner = runner
         self.report = report
@@ -83,6 +87,7 @@ class HostedInstance:
             "connect": self._connect,
             "disconnect": self._disconnect,
             "repoint": self._repoint,
+            "data_keys": self._data_keys,
         }
         self._blob_handlers: dict[str, Callable[[control.Command], Awaitable[bytes | None]]] = {
             "snapshot": lambda c: handoff.snapshot(self.runner, c),
@@ -162,7 +167,9 @@ class HostedInstance:
         except (ValueError, TypeError, SdrpeerError) as exc:
             raise CommandError(f"conn 'policy': {exc}") from None
         try:
-            connection = Connection(conn_id, to, in_port, f"{self.name}.{out}", policy)
+            connection = Connection(
+                conn_id, to, in_port, f"{self.name}.{out}", policy, auth=self.auth
+            )
         except ValueError as exc:
             raise CommandError(f"conn 'to': {exc}") from None
         connection.start()
@@ -194,6 +201,18 @@ class HostedInstance:
         except ValueError as exc:
             raise CommandError(f"'to': {exc}") from None
         log.info("connection %s repointed to %s", conn_id, to)
+
+    async def _data_keys(self, msg: control.Message) -> None:
+        """New data keys (the agent's keys rotated): every later handshake uses them."""
+        keys = _field(msg, "keys", list)
+        try:
+            parsed = [bytes.fromhex(k) for k in keys if isinstance(k, str)]
+        except ValueError:
+            raise CommandError("'keys': expected hex strings") from None
+        if len(parsed) != len(keys) or not all(16 <= len(k) <= 64 for k in parsed):
+            raise CommandError("'keys': expected hex strings of 16 to 64 bytes")
+        self.auth.keys[:] = parsed
+        log.info("data keys updated: %d key(s)", len(parsed))
 
     async def close_connections(self) -> None:
         """Detach and close every outgoing connection."""

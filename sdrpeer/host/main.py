@@ -23,6 +23,8 @@ import sys
 import time
 from dataclasses import dataclass, field
 
+from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
+from sdrpeer.datakeys import keys_from_env
 from sdrpeer.errors import SdrpeerError
 from sdrpeer.host import control
 from sdrpeer.host.loader import LoadError, load_component_class
@@ -51,6 +53,8 @@ class HostConfig:
     """Where the data server listens for TCP (`SDRPEER_DATA_HOST`)."""
     run_dir: str | None = None
     """Directory for the Unix data socket (`SDRPEER_RUN_DIR`), None for a temporary one."""
+    data_keys: tuple[bytes, ...] = ()
+    """Keys data connections are authenticated with (`SDRPEER_DATA_KEYS`); none: open."""
 
 
 def parse_args(argv: list[str], env: dict[str, str]) -> HostConfig:
@@ -73,7 +77,12 @@ def parse_args(argv: list[str], env: dict[str, str]) -> HostConfig:
             control_fd = int(fd_text)
         except ValueError:
             parser.error(f"SDRPEER_CONTROL_FD={fd_text!r} is not a file descriptor number")
+    try:
+        data_keys = tuple(keys_from_env(env.get(DATA_KEYS_ENV)))
+    except ValueError as exc:
+        parser.error(str(exc))
     return HostConfig(
+        data_keys=data_keys,
         target=args.target,
         params=params,
         name=args.name or env.get("SDRPEER_INSTANCE", ""),

@@ -23,6 +23,7 @@ from typing import Any
 
 from sdrpeer.control_parts import parts
 from sdrpeer.dataplane import DataServer
+from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.host import control
 from sdrpeer.host.instance import HostedInstance, Report, maybe_await
 from sdrpeer.host.main import (
@@ -63,9 +64,13 @@ class Host:
             report: Report = self.channel.send
         else:
             report = _no_report  # standalone: state changes are logged by the instance
-        self.inst = HostedInstance(self.name, component, runner, report, clock=now)
+        auth = DataAuth(self.config.data_keys)
+        self.inst = HostedInstance(self.name, component, runner, report, clock=now, auth=auth)
         server = DataServer(
-            self.inst.in_port, tcp_host=self.config.data_host, unix_path=self._unix_path()
+            self.inst.in_port,
+            tcp_host=self.config.data_host,
+            unix_path=self._unix_path(),
+            auth=auth,
         )
         await maybe_await(server.start())
         data = dict(server.addresses)

@@ -70,6 +70,8 @@ class InstanceManager:
         self.before_stop: Callable[[str], Awaitable[None]] | None = None
         """Awaited before an ACTIVE instance is stopped (errors are logged, the stop goes on)."""
         self.before_stop_timeout = 2.0
+        self.data_keys: tuple[bytes, ...] = ()
+        """What new hosts authenticate data connections with (`set_data_keys` on rotation)."""
         self.reconciler = Reconciler()
         self._desired: dict[str, InstanceSpec] = {}
         self._sups: dict[str, Supervisor] = {}
@@ -218,6 +220,7 @@ class InstanceManager:
                     self._changed,
                     on_fault=lambda s, kind, detail: self.on_fault(s.name, kind, detail),
                     on_problem=lambda s, cause: self.on_instance_problem(s.name, cause),
+                    data_keys=lambda: self.data_keys,
                 )
                 self._sups[a.instance] = sup
             sup.spec = spec
@@ -245,6 +248,24 @@ class InstanceManager:
         elif a.kind == "disconnect" and conn is not None:
             sup.connections.pop(conn.id, None)
             await sup.command("disconnect", conn_id=conn.id)
+
+    def set_data_keys(self, keys: tuple[bytes, ...]) -> None:
+        """New data keys (a key rotation): for hosts started from now on, and sent to every
+        running one (`data_keys` command; a host that misses it keeps its old keys)."""
+        self.data_keys = keys
+        wire = [k.hex() for k in keys]
+        for sup in self._sups.values():
+            if sup.running:
+                task = asyncio.get_running_loop().create_task(self._give_keys(sup, wire))
+                self._actions.add(task)
+                task.add_done_callback(self._actions.discard)
+
+    @staticmethod
+    async def _give_keys(sup: Supervisor, wire: list[str]) -> None:
+        try:
+            await sup.command("data_keys", keys=wire)
+        except CommandError as e:
+            log.warning("%s: data keys not updated: %s", sup.name, e)
 
     async def _quiesce(self, sup: Supervisor) -> None:
         """Deactivate an instance about to stop, so that the state it hands over is the last

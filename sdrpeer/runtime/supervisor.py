@@ -25,13 +25,15 @@ import socket
 import subprocess
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import psutil
 
+from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
+from sdrpeer.datakeys import keys_to_env
 from sdrpeer.errors import ConfigError
 from sdrpeer.runtime import problems
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
@@ -101,6 +103,7 @@ class Supervisor:
         *,
         on_fault: Callable[[Supervisor, str, str], None] = lambda s, k, d: None,
         on_problem: Callable[[Supervisor, str], None] = lambda s, c: None,
+        data_keys: Callable[[], Sequence[bytes]] = tuple,
     ) -> None:
         self.spec = spec
         self.data_dir = data_dir
@@ -109,6 +112,8 @@ class Supervisor:
         self.on_fault = on_fault
         """Called at once with (self, kind, detail) for every fault the component reports."""
         self.on_problem = on_problem
+        self.data_keys = data_keys
+        """The data keys a new host gets (SDRPEER_DATA_KEYS; sdrpeer.dataplane.auth)."""
         """Called at once with (self, cause): component_error or crashed (runtime.problems)."""
         self.faults: deque[problems.Fault] = deque(maxlen=config.max_faults)
         """The last faults reported, oldest first."""
@@ -276,6 +281,10 @@ class Supervisor:
             data_host=self.config.data_host,
             run_dir=self._run_dir,
         )
+        keys = self.data_keys()
+        env.pop(DATA_KEYS_ENV, None)
+        if keys:
+            env[DATA_KEYS_ENV] = keys_to_env(keys)
         out = open_log(self.data_dir, self.name, argv)
         self._spawned = asyncio.get_running_loop().time()
         try:

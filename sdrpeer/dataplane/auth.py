@@ -1,0 +1,94 @@
+"""Authenticated data connections: both ends prove they hold a data key of the cluster.
+
+How it works (docs/protocol.md section 2, "Authentication"): the agent derives one data key
+from each key of its cluster keyring (sdrpeer.datakeys) and gives them to its hosts
+(SDRPEER_DATA_KEYS, hex, the signing key first; a running host gets new ones with the
+`data_keys` command when the agent's keys rotate). A sender with keys puts a fresh random nonce
+in its hello; the receiver answers with its own nonce and a MAC over both (proving it holds a
+key); the sender checks it under every key it has and writes, before any frame, a MAC over both
+nonces and the connection's names under the key that matched (proving it holds one too). Nonces
+are fresh on both sides, so a captured handshake replayed opens nothing. A receiver with keys
+refuses a hello without a nonce; a sender with keys refuses a receiver that does not prove
+itself. The MAC is keyed BLAKE2b (16 bytes), which needs no OpenSSL (hosts stay small).
+
+Frames after the handshake are not MACed: this keeps a neighbour without the key from opening
+connections, not an on-path attacker from altering a TCP stream (docs/security.md).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Final
+
+try:  # the C module itself: `hashlib` would load OpenSSL into every host (sdrpeer.host.lean)
+    from _blake2 import blake2b
+except ImportError:  # pragma: no cover - an interpreter without it
+    from hashlib import blake2b
+
+__all__ = ["DataAuth"]
+
+NONCE: Final = 16
+MAC: Final = 16
+
+
+def _mac(key: bytes, *parts: bytes) -> bytes:
+    h = blake2b(key=key, digest_size=MAC)
+    for part in parts:
+        h.update(len(part).to_bytes(4, "big"))
+        h.update(part)
+    return h.digest()
+
+
+def _same(a: bytes, b: bytes) -> bool:
+    """Constant-time comparison (hmac.compare_digest would load OpenSSL into every host)."""
+    if len(a) != len(b):
+        return False
+    diff = 0
+    for x, y in zip(a, b, strict=True):
+        diff |= x ^ y
+    return diff == 0
+
+
+class DataAuth:
+    """The data keys of one host (mutable: the agent rotates them)."""
+
+    def __init__(self, keys: Sequence[bytes]) -> None:
+        self.keys: list[bytes] = list(keys)
+        """The keys, the signing one first; empty: connections are not authenticated."""
+
+    @property
+    def enabled(self) -> bool:
+        """True when this host authenticates its connections."""
+        return bool(self.keys)
+
+    @staticmethod
+    def nonce() -> bytes:
+        """A fresh random nonce."""
+        return os.urandom(NONCE)
+
+    def receiver_proof(self, sender_nonce: bytes, nonce: bytes, conn: str) -> bytes:
+        """The receiver's MAC (its signing key) for its reply."""
+        return _mac(self.keys[0], b"receiver", sender_nonce, nonce, conn.encode())
+
+    def check_receiver(
+        self, sender_nonce: bytes, nonce: bytes, conn: str, proof: bytes
+    ) -> bytes | None:
+        """The key under which the receiver's proof holds, or None."""
+        for key in self.keys:
+            if _same(_mac(key, b"receiver", sender_nonce, nonce, conn.encode()), proof):
+                return key
+        return None
+
+    @staticmethod
+    def sender_proof(key: bytes, nonce: bytes, sender_nonce: bytes, names: Sequence[str]) -> bytes:
+        """The sender's MAC over both nonces and the connection's names."""
+        return _mac(key, b"sender", nonce, sender_nonce, *(n.encode() for n in names))
+
+    def check_sender(
+        self, nonce: bytes, sender_nonce: bytes, names: Sequence[str], proof: bytes
+    ) -> bool:
+        """True when the sender's proof holds under one of our keys."""
+        return any(
+            _same(self.sender_proof(key, nonce, sender_nonce, names), proof) for key in self.keys
+        )
