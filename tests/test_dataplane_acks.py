@@ -208,11 +208,11 @@ async def new_instance(made: list[Instance], tmp: Path, *, consume: bool = True)
     return await inst.start(consume=consume)
 
 
-async def publish(conn: Connection, n: int) -> None:
+async def publish(conn: Connection, n: int, every: int = 50) -> None:
     for value in range(1, n + 1):
         while not conn.offer(value):
             await conn.drain()
-        if value % 50 == 0:
+        if value % every == 0:
             await asyncio.sleep(0.001)  # a sensor's pace, so moves land mid-stream
 
 
@@ -274,13 +274,16 @@ async def test_a_reconnect_to_the_same_instance_replays_without_duplicates(
     inst = await new_instance(instances, tmp_path)
     conn = Connection("c", inst.address("tcp"), "in", "cam.out", make_policy("fifo", 64, "block"))
     conn.start()
-    sender = asyncio.create_task(publish(conn, n))
+    sender = asyncio.create_task(publish(conn, n, every=10))
     try:
-        for _ in range(3):
-            await until(lambda: conn.unacked > 0, within=10)
+        for k in range(3):
+            await until(lambda k=k: len(inst.taken) > (k + 1) * 300)  # type: ignore[misc]
+            await inst.deactivate()  # frames arriving now are delivered, not taken
+            await until(lambda: conn.unacked > 0)
             for receiver in list(inst.server._receivers):
                 receiver.abort()  # the network broke; the instance lives on
-            await until(lambda: conn.reconnects > 0, within=10)
+            await until(lambda k=k: conn.reconnects > k, within=10)  # type: ignore[misc]
+            inst.resume()
         await asyncio.wait_for(sender, 30)
         await until(lambda: len(inst.taken) >= n, within=20)
         assert inst.taken == list(range(1, n + 1))

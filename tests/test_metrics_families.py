@@ -59,6 +59,8 @@ MORE = {
     "sdrpeer_port_dropped": "counter",
     "sdrpeer_port_lost": "counter",
     "sdrpeer_port_refused": "counter",
+    "sdrpeer_port_replayed": "counter",
+    "sdrpeer_port_duplicates": "counter",
     "sdrpeer_election_epoch": "gauge",
     "sdrpeer_allocator": "gauge",
     "sdrpeer_is_allocator": "gauge",

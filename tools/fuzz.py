@@ -14,7 +14,8 @@ Gossip inputs are signed with the cluster key after mutation (with a fresh seque
 they get past authentication and reach the parser, the replay guard, the membership core (which
 processes them, with its timers run every 64 inputs) and the record decoder. Control inputs go
 to the agent's report decoder and to the host's command decoder; stream inputs to the receiver's
-hello and frame decoder. An input may be refused only with the surface's own error
+hello (with acknowledgement and authentication fields) and frame decoder, and replies to the
+sender's reply parser. An input may be refused only with the surface's own error
 (WireError, ControlProtocolError, FrameError), which is counted by reason; any other exception
 is a crash (reported with the input). Also reported: the slowest input (a hang would show) and
 the peak RSS of this process.
@@ -39,12 +40,16 @@ import msgpack
 
 from sdrpeer.control_stream import ControlProtocolError, encode
 from sdrpeer.dataplane.frames import (
+    AckOffer,
     FrameDecoder,
     FrameError,
     Hello,
     encode_frame,
     encode_hello,
+    encode_reply,
     parse_hello,
+    parse_reply,
+    reply_auth,
 )
 from sdrpeer.errors import WireError
 from sdrpeer.gossip.config import preset
@@ -305,11 +310,23 @@ class StreamSurface:
 
     def __init__(self, rng: random.Random) -> None:
         self.rng = rng
-        hello = encode_hello(Hello("c1", "image", "Cam.image", {"push": "fifo", "buffer": 4}))
+        policy = {"push": "fifo", "buffer": 4}
+        hello = encode_hello(Hello("c1", "image", "Cam.image", policy))
+        full = encode_hello(
+            Hello("c1", "image", "Cam.image", policy, ack=AckOffer("ab12", 7), auth=b"n" * 16)
+        )
         frames = b"".join(
             encode_frame(i, v) for i, v in enumerate([1, b"\x00" * 300, "x", {"a": [1]}], 1)
         )
-        self.seeds = [hello + frames, hello, hello + encode_frame(1, b"\x01" * 5000)]
+        reply = encode_reply(None, shm=True, ack=True, auth=(b"r" * 16, b"p" * 16))
+        proof = msgpack.packb({"auth": b"p" * 16})
+        self.seeds = [
+            hello + frames,
+            hello,
+            hello + encode_frame(1, b"\x01" * 5000),
+            full + proof + frames,
+            reply + msgpack.packb([5]) + msgpack.packb(123),
+        ]
         self.reasons: Counter[str] = Counter()
 
     def input(self, kind: int) -> bytes:
@@ -334,7 +351,12 @@ class StreamSurface:
             if first is None:
                 first = decoder.next_map()
             if first is not None:
-                parse_hello(first)
+                if isinstance(first, dict) and "ok" in first:  # a reply (the sender's side)
+                    parse_reply(first)
+                    reply_auth(first)
+                else:
+                    parse_hello(first)
+                    decoder.next_map()  # a proof, when the hello has auth
                 decoder.frames()
         except FrameError as exc:
             self.reasons[exc.reason] += 1

@@ -136,7 +136,7 @@ def render(registry: CollectorRegistry) -> bytes:
 
 
 INSTANCE_STATES = ("active", "inactive", "error", "created", "starting", "stopping", "stopped")
-PORT_COUNTERS = ("frames", "bytes", "dropped", "lost", "refused")
+PORT_COUNTERS = ("frames", "bytes", "dropped", "lost", "refused", "replayed", "duplicates")
 
 
 def instance_families(members: list[dict[str, Any]]) -> Iterator[Metric]:
