@@ -16,10 +16,11 @@ import logging
 import os
 import random
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_keys, agent_views
-from sdrpeer.agent_files import load_token, write_agent_json
+from sdrpeer.agent_files import load_token, seq_start, write_agent_json
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
@@ -141,9 +142,11 @@ class Agent:
             self.host = HostMetrics()
         gossip_preset = preset(cfg.preset)
         host, port = parse_hostport(cfg.bind)
-        codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=time.time_ns() // 1000)
+        first = seq_start(cfg.data_dir, time.time_ns() // 1000)
+        codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=first)
+        skew = self.robot.file.clock_skew if self.robot is not None else 0.0
         self.shell, addr = await open_gossip(
-            host, port, codec, self._on_core_event, self._on_reject
+            host, port, codec, self._on_core_event, self._on_reject, wall=_skewed(skew)
         )
         self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
         self.shell.attach(self.core)
@@ -443,3 +446,10 @@ def _trap_json(trap: Any) -> dict[str, Any]:
 
 def _states_of(record: RobotRecord) -> list[tuple[str, str, str]]:
     return [(i.name, i.state, i.role) for i in record.instances]
+
+
+def _skewed(skew: float) -> Callable[[], float]:
+    """The wall clock of a robot whose clock is `skew` seconds off (virtual robots)."""
+    if not skew:
+        return time.time
+    return lambda: time.time() + skew

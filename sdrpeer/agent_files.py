@@ -1,8 +1,11 @@
-"""The agent's files in its data directory: the API token and agent.json.
+"""The agent's files in its data directory: the API token, agent.json and the seq floor.
 
 How it works: the token is read from `--token-file` (which must exist) or `DATA_DIR/token`,
 generated (mode 0600) when absent. `agent.json` (name, gossip and API addresses, pid) is written
-atomically once both sockets are bound, so a lab or a person can find the agent.
+atomically once both sockets are bound, so a lab or a person can find the agent. `seq_start`
+picks the first gossip seq: wall-clock microseconds, but never below `DATA_DIR/seq.floor`, which
+it then moves `SEQ_RESERVE` past what it returns — so seqs keep rising across restarts even when
+the clock went back (receivers would refuse lower ones as replays).
 """
 
 from __future__ import annotations
@@ -13,6 +16,23 @@ import secrets
 from pathlib import Path
 
 from sdrpeer.errors import ConfigError
+
+SEQ_RESERVE = 10**12
+"""Seqs one run may use (a million datagrams a second for eleven days)."""
+
+
+def seq_start(data_dir: Path, now_us: int) -> int:
+    """The first gossip seq of this run (see the module docstring)."""
+    path = data_dir / "seq.floor"
+    try:
+        floor = int(path.read_text().strip())
+    except (OSError, ValueError):
+        floor = 0
+    start = max(now_us, floor)
+    tmp = path.with_name("seq.floor.tmp")
+    tmp.write_text(f"{start + SEQ_RESERVE}\n")
+    os.replace(tmp, path)
+    return start
 
 
 def load_token(data_dir: Path, token_file: Path | None) -> str:

@@ -87,6 +87,11 @@ def agent_view(self: Agent) -> dict[str, Any]:
             "bytes_out_per_s": round(self._rate["out_s"], 1),
         },
         "rejected": {r: codec.get(r, 0) for r in REASONS},
+        "clock": {
+            "offset_ms": self.shell.codec.clock_offset_ms,
+            "advanced": codec.get("clock_advanced", 0),
+            "nudges": c["clock_nudges"],
+        },
         "members": states,
         "gossip": dict(self.core.counters),
     }

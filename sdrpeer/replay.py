@@ -2,7 +2,9 @@
 
 How it works (as IPsec's anti-replay window): for each sender we keep its highest seq and a
 bitmap of the `REPLAY_WINDOW` seqs below it. A datagram is refused as "stale" when its timestamp
-is outside the freshness window of our clock, and as "replayed" when its seq was seen already or
+is older than the freshness window before `now` (the cluster time: sdrpeer.wire's codec keeps
+it at the newest authenticated timestamp it has seen, so a datagram dated *later* than now is
+not refused — a replay can only be older), and as "replayed" when its seq was seen already or
 is older than the window. Time is passed in; at most `max_senders` senders are tracked (the least
 recently seen is forgotten first), so a flood of forged names cannot exhaust memory.
 """
@@ -33,7 +35,7 @@ class ReplayGuard:
 
     def check(self, sender: str, seq: int, ts_ms: int, now_ms: int) -> str | None:
         """None if acceptable (the seq is then recorded), else "stale" or "replayed"."""
-        if abs(now_ms - ts_ms) > self.freshness_ms:
+        if now_ms - ts_ms > self.freshness_ms:
             return "stale"
         state = self._senders.get(sender)
         if state is None:

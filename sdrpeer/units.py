@@ -119,6 +119,11 @@ def parse_duration(value: object) -> float:
     return _parse(value, _DURATION, "a duration", "6s", signed=False)
 
 
+def parse_offset(value: object) -> float:
+    """`-1h`, `90s`, `-250ms`, `0` -> seconds, either sign (a clock's error)."""
+    return _parse(value, _DURATION, "a time offset", "-1h", signed=True)
+
+
 def parse_distance(value: object) -> float:
     """`30m`, `2.5km`, `40cm`, `30` -> metres."""
     return _parse(value, _DISTANCE, "a distance", "30m", signed=False)

@@ -18,9 +18,20 @@ A datagram is a fixed 39-byte header followed by a msgpack body::
   `encoded_size(u)` of its updates.
 
 Checks on receive, cheapest and safest first: size, magic, version, key id + MAC (before the body
-is parsed), body (every field type-checked), then freshness (|now - ts| within the window) and
-replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs, as in IPsec). A failure raises
-`WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else escapes `decode`.
+is parsed), body (every field type-checked), then freshness (ts no older than the window before
+the cluster time, below) and replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs,
+as in IPsec).
+
+Time: robots far from any NTP server cannot keep their clocks within the window of each other,
+so a codec keeps a *cluster time*: its own wall clock plus `clock_offset_ms`, which only grows,
+to the newest timestamp of any authenticated datagram it accepted (a hybrid logical clock on
+wall time: the fleet runs on its fastest clock). Datagrams are stamped with it. A robot whose
+clock is behind adopts the fleet's time with the first datagram it hears; a replay, always older
+than the newest traffic, stays stale. `Codec.stale_hint` tells the shell when an authenticated
+datagram was stale — its sender is behind and catches up as soon as we send it anything.
+
+A failure raises `WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else
+escapes `decode`.
 
 Keys: a `Keyring` holds the cluster keys; the first signs, every one verifies. To rotate: add the
 new key second everywhere (both verify), then move it first everywhere (it signs, the old still
@@ -361,9 +372,15 @@ class Codec:
         self.guard = ReplayGuard(freshness_s, max_senders)
         """Freshness and per-sender replay window of incoming datagrams."""
         self.counters: Counter[str] = Counter()
-        """Rejections by reason, plus "accepted", "sent", "unknown_update" (updates skipped) and
-        "send_oversized" (packets too big to encode)."""
+        """Rejections by reason, plus "accepted", "sent", "unknown_update" (updates skipped),
+        "send_oversized" (packets too big to encode) and "clock_advanced" (datagrams that moved
+        the cluster time on)."""
         self._seq = seq_start
+        self.clock_offset_ms = 0
+        """How far the cluster time is ahead of this robot's wall clock (only grows)."""
+        self.stale_hint = False
+        """True after `decode` refused an authenticated datagram as stale (its sender's clock is
+        behind the cluster's: the shell may send it something to catch up with)."""
         self._unpacker = _new_unpacker(max_datagram)
         self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
 
@@ -383,7 +400,7 @@ class Codec:
             raise ValueError(f"codec of {self.sender!r} cannot send as {packet.sender!r}")
         seq = int(now_wall * 1e6) if self._seq is None else self._seq
         self._seq = seq + 1
-        body = packet_body(packet, seq, int(now_wall * 1000))
+        body = packet_body(packet, seq, int(now_wall * 1000) + self.clock_offset_ms)
         if len(body) + HEADER_SIZE > self.max_datagram:
             self.counters["send_oversized"] += 1
             raise WireError(
@@ -399,6 +416,7 @@ class Codec:
 
     def decode(self, data: bytes | bytearray | memoryview, now_wall: float) -> Packet:
         """The packet in datagram `data`, received at `now_wall`; else WireError (counted)."""
+        self.stale_hint = False
         if type(data) is not bytes:
             data = bytes(data)  # a bytearray or memoryview: key ids must be hashable
         size = len(data)
@@ -426,9 +444,14 @@ class Codec:
             if isinstance(e, Exception):  # msgpack's ValueError, OutOfData, ...: all malformed
                 raise self.reject("malformed", f"{type(e).__name__}: {e}"[:120]) from None
             raise
-        reason = self.guard.check(packet.sender, seq, ts_ms, int(now_wall * 1000))
+        cluster_ms = int(now_wall * 1000) + self.clock_offset_ms
+        reason = self.guard.check(packet.sender, seq, ts_ms, cluster_ms)
         if reason is not None:
+            self.stale_hint = reason == "stale" and self.keyring is not None
             raise self.reject(reason, f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms")
+        if ts_ms > cluster_ms:  # a clock ahead of ours: the fleet's time moves on
+            self.clock_offset_ms += ts_ms - cluster_ms
+            self.counters["clock_advanced"] += 1
         self.counters["accepted"] += 1
         if unknown:
             self.counters["unknown_update"] += unknown

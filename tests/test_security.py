@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from sdrpeer.agent_files import SEQ_RESERVE, seq_start
 from sdrpeer.config import AgentConfig
 from sdrpeer.keyring import Keyring
 from sdrpeer.wire import format_key
@@ -98,3 +99,33 @@ def test_no_state_change_without_the_token_and_loopback_by_default(cluster: Real
     assert agent.member("robot-1")["metrics"]["rssi_dbm"] == before  # nothing changed
     code, _ = http("POST", agent.api + "/v1/robot", {"rssi": "-80dBm"}, agent.token)
     assert code == 200
+
+
+def test_robots_with_clocks_an_hour_apart_form_one_fleet(cluster: RealCluster) -> None:
+    """No NTP on the Moon: robot-2's clock is an hour slow, robot-3's an hour fast. Both join,
+    everyone ends on the fastest clock, and nobody is refused as stale any more."""
+    for name, skew in (("robot-2", "-1h"), ("robot-3", "1h")):
+        (cluster.root / f"{name}.yaml").write_text(
+            f"name: {name}\nmemory: 4GB\ncpus: 4\nbattery: 100%\nrssi: -45dBm\nclock_skew: {skew}\n"
+        )
+    agents = cluster.start_many(3)
+    offsets = {a.name: a.agent_info()["clock"]["offset_ms"] for a in agents}
+    assert offsets["robot-3"] < 5_000  # the fastest clock: its own time is the fleet's
+    assert 3_595_000 < offsets["robot-1"] < 3_605_000
+    assert 7_195_000 < offsets["robot-2"] < 7_205_000
+    stale = {a.name: a.agent_info()["rejected"]["stale"] for a in agents}
+    time.sleep(3.0)
+    assert {a.name: a.agent_info()["rejected"]["stale"] for a in agents} == stale  # no more
+    assert all(set(a.states().values()) == {"alive"} for a in agents)
+
+
+def test_gossip_seqs_keep_rising_across_restarts_even_when_the_clock_went_back(
+    tmp_path: Path,
+) -> None:
+    first = seq_start(tmp_path, 5_000_000)
+    assert first == 5_000_000
+    again = seq_start(tmp_path, 1_000)  # restarted with a clock far behind
+    assert again == first + SEQ_RESERVE  # above anything the first run could have used
+    assert seq_start(tmp_path, again + 10 * SEQ_RESERVE) == again + 10 * SEQ_RESERVE
+    (tmp_path / "seq.floor").write_text("garbage")
+    assert seq_start(tmp_path, 7) == 7  # an unreadable floor: the clock alone

@@ -5,7 +5,10 @@ by the wire codec, then handed to the core with `loop.time()`; whatever the core
 encoded and sent, its events are passed to `on_event`, and a single `call_at` timer is re-armed
 at the core's next deadline. A datagram that fails authentication or parsing is dropped and
 counted by reason, with at most one log line per reason every ten seconds: a hostile peer can
-cost us a few microseconds per datagram, never a crash or a stall.
+cost us a few microseconds per datagram, never a crash or a stall. An authenticated datagram
+refused as stale comes from a robot whose clock is behind the cluster time (sdrpeer.wire): it
+gets an empty gossip back, at most every 5 s per address, so it catches up even when nobody
+else talks to it (a robot joining with a wrong clock).
 """
 
 from __future__ import annotations
@@ -20,11 +23,13 @@ from typing import cast
 from sdrpeer.errors import WireError
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent
-from sdrpeer.gossip.messages import Addr
+from sdrpeer.gossip.messages import Addr, Gossip
 from sdrpeer.wire import Codec
 
 log = logging.getLogger("sdrpeer.gossip")
 _LOG_EVERY = 10.0
+_NUDGE_EVERY = 5.0
+_NUDGE_MAX = 1024
 
 
 class GossipShell(asyncio.DatagramProtocol):
@@ -50,6 +55,7 @@ class GossipShell(asyncio.DatagramProtocol):
         self._deadline = float("inf")
         self.counters: Counter[str] = Counter()
         self._logged: dict[str, float] = {}
+        self._nudged: dict[Addr, float] = {}
 
     # asyncio.DatagramProtocol
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -65,6 +71,8 @@ class GossipShell(asyncio.DatagramProtocol):
         try:
             packet = self.codec.decode(data, self._wall())
         except WireError as e:
+            if self.codec.stale_hint:
+                self._nudge(addr)
             self._rejected(e, addr)
             return
         src: Addr = (str(addr[0]), int(addr[1]))
@@ -152,6 +160,22 @@ class GossipShell(asyncio.DatagramProtocol):
             self.core.handle_timer(self._loop.time())
             self.flush()
 
+    def _nudge(self, addr: tuple[str | int, ...]) -> None:
+        """An authenticated sender whose clock is behind the cluster's: send it an empty gossip
+        (it adopts our time from its timestamp), at most once per `_NUDGE_EVERY` per address."""
+        now = self._loop.time()
+        dest: Addr = (str(addr[0]), int(addr[1]))
+        if now - self._nudged.get(dest, float("-inf")) < _NUDGE_EVERY:
+            return
+        if len(self._nudged) >= _NUDGE_MAX:
+            self._nudged.clear()
+        self._nudged[dest] = now
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            return
+        transport.sendto(self.codec.encode(Gossip(self.codec.sender), self._wall()), dest)
+        self.counters["clock_nudges"] += 1
+
     def _rejected(self, e: WireError, addr: tuple[str | int, ...]) -> None:
         self._since_logged[e.reason] += 1
         if not self._log_once(
@@ -183,11 +207,13 @@ async def open_gossip(
     codec: Codec,
     on_event: Callable[[CoreEvent], None],
     on_reject: Callable[[str, str, int], None] | None = None,
+    *,
+    wall: Callable[[], float] = time.time,
 ) -> tuple[GossipShell, Addr]:
     """Bind a UDP socket and return the shell and the address actually bound."""
     loop = asyncio.get_running_loop()
     transport, shell = await loop.create_datagram_endpoint(
-        lambda: GossipShell(codec, on_event, on_reject=on_reject), local_addr=(host, port)
+        lambda: GossipShell(codec, on_event, wall, on_reject=on_reject), local_addr=(host, port)
     )
     sockname = transport.get_extra_info("sockname")
     return shell, (str(sockname[0]), int(sockname[1]))

@@ -114,6 +114,7 @@ _FILE_FIELDS: dict[str, Callable[[object], Any]] = {
     "rssi": units.parse_power,
     "rssi_noise": _noise,
     "priority": _priority,
+    "clock_skew": units.parse_offset,
 }
 
 
@@ -130,6 +131,8 @@ class RobotFile:
     rssi: float | None = None
     rssi_noise: float = 0.0
     priority: int = 0
+    clock_skew: float = 0.0
+    """Seconds this robot's clock is off true time (its gossip sees time.time() + skew)."""
 
     @classmethod
     def load(cls, path: Path | str) -> RobotFile:
