@@ -20,7 +20,13 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_keys, agent_views
-from sdrpeer.agent_files import load_token, seq_start, write_agent_json
+from sdrpeer.agent_files import (
+    load_clock_offset,
+    load_token,
+    save_clock_offset,
+    seq_start,
+    write_agent_json,
+)
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
@@ -79,6 +85,7 @@ class Agent:
         self.metrics: Metrics | None = None
         self.api_url: str | None = None
         self.shell: GossipShell | None = None
+        self._saved_offset = 0  # the cluster-time offset last written to the data dir
         self.core: Membership | None = None
         self.robot: VirtualRobot | None = None
         self.host: HostMetrics | None = None
@@ -144,6 +151,8 @@ class Agent:
         host, port = parse_hostport(cfg.bind)
         first = seq_start(cfg.data_dir, time.time_ns() // 1000)
         codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=first)
+        if self.keyring is not None:
+            codec.clock_offset_ms = self._saved_offset = load_clock_offset(cfg.data_dir)
         skew = self.robot.file.clock_skew if self.robot is not None else 0.0
         self.shell, addr = await open_gossip(
             host, port, codec, self._on_core_event, self._on_reject, wall=_skewed(skew)
@@ -230,6 +239,10 @@ class Agent:
                     self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
             self.instances.sample()
             self._publish()
+            offset = self.shell.codec.clock_offset_ms if self.shell is not None else 0
+            if offset != self._saved_offset:
+                save_clock_offset(self.config.data_dir, offset)
+                self._saved_offset = offset
             if self.coordinator is not None and self.metrics is not None:
                 self.coordinator.local.sample(self.metrics.mem_free, self.metrics.cpu_pct)
 

@@ -5,7 +5,8 @@ generated (mode 0600) when absent. `agent.json` (name, gossip and API addresses,
 atomically once both sockets are bound, so a lab or a person can find the agent. `seq_start`
 picks the first gossip seq: wall-clock microseconds, but never below `DATA_DIR/seq.floor`, which
 it then moves `SEQ_RESERVE` past what it returns — so seqs keep rising across restarts even when
-the clock went back (receivers would refuse lower ones as replays).
+the clock went back (receivers would refuse lower ones as replays). `clock.offset` keeps the
+gossip codec's cluster-time offset (sdrpeer.wire) across restarts.
 """
 
 from __future__ import annotations
@@ -59,3 +60,19 @@ def write_agent_json(data_dir: Path, name: str, addr: tuple[str, int], api: str 
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(info))
     tmp.replace(path)
+
+
+def load_clock_offset(data_dir: Path) -> int:
+    """The cluster-time offset (ms) this robot last ran with (0 when none is recorded)."""
+    try:
+        return max(0, int((data_dir / "clock.offset").read_text().strip()))
+    except (OSError, ValueError):
+        return 0
+
+
+def save_clock_offset(data_dir: Path, offset_ms: int) -> None:
+    """Record the cluster-time offset (atomically), for the next start."""
+    path = data_dir / "clock.offset"
+    tmp = path.with_name("clock.offset.tmp")
+    tmp.write_text(f"{offset_ms}\n")
+    os.replace(tmp, path)

@@ -62,6 +62,9 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--loopback", action="store_true", help="no namespaces (no partitions, loss)"
     )
     chaos.add_argument("--json", type=Path, metavar="FILE", help="also write the report as JSON")
+    chaos.add_argument(
+        "--keep", type=Path, metavar="DIR", help="run the lab in DIR and keep its logs there"
+    )
     chaos.set_defaults(func=cmd_lab_chaos)
     status = lab_sub.add_parser("status", parents=[where], help="the lab's agents")
     status.add_argument("--json", action="store_true", help="print JSON")
@@ -226,6 +229,7 @@ def cmd_lab_chaos(args: argparse.Namespace) -> int:
         minutes=args.minutes,
         seed=args.seed,
         netns=False if args.loopback else None,
+        lab_dir=args.keep,
     )
     report = run_chaos(options, _say)
     _say(format_report(report))

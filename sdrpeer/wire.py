@@ -25,7 +25,10 @@ as in IPsec).
 Time: robots far from any NTP server cannot keep their clocks within the window of each other,
 so a codec keeps a *cluster time*: its own wall clock plus `clock_offset_ms`, which only grows,
 to the newest timestamp of any authenticated datagram it accepted (a hybrid logical clock on
-wall time: the fleet runs on its fastest clock). Datagrams are stamped with it. A robot whose
+wall time: the fleet runs on its fastest clock). Datagrams are stamped with it; the agent keeps
+the offset in its data directory, so a restarted robot does not fall back to its own clock.
+Without keys (`--insecure`) nothing moves the time and a datagram more than the window in the
+future is refused too, as before; a timestamp past `MAX_TS_MS` is always refused. A robot whose
 clock is behind adopts the fleet's time with the first datagram it hears; a replay, always older
 than the newest traffic, stays stale. `Codec.stale_hint` tells the shell when an authenticated
 datagram was stale — its sender is behind and catches up as soon as we send it anything.
@@ -347,6 +350,10 @@ def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, i
 # The codec
 
 
+MAX_TS_MS = 1 << 52
+"""Timestamps beyond this (year ~142,000) are refused: cluster time must stay encodable."""
+
+
 class Codec:
     """Encodes this robot's packets into datagrams and checks and decodes incoming ones."""
 
@@ -445,11 +452,15 @@ class Codec:
                 raise self.reject("malformed", f"{type(e).__name__}: {e}"[:120]) from None
             raise
         cluster_ms = int(now_wall * 1000) + self.clock_offset_ms
+        if ts_ms > MAX_TS_MS or (
+            self.keyring is None and ts_ms - cluster_ms > self.guard.freshness_ms
+        ):  # unauthenticated datagrams do not move the time: a future one is refused
+            raise self.reject("stale", f"from {packet.sender!r}: ts {ts_ms} ms in the future")
         reason = self.guard.check(packet.sender, seq, ts_ms, cluster_ms)
         if reason is not None:
             self.stale_hint = reason == "stale" and self.keyring is not None
             raise self.reject(reason, f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms")
-        if ts_ms > cluster_ms:  # a clock ahead of ours: the fleet's time moves on
+        if ts_ms > cluster_ms and self.keyring is not None:  # a clock ahead: time moves on
             self.clock_offset_ms += ts_ms - cluster_ms
             self.counters["clock_advanced"] += 1
         self.counters["accepted"] += 1

@@ -77,34 +77,36 @@ def test_ack_state_waits_for_older_frames_before_a_refused_one() -> None:
 # ---- the InPort's side ---------------------------------------------------------------------
 
 
-def port_with_stream(policy: ConnectorPolicy | None = None) -> tuple[InPortRuntime, list[int]]:
+def port_with_stream(
+    policy: ConnectorPolicy | None = None,
+) -> tuple[InPortRuntime, list[int], str]:
     port = InPortRuntime("in", policy or ConnectorPolicy("fifo", 100, "block"))
     acks: list[int] = []
-    port.attach_stream("c", "session-1", 1, acks.append)
-    return port, acks
+    key = port.attach_stream("c", "session-1", 1, acks.append)
+    return port, acks, key
 
 
 def test_inport_acknowledges_what_the_component_took() -> None:
-    port, acks = port_with_stream()
+    port, acks, key = port_with_stream()
     for seq in range(1, 6):
-        port.deliver(seq * 10, seq, "c")
+        port.deliver(seq * 10, seq, key)
     assert acks == []  # delivered is not taken
     assert port.get_nowait() == 10
     assert port.get_nowait() == 20
     assert acks == [1, 2]  # no loop running: sent at once
     assert port.read() == 50
     assert acks[-1] == 5
-    assert port.acked("c") == 5
+    assert port.acked(key) == 5
 
 
 def test_inport_acknowledges_what_its_policy_discarded() -> None:
-    port, acks = port_with_stream(ConnectorPolicy("fifo", 2, "overwrite"))
+    port, acks, key = port_with_stream(ConnectorPolicy("fifo", 2, "overwrite"))
     for seq in (1, 2, 3):
-        port.deliver(seq, seq, "c")
+        port.deliver(seq, seq, key)
     assert acks == [1]  # 1 was evicted by 3: it can never be needed again
-    port, acks = port_with_stream(ConnectorPolicy("fifo", 2, "drop"))
+    port, acks, key = port_with_stream(ConnectorPolicy("fifo", 2, "drop"))
     for seq in (1, 2, 3):
-        port.deliver(seq, seq, "c")
+        port.deliver(seq, seq, key)
     assert acks == []  # 3 was refused, but 1 and 2 still wait
     assert port.get_nowait() == 1
     assert port.get_nowait() == 2
@@ -112,32 +114,67 @@ def test_inport_acknowledges_what_its_policy_discarded() -> None:
 
 
 def test_inport_drops_a_replay_within_a_session_and_restarts_on_a_new_one() -> None:
-    port, acks = port_with_stream()
+    port, acks, key = port_with_stream()
     for seq in (1, 2, 3):
-        port.deliver(seq, seq, "c")
+        port.deliver(seq, seq, key)
     port.get_nowait()
     again: list[int] = []
-    port.attach_stream("c", "session-1", 2, again.append)  # the same sender reconnects
+    assert port.attach_stream("c", "session-1", 2, again.append) == key  # a reconnect
     assert again == [1]  # told at once where the port is
     for seq in (2, 3, 4):
-        port.deliver(seq, seq, "c")
+        port.deliver(seq, seq, key)
     assert port.duplicates == 2
     assert port.lost == 0
     assert [port.get_nowait() for _ in range(3)] == [2, 3, 4]
     assert again[-1] == 4
     assert acks == [1]
     fresh: list[int] = []
-    port.attach_stream("c", "session-2", 1, fresh.append)  # the sender restarted
-    port.deliver("x", 1, "c")
+    new_key = port.attach_stream("c", "session-2", 1, fresh.append)  # the sender restarted
+    port.deliver("x", 1, new_key)
     assert port.get_nowait() == "x"
     assert fresh == [1]
     assert port.duplicates == 2
 
 
+def test_two_senders_of_one_connection_never_mix() -> None:
+    """An old copy of the sender still flushing (session 1) while its successor (session 2)
+    starts: each has its own seqs, duplicates and acks."""
+    port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
+    old_acks: list[int] = []
+    new_acks: list[int] = []
+    old = port.attach_stream("c", "s1", 1, old_acks.append)
+    for seq in range(1, 901):
+        port.deliver(seq, seq, old)
+    new = port.attach_stream("c", "s2", 1, new_acks.append)
+    port.deliver("n1", 1, new)
+    port.deliver(901, 901, old)  # the old socket still delivering
+    port.deliver("n2", 2, new)
+    assert port.duplicates == 0
+    assert port.lost == 0
+    taken = [port.get_nowait() for _ in range(port.qsize())]
+    assert taken[-3:] == ["n1", 901, "n2"]
+    assert old_acks[-1] == 901
+    assert new_acks[-1] == 2
+
+
+def test_sessions_of_a_connection_are_bounded() -> None:
+    port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
+    for k in range(20):
+        key = port.attach_stream("c", f"s{k}", 1, lambda seq: None)
+        port.detach_stream(key, lambda seq: None)  # not the one attached: stays attached
+    assert len(port._conns) == 20  # attached ones are kept
+    port2 = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
+    for k in range(20):
+        send = list[int]().append
+        key = port2.attach_stream("c", f"s{k}", 1, send)
+        port2.detach_stream(key, send)
+    assert len(port2._conns) <= 5
+
+
 def test_inport_counts_a_gap_from_the_first_seq_announced() -> None:
     port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
-    port.attach_stream("c", "s", 5, lambda seq: None)
-    port.deliver("a", 7, "c")
+    key = port.attach_stream("c", "s", 5, lambda seq: None)
+    port.deliver("a", 7, key)
     assert port.lost == 2
 
 
@@ -165,6 +202,7 @@ class Instance:
         return f"{kind}://{self.server.addresses[kind]}"
 
     def resume(self) -> None:
+        self.server.set_taking(True)
         self._consumer = asyncio.create_task(self._consume())
 
     async def _consume(self) -> None:
@@ -174,6 +212,8 @@ class Instance:
                 await asyncio.sleep(0)  # a component that takes its time
 
     async def deactivate(self) -> None:
+        """What a host does when its component leaves ACTIVE."""
+        self.server.set_taking(False)
         if self._consumer is not None:
             self._consumer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -240,6 +280,33 @@ async def test_planned_moves_lose_and_duplicate_nothing(
         assert sorted(taken()) == list(range(1, n + 1))  # every frame once, none lost
         assert conn.replayed > 0  # the moves did leave frames to replay
         assert all(inst.port.duplicates == 0 for inst in instances)
+    finally:
+        sender.cancel()
+        await conn.close(linger=0.5)
+
+
+async def test_a_deactivated_receiver_lets_its_sender_go_at_once(
+    instances: list[Instance], tmp_path: Path
+) -> None:
+    """The old instance was deactivated for a move: when its sender re-points, it sends the
+    acks due and closes at once, so the new instance gets the rest without the drain wait."""
+    first = await new_instance(instances, tmp_path)
+    conn = Connection("c", first.address("tcp"), "in", "cam.out", make_policy("fifo", 64, "block"))
+    conn.start()
+    sender = asyncio.create_task(publish(conn, 100_000, every=10))
+    try:
+        await until(lambda: len(first.taken) > 200)
+        await first.deactivate()
+        await until(lambda: conn.unacked > 0)
+        second = await new_instance(instances, tmp_path)
+        t0 = asyncio.get_running_loop().time()
+        conn.repoint(second.address("tcp"))
+        await until(lambda: len(second.taken) > 0, within=3)
+        assert asyncio.get_running_loop().time() - t0 < conn.drain_timeout / 2
+        sender.cancel()
+        await until(lambda: conn.unacked == 0 and not conn.pending, within=5)
+        taken = first.taken + second.taken
+        assert sorted(taken) == list(range(1, len(taken) + 1))  # none lost, none twice
     finally:
         sender.cancel()
         await conn.close(linger=0.5)

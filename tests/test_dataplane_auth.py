@@ -33,13 +33,15 @@ def test_keys_travel_as_hex_and_bad_ones_are_named() -> None:
 def test_proofs_hold_only_under_the_same_key_and_names() -> None:
     a, b = DataAuth([K1]), DataAuth([K2, K1])
     sn, rn = a.nonce(), a.nonce()
-    assert b.check_receiver(sn, rn, "c", a.receiver_proof(sn, rn, "c")) == K1
-    assert DataAuth([K2]).check_receiver(sn, rn, "c", a.receiver_proof(sn, rn, "c")) is None
-    assert b.check_receiver(sn, rn, "d", a.receiver_proof(sn, rn, "c")) is None
-    names = ("c", "in", "x.out")
+    names = ("c", "in", "x.out", "session", "7")
+    assert b.check_receiver(sn, rn, names, a.receiver_proof(sn, rn, names)) == K1
+    assert DataAuth([K2]).check_receiver(sn, rn, names, a.receiver_proof(sn, rn, names)) is None
+    moved = ("c", "in", "x.out", "session", "9")  # ack.next rewritten on the way
+    assert b.check_receiver(sn, rn, moved, a.receiver_proof(sn, rn, names)) is None
     proof = DataAuth.sender_proof(K1, rn, sn, names)
     assert a.check_sender(rn, sn, names, proof)
-    assert not a.check_sender(rn, sn, ("c", "in", "y.out"), proof)
+    assert not a.check_sender(rn, sn, ("c", "in", "y.out", "session", "7"), proof)
+    assert not a.check_sender(rn, sn, moved, proof)
     assert not a.check_sender(a.nonce(), sn, names, proof)  # another receiver nonce: a replay
 
 
@@ -122,7 +124,8 @@ async def test_a_replayed_handshake_opens_nothing(rx: Rx) -> None:
             decoder.feed(await reader.read(4096))
         assert isinstance(reply, dict)
         their_nonce = reply["auth"][0]
-        made = proof or DataAuth.sender_proof(K1, their_nonce, nonce, ("c", "in", "x.out"))
+        names = ("c", "in", "x.out", "", "")
+        made = proof or DataAuth.sender_proof(K1, their_nonce, nonce, names)
         writer.write(msgpack.packb({"auth": made}) + msgpack.packb([1, "frame"]))
         await writer.drain()
         captured.append(made)

@@ -33,6 +33,7 @@ from sdrpeer.gossip.messages import (
 )
 from sdrpeer.wire import (
     HEADER_SIZE,
+    MAX_TS_MS,
     PROTOCOL_VERSION,
     REASONS,
     REPLAY_WINDOW,
@@ -361,6 +362,23 @@ def test_unauthenticated_stale_datagrams_give_no_hint() -> None:
     a, b = pair(None, None)
     rejects(b, a.encode(Gossip("a"), T), "stale", T + 60)
     assert not b.stale_hint
+
+
+def test_without_keys_nothing_moves_the_time_and_the_future_is_refused() -> None:
+    a, b = pair(None, None)
+    rejects(b, a.encode(Gossip("a"), T + 60), "stale", T)  # anyone could have dated it
+    assert b.decode(a.encode(Gossip("a"), T + 20), T) == Gossip("a")  # within the window
+    assert b.clock_offset_ms == 0
+
+
+def test_an_absurd_timestamp_is_refused_and_the_codec_keeps_working() -> None:
+    a, b = pair([KEY_A], [KEY_A])
+    rejects(b, a.encode(Gossip("a"), MAX_TS_MS / 1000 + 1), "stale", T)
+    assert b.clock_offset_ms == 0
+    far = a.encode(Gossip("a"), MAX_TS_MS / 1000 - 1)  # the latest time still accepted
+    assert b.decode(far, T) == Gossip("a")
+    assert len(b.encode(Gossip("b"), T)) > 0  # stamping at the far time still encodes
+    rejects(b, a.encode(Gossip("a"), T), "stale", T)  # a key holder set the time (security.md)
 
 
 def test_freshness_window_is_configurable() -> None:

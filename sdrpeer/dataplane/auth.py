@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import Final
+from typing import TYPE_CHECKING, Final
+
+if TYPE_CHECKING:
+    from sdrpeer.dataplane.frames import Hello
 
 try:  # the C module itself: `hashlib` would load OpenSSL into every host (sdrpeer.host.lean)
     from _blake2 import blake2b
@@ -67,16 +70,17 @@ class DataAuth:
         """A fresh random nonce."""
         return os.urandom(NONCE)
 
-    def receiver_proof(self, sender_nonce: bytes, nonce: bytes, conn: str) -> bytes:
+    def receiver_proof(self, sender_nonce: bytes, nonce: bytes, names: Sequence[str]) -> bytes:
         """The receiver's MAC (its signing key) for its reply."""
-        return _mac(self.keys[0], b"receiver", sender_nonce, nonce, conn.encode())
+        return _mac(self.keys[0], b"receiver", sender_nonce, nonce, *(n.encode() for n in names))
 
     def check_receiver(
-        self, sender_nonce: bytes, nonce: bytes, conn: str, proof: bytes
+        self, sender_nonce: bytes, nonce: bytes, names: Sequence[str], proof: bytes
     ) -> bytes | None:
         """The key under which the receiver's proof holds, or None."""
+        parts = [n.encode() for n in names]
         for key in self.keys:
-            if _same(_mac(key, b"receiver", sender_nonce, nonce, conn.encode()), proof):
+            if _same(_mac(key, b"receiver", sender_nonce, nonce, *parts), proof):
                 return key
         return None
 
@@ -92,3 +96,11 @@ class DataAuth:
         return any(
             _same(self.sender_proof(key, nonce, sender_nonce, names), proof) for key in self.keys
         )
+
+
+def proof_names(hello: Hello) -> tuple[str, ...]:
+    """What both proofs cover besides the nonces: the connection, its ports and, for an
+    acknowledged stream, the sender's session and first seq (so neither can be rewritten)."""
+    ack = hello.ack
+    extra = ("", "") if ack is None else (ack.session, str(ack.next))
+    return (hello.conn, hello.in_port, hello.from_, *extra)

@@ -69,7 +69,7 @@ class Connection:
         hello_timeout: float = 5.0,
         shm_size: int = DEFAULT_SIZE,
         window: tuple[int, int] | None = (DEFAULT_FRAMES, DEFAULT_BYTES),
-        drain_timeout: float = 2.0,
+        drain_timeout: float = 5.0,
         auth: DataAuth | None = None,
     ) -> None:
         parse_address(to)
@@ -234,7 +234,10 @@ class Connection:
             old.transport.abort()
         self._draining.clear()
         if link is not None:
-            link.shut()
+            if link.ring is None:
+                link.transport.close()  # what was written still arrives; no ack is awaited
+            else:
+                link.shut()  # the receiver still needs to credit the ring while it reads
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(linger):
                     await link.closed
@@ -301,8 +304,9 @@ class Connection:
                         await self._wake.wait()  # a repoint or close cuts the wait short
                 delay = next_backoff(delay, initial, cap)
                 continue
-            if self.to != to or self._closing:  # repointed while dialing
-                link.shut()
+            if self.to != to or self._closing:  # repointed while dialing: nothing written yet
+                link.on_ack = None
+                link.transport.abort()
                 continue
             delay = initial
             if dropped:

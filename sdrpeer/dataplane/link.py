@@ -32,7 +32,7 @@ from typing import Any, Final
 import msgpack
 
 from sdrpeer.dataplane.address import parse_address
-from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.auth import DataAuth, proof_names
 from sdrpeer.dataplane.frames import (
     FrameDecoder,
     FrameError,
@@ -248,10 +248,10 @@ def _prove(
         return str(exc)
     if theirs is None:
         return "the receiver did not authenticate (it has no data key)"
-    key = auth.check_receiver(nonce, theirs[0], hello.conn, theirs[1])
+    names = proof_names(hello)
+    key = auth.check_receiver(nonce, theirs[0], names, theirs[1])
     if key is None:
         return "the receiver's proof does not hold under our data keys"
-    names = (hello.conn, hello.in_port, hello.from_)
     proof = auth.sender_proof(key, theirs[0], nonce, names)
     link.transport.write(msgpack.packb({"auth": proof}))
     return None

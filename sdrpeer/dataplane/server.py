@@ -38,7 +38,7 @@ from typing import Any, Final, Protocol, cast
 import msgpack
 
 from sdrpeer.dataplane.address import format_tcp
-from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.auth import DataAuth, proof_names
 from sdrpeer.dataplane.frames import (
     DEFAULT_MAX_FRAME,
     PROTOCOL_VERSION,
@@ -72,13 +72,14 @@ class AckingPort(InPortLike, Protocol):
 
     def attach_stream(
         self, conn: str, session: str, next_seq: int, send: Callable[[int], None]
-    ) -> None:
-        """A socket of an acknowledged stream opened; acks go to `send`."""
+    ) -> str:
+        """A socket of an acknowledged stream opened; acks go to `send`; returns the key its
+        frames are delivered under."""
 
-    def detach_stream(self, conn: str, send: Callable[[int], None]) -> None:
+    def detach_stream(self, key: str, send: Callable[[int], None]) -> None:
         """That socket closed."""
 
-    def acked(self, conn: str) -> int:
+    def acked(self, key: str) -> int:
         """The seq up to which the stream's frames were taken."""
 
     def flush_acks(self) -> None:
@@ -112,6 +113,9 @@ class DataServer:
         """Take the shared-memory rings senders on this machine offer."""
         self.auth = auth
         """The host's data keys: with any, only senders that prove they hold one get in."""
+        self.quiesced = False
+        """True while the component takes no frames (not ACTIVE): a sender that ends its side
+        gets the acks due and the close at once, nothing more will be taken (`set_taking`)."""
         self.counters: Counter[str] = Counter()
         """accepted, rejected (hello refused or over the limit), refused_<reason> (refused_auth:
         a hello or proof without a valid data key), deliver_error, shm (connections that took a
@@ -138,6 +142,15 @@ class DataServer:
             unix = await loop.create_unix_server(lambda: _Receiver(self), self.unix_path)
             self._servers.append(unix)
             self._addresses["unix"] = self.unix_path
+
+    def set_taking(self, taking: bool) -> None:
+        """The component takes frames (ACTIVE) or not; when not, every acknowledged stream is
+        told what was taken, and one whose sender already left is closed."""
+        self.quiesced = not taking
+        if taking:
+            return
+        for receiver in list(self._receivers):
+            receiver.quiesce()
 
     @property
     def addresses(self) -> dict[str, str]:
@@ -180,6 +193,8 @@ class _Receiver(asyncio.BufferedProtocol):
         self.transport: asyncio.Transport | None = None
         self.port: InPortLike | None = None
         self.conn = "?"
+        self.key = "?"
+        """What frames are delivered under: the connection id, or its stream's session key."""
         self.in_port = ""
         self.ring: ReceiverRing | None = None
         self.acking: AckingPort | None = None
@@ -260,20 +275,20 @@ class _Receiver(asyncio.BufferedProtocol):
             self._deliver_from_ring(frames)
             return
         deliver = self.port.deliver
-        conn = self.conn
+        conn = self.key
         for seq, value in frames:
             try:
                 deliver(value, seq, conn)
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
-                self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+                self.server._report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
         if frames and self.acking is not None:
             self._last_seq = max(self._last_seq, frames[-1][0])
 
     def _deliver_from_ring(self, frames: list[list[Any]]) -> None:
         """Deliver frames, taking each ``[seq, pos, length]`` value out of the ring just before
         (counted in bytes_in like the socket's bytes)."""
-        ring, port, conn = self.ring, self.port, self.conn
+        ring, port, conn = self.ring, self.port, self.key
         assert ring is not None
         assert port is not None
         bytes_in = self.server.bytes_in
@@ -291,7 +306,7 @@ class _Receiver(asyncio.BufferedProtocol):
                 port.deliver(value, frame[0], conn)
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
-                self.server._report("deliver_error", conn, f"{type(exc).__name__}: {exc}")
+                self.server._report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
             del value  # the next value may reuse its memory
         if frames and self.acking is not None:
             self._last_seq = max(self._last_seq, frames[-1][0])
@@ -305,7 +320,7 @@ class _Receiver(asyncio.BufferedProtocol):
         if obj is None:
             return False
         hello = parse_hello(obj)
-        self.conn = hello.conn
+        self.conn = self.key = hello.conn
         error = None
         port = None
         auth = self.server.auth
@@ -319,13 +334,13 @@ class _Receiver(asyncio.BufferedProtocol):
             if port is None:
                 error = f"unknown in-port {hello.in_port!r}"
         assert self.transport is not None
-        if error is None and hello.shm is not None and self.server.shm:
+        if error is None and hello.shm is not None and self.server.shm and self._local():
             self._attach(hello.shm)
         acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
         proof = None
         if error is None and auth is not None and auth.enabled and hello.auth is not None:
             nonce = auth.nonce()
-            proof = (nonce, auth.receiver_proof(hello.auth, nonce, hello.conn))
+            proof = (nonce, auth.receiver_proof(hello.auth, nonce, proof_names(hello)))
         reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof)
         self.transport.write(reply)
         if error is not None or port is None:
@@ -346,7 +361,7 @@ class _Receiver(asyncio.BufferedProtocol):
         auth = self.server.auth
         assert auth is not None
         proof = obj.get("auth") if isinstance(obj, dict) else None
-        names = (hello.conn, hello.in_port, hello.from_)
+        names = proof_names(hello)
         if (
             type(proof) is not bytes
             or hello.auth is None
@@ -371,7 +386,8 @@ class _Receiver(asyncio.BufferedProtocol):
         self.in_port = hello.in_port
         if acks and hello.ack is not None:
             self.acking = cast(AckingPort, port)
-            self.acking.attach_stream(hello.conn, hello.ack.session, hello.ack.next, self._ack)
+            ack = hello.ack
+            self.key = self.acking.attach_stream(hello.conn, ack.session, ack.next, self._ack)
             self.server.counters["acked"] += 1
         return True
 
@@ -386,20 +402,37 @@ class _Receiver(asyncio.BufferedProtocol):
 
     def eof_received(self) -> bool | None:
         """The sender ended its side: close now, or once what we delivered is acknowledged."""
-        if self.acking is not None and self.acking.acked(self.conn) < self._last_seq:
+        if self.acking is None:
+            return None
+        self.acking.flush_acks()  # what the component took so far goes out before any close
+        if not self.server.quiesced and self.acking.acked(self.key) < self._last_seq:
             self._eof = True
             return True  # keep the socket open for the acks
         return None
+
+    def quiesce(self) -> None:
+        """Our component stopped taking frames: send the acks due; close if the sender left."""
+        if self.acking is None:
+            return
+        self.acking.flush_acks()
+        if self._eof and self.transport is not None:
+            self.transport.close()
 
     def finish(self) -> None:
         """Close for the server's end: send the acknowledgements due, then close gracefully."""
         acking, self.acking = self.acking, None
         if acking is not None:
             acking.flush_acks()
-            acking.detach_stream(self.conn, self._ack)
+            acking.detach_stream(self.key, self._ack)
         self.port = None
         if self.transport is not None:
             self.transport.close()
+
+    def _local(self) -> bool:
+        """True on a Unix socket (a ring is only for a sender on this machine)."""
+        assert self.transport is not None
+        sock = self.transport.get_extra_info("socket")
+        return sock is not None and sock.family == socket.AF_UNIX
 
     def _attach(self, offer: object) -> None:
         """Map the ring the sender offered; without it the stream carries every value."""
@@ -444,7 +477,7 @@ class _Receiver(asyncio.BufferedProtocol):
             self._proving = None
             self.server.counters["refused_auth"] += 1
         if self.acking is not None:
-            self.acking.detach_stream(self.conn, self._ack)
+            self.acking.detach_stream(self.key, self._ack)
             self.acking = None
         self.port = None
         self.server._receivers.discard(self)

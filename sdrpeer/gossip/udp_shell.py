@@ -124,11 +124,10 @@ class GossipShell(asyncio.DatagramProtocol):
         for dest, packet in core.datagrams_to_send():
             try:
                 data = self.codec.encode(packet, wall)
-            except WireError as e:
+            except Exception as e:  # one bad packet must not stop the shell
                 self.counters["encode_errors"] += 1
-                self._log_once(
-                    "encode:" + e.reason, "cannot encode %s: %s", type(packet).__name__, e
-                )
+                reason = e.reason if isinstance(e, WireError) else type(e).__name__
+                self._log_once("encode:" + reason, "cannot encode %s: %s", type(packet).__name__, e)
                 continue
             if transport is not None and not transport.is_closing():
                 transport.sendto(data, dest)
@@ -173,7 +172,12 @@ class GossipShell(asyncio.DatagramProtocol):
         transport = self._transport
         if transport is None or transport.is_closing():
             return
-        transport.sendto(self.codec.encode(Gossip(self.codec.sender), self._wall()), dest)
+        try:
+            data = self.codec.encode(Gossip(self.codec.sender), self._wall())
+        except Exception:  # a nudge is a courtesy: it never stops the shell
+            self.counters["encode_errors"] += 1
+            return
+        transport.sendto(data, dest)
         self.counters["clock_nudges"] += 1
 
     def _rejected(self, e: WireError, addr: tuple[str | int, ...]) -> None:

@@ -13,6 +13,7 @@ turns either into `reply ok=false`. The data server's `resolve` is `in_port`.
 
 from __future__ import annotations
 
+import asyncio
 import inspect
 import logging
 import time
@@ -70,6 +71,9 @@ class HostedInstance:
         self.name = name
         self.auth = auth if auth is not None else DataAuth(())
         """The data keys of this host's connections, both ways (sdrpeer.dataplane.auth)."""
+        self.on_taking: Callable[[bool], None] | None = None
+        """Told whether the component takes frames now (ACTIVE): the data server's
+        `set_taking`, so a sender that left hears at once what an inactive one never took."""
         self.component = component
         self.runner = runner
         self.report = report
@@ -105,6 +109,8 @@ class HostedInstance:
         if name == self.state and error is None:
             return
         self.state = name
+        if self.on_taking is not None:
+            self.on_taking(name == "ACTIVE")
         text = None if error is None else (str(error) or type(error).__name__)
         log.info("state %s%s", name, f" ({text})" if text else "")
         fault = self.runner.fault if name == "ERROR" else None
@@ -211,15 +217,23 @@ class HostedInstance:
             raise CommandError("'keys': expected hex strings") from None
         if len(parsed) != len(keys) or not all(16 <= len(k) <= 64 for k in parsed):
             raise CommandError("'keys': expected hex strings of 16 to 64 bytes")
+        if not parsed and self.auth.enabled:
+            raise CommandError("'keys': a host with data keys cannot be left without any")
         self.auth.keys[:] = parsed
         log.info("data keys updated: %d key(s)", len(parsed))
 
     async def close_connections(self) -> None:
-        """Detach and close every outgoing connection."""
-        for conn_id, (connection, port) in list(self.connections.items()):
-            del self.connections[conn_id]
-            port.detach(connection)
+        """Detach and close every outgoing connection (all at once: each may linger)."""
+
+        async def close(conn_id: str, connection: Connection) -> None:
             try:
                 await maybe_await(connection.close())
             except Exception:
                 log.exception("closing connection %s", conn_id)
+
+        closing = []
+        for conn_id, (connection, port) in list(self.connections.items()):
+            del self.connections[conn_id]
+            port.detach(connection)
+            closing.append(close(conn_id, connection))
+        await asyncio.gather(*closing)

@@ -72,6 +72,8 @@ class Host:
             unix_path=self._unix_path(),
             auth=auth,
         )
+        self.inst.on_taking = server.set_taking
+        server.set_taking(self.inst.state == "ACTIVE")
         await maybe_await(server.start())
         data = dict(server.addresses)
         if self.channel is not None:

@@ -9,7 +9,8 @@ on the common path, and never raises for a well-typed call. The component reads 
 (newest), `get_nowait()`/`get()`/`async for` (oldest first).
 
 Acknowledged streams (sdrpeer.sdk.acks): a data-plane socket whose sender keeps frames until
-they are acknowledged calls `attach_stream(conn, session, next_seq, send)`. From then on every
+they are acknowledged calls `attach_stream(conn, session, next_seq, send)` and delivers under
+the key it returns (one per sender session). From then on every
 queued value has a tag (the stream's `AckState` and the seq) in `_tags`, parallel to the queue,
 so taking or evicting it moves the stream's acknowledged seq; acknowledgements are sent once per
 event-loop iteration at most (`flush_acks`). Within one session a seq already received is a
@@ -31,6 +32,8 @@ from sdrpeer.sdk.policy import ConnectorPolicy
 __all__ = ["InPortRuntime"]
 
 _NOTHING: Final = object()
+_SESSION_SEP: Final = "\x1f"
+_SESSIONS_KEPT: Final = 4
 
 
 class _Conn:
@@ -172,20 +175,33 @@ class InPortRuntime:
 
     # -- acknowledged streams (see the module doc) -------------------------------------------
 
-    def attach_stream(self, conn: str, session: str, next_seq: int, send: SendAck) -> None:
-        """A socket of an acknowledged stream opened: its acks go to `send` from now on."""
-        c = self._conns.get(conn)
-        a = c.acks if c is not None else None
-        if c is None or a is None or a.session != session:
-            policy = c.policy if c is not None else self.policy
-            c = self._conns[conn] = _Conn(policy, next_seq - 1)
-            a = c.acks = AckState(session, next_seq, send)
+    def attach_stream(self, conn: str, session: str, next_seq: int, send: SendAck) -> str:
+        """A socket of an acknowledged stream opened: its acks go to `send` from now on.
+        Returns the key its frames are delivered under (one per sender session, so two senders
+        of one connection — an old copy still flushing, a new one — never mix)."""
+        key = f"{conn}{_SESSION_SEP}{session}"
+        c = self._conns.get(key)
+        if c is None or c.acks is None:
+            base = self._conns.get(conn)
+            c = self._conns[key] = _Conn(base.policy if base else self.policy, next_seq - 1)
+            c.acks = AckState(session, next_seq, send)
             if self._tags is None:
                 self._tags = deque([None] * len(self._queue))
-            return
-        a.send = send  # the same sender again (a reconnect): tell it where we are
-        a.dirty = True
-        self._schedule_acks(a)
+            self._forget_sessions(conn)
+            return key
+        c.acks.send = send  # the same sender again (a reconnect): tell it where we are
+        c.acks.dirty = True
+        self._schedule_acks(c.acks)
+        return key
+
+    def _forget_sessions(self, conn: str) -> None:
+        """Keep the newest `_SESSIONS_KEPT` sessions of `conn` (older senders are gone)."""
+        prefix = f"{conn}{_SESSION_SEP}"
+        keys = [k for k in self._conns if k.startswith(prefix)]
+        for key in keys[: max(0, len(keys) - _SESSIONS_KEPT)]:
+            acks = self._conns[key].acks
+            if acks is None or acks.send is None:
+                del self._conns[key]
 
     def detach_stream(self, conn: str, send: SendAck) -> None:
         """The socket whose acks went to `send` closed."""
