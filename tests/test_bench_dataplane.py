@@ -28,7 +28,8 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     assert "Targets" in done.stdout
     figures = json.loads(out.read_text())
     assert figures["quick"] is True
-    small = {"sdrpeer_tcp", "sdrpeer_tcp_acked", "sdrpeer_unix", "zmq", "plain_tcp"}
+    small = {"sdrpeer_tcp", "sdrpeer_tcp_acked", "sdrpeer_tcp_inport", "sdrpeer_unix", "zmq"}
+    small |= {"plain_tcp"}
     assert set(figures["small"]) == small | {"plain_tcp_coalesced"}
     assert set(figures["big"]) == small | {"sdrpeer_shm"}
     assert set(figures["rtt"]) == {"sdrpeer_tcp", "plain_tcp", "zmq", "asyncio_raw"}

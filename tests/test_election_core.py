@@ -21,7 +21,7 @@ from sdrpeer.election import (
 )
 from sdrpeer.election.rules import TRANSITIONS, next_role
 
-CONFIG = ElectionConfig(grace=1.0, startup_grace=0.0)
+CONFIG = ElectionConfig(grace=1.0, startup_grace=0.0, rejoin_grace=0.0)
 
 
 def cand(
@@ -134,6 +134,21 @@ def test_startup_grace_holds_a_fresh_robot_back() -> None:
     e.update(100.5, {"a": cand(), "z": cand(priority=-1, state=claim(4, "z"))})
     assert e.leader == "z"
     assert e.next_timer() == math.inf
+
+
+def test_a_robot_restarted_into_a_running_fleet_waits_longer_for_the_allocator() -> None:
+    config = CONFIG.with_(startup_grace=1.5, rejoin_grace=6.0)
+    fresh = Election("a", config, 100.0)
+    fresh.update(100.0, {"a": cand()})
+    assert fresh.next_timer() == 101.5
+    back = Election("a", config, 100.0, known_epoch=7)  # it followed epoch 7 before
+    back.update(100.0, {"a": cand()})
+    assert back.next_timer() == 106.0
+    back.handle_timer(101.5)
+    assert not back.is_leader  # the allocator's claim may still be on its way
+    back.update(104.0, {"a": cand(), "z": cand(priority=-1, state=claim(7, "z"))})
+    assert back.leader == "z"
+    assert not back.is_leader
 
 
 def test_ineligible_or_dead_robots_neither_claim_nor_count_as_above() -> None:

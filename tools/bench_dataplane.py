@@ -16,7 +16,8 @@ with the shared-memory ring turned off (`sdrpeer_unix`), and as a same-robot con
 default (`sdrpeer_shm`: a Unix socket, big values through the ring; 1 MB rows only, since small
 values never take the ring), and over TCP into the SDK's InPort with a consumer taking every
 frame (`sdrpeer_tcp_acked`: the stream a component gets, acknowledged, the sender keeping its
-unacknowledged frames for replay; the other sdrpeer rows count frames at the socket), pyzmq
+unacknowledged frames for replay; `sdrpeer_tcp_inport`: the same without acknowledgements; the
+other sdrpeer rows count frames at the socket), pyzmq
 (PUSH/PULL, REQ/REP; blocking sockets), a plain length-prefixed socket loop (one sendall per
 frame; the receiver parses frames out of a recv_into buffer and makes each a bytes object) and
 the same loop sending frames coalesced by 256. Every cell is the median of --reps runs; the
@@ -59,11 +60,13 @@ RTT_TARGET = 1.3  # sdrpeer p50 <= 1.3x plain socket p50
 # ---- senders (the parent process) ---------------------------------------------------------
 
 
-async def _sdr_send(to: str, n: int, size: int, shm: bool) -> float:
+async def _sdr_send(to: str, n: int, size: int, shm: bool, acks: bool = True) -> float:
     buffer = 4096 if size <= 1024 else 4
     policy = make_policy("fifo", buffer, "block")
     size_shm = DEFAULT_SIZE if shm else 0
     conn = Connection("bench", to, "sink", "bench.out", policy, shm_size=size_shm)
+    if not acks:
+        conn.window = None  # the receiver's InPort would acknowledge: do not ask it to
     conn.start()
     async with asyncio.timeout(10):
         await conn.wait_connected()
@@ -79,14 +82,16 @@ async def _sdr_send(to: str, n: int, size: int, shm: bool) -> float:
 
 def sdr_throughput(kind: str, n: int, size: int) -> float:
     """Seconds the sdrpeer receiver took for n frames of `size` bytes; kind tcp, unix (the
-    socket alone), shm (a Unix socket with the shared-memory ring, the default) or tcp_acked
-    (into the SDK's InPort, taken by a consumer: an acknowledged stream)."""
+    socket alone), shm (a Unix socket with the shared-memory ring, the default), tcp_acked
+    (into the SDK's InPort, taken by a consumer: an acknowledged stream) or tcp_inport (the
+    same without acknowledgements: what the acks cost is the difference)."""
     with tempfile.TemporaryDirectory() as tmp:
-        role = "sdr-inport" if kind == "tcp_acked" else "sdr-sink"
+        role = "sdr-inport" if kind in ("tcp_acked", "tcp_inport") else "sdr-sink"
         peer = Peer(role, n, os.path.join(tmp, "rx.sock"))
         scheme = "unix" if kind in ("unix", "shm") else "tcp"
         to = f"{scheme}://{peer.addresses[scheme]}"
-        start = asyncio.run(_sdr_send(to, n, size, shm=kind == "shm"))
+        acks = kind != "tcp_inport"
+        start = asyncio.run(_sdr_send(to, n, size, shm=kind == "shm", acks=acks))
         return float(peer.finish()["end"]) - start
 
 
@@ -132,6 +137,7 @@ def measure(
     n_small, n_big, m = (20_000, 20, 300) if quick else (300_000, 500, 5000)
     small: dict[str, Callable[[], float]] = {
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_small, SMALL),
+        "sdrpeer_tcp_inport": lambda: sdr_throughput("tcp_inport", n_small, SMALL),
         "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_small, SMALL),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_small, SMALL),
         "zmq": lambda: zmq_throughput(n_small, SMALL),
@@ -140,6 +146,7 @@ def measure(
     }
     big: dict[str, Callable[[], float]] = {
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_big, BIG),
+        "sdrpeer_tcp_inport": lambda: sdr_throughput("tcp_inport", n_big, BIG),
         "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_big, BIG),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_big, BIG),
         "sdrpeer_shm": lambda: sdr_throughput("shm", n_big, BIG),

@@ -22,15 +22,20 @@ class ElectionConfig:
     startup_grace: float = 1.5
     """A freshly started robot claims nothing for this long, so that it first hears the cluster's
     records (the current allocator and the highest epoch) through gossip."""
+    rejoin_grace: float = 6.0
+    """The same for a robot that restarted into a running fleet (it knows an epoch from before):
+    its allocator very likely still is, and on a busy or lossy network its claim may take an
+    anti-entropy round (5 s in `lan`) to arrive; claiming sooner made two allocators whose plans
+    reshuffled the standbys of the whole fleet (seen in the 10-robot chaos soak)."""
     preempt: bool = False
     """When True, an alive, eligible robot ranked above the current allocator takes the role from
     it (with a higher epoch). When False (the default) a healthy allocator keeps the role."""
 
     def __post_init__(self) -> None:
-        if self.grace < 0 or self.startup_grace < 0:
+        if self.grace < 0 or self.startup_grace < 0 or self.rejoin_grace < 0:
             raise ValueError(
-                f"election grace periods must be >= 0 "
-                f"(grace={self.grace}, startup_grace={self.startup_grace})"
+                f"election grace periods must be >= 0 (grace={self.grace}, "
+                f"startup_grace={self.startup_grace}, rejoin_grace={self.rejoin_grace})"
             )
 
     def with_(self, **changes: Any) -> ElectionConfig:
@@ -45,7 +50,7 @@ def lan() -> ElectionConfig:
 
 def fast_test() -> ElectionConfig:
     """Loopback tests and the simulator with the `fast_test` gossip preset (0.05 s rounds)."""
-    return ElectionConfig(grace=0.25, startup_grace=0.75)
+    return ElectionConfig(grace=0.25, startup_grace=0.75, rejoin_grace=1.5)
 
 
 PRESETS = {"lan": lan, "fast_test": fast_test}

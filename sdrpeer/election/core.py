@@ -51,6 +51,7 @@ class Election:
         self.role = Role.FOLLOWER
         """FOLLOWER, WAITING or LEADER (see `rules.py`)."""
         self._started = now
+        self._startup = config.rejoin_grace if known_epoch > 0 else config.startup_grace
         self._max_epoch = known_epoch
         self._adopted = known_epoch
         self._claim_epoch = 0
@@ -189,7 +190,7 @@ class Election:
         )
         # the higher-ranked get their grace counted from when they could first claim: after
         # the startup grace (a fleet booting together), not from our own boot
-        awake = max(self._waiting_since, self._started + self.config.startup_grace)
+        awake = max(self._waiting_since, self._started + self._startup)
         due = awake + above * self.config.grace
         if now >= due:
             self._move("claim")

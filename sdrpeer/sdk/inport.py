@@ -239,13 +239,23 @@ class InPortRuntime:
             self._schedule_acks(a)
 
     def _taken_one(self) -> None:
+        """The oldest queued value left the queue (the hot path of a consumer: inlined)."""
         assert self._tags is not None
         tag = self._tags.popleft()
-        if tag is not None:
-            a = tag[0]
-            a.taken(tag[1])
-            if a.dirty:
-                self._schedule_acks(a)
+        if tag is None:
+            return
+        a, seq = tag
+        was = a.dirty
+        if a.drops:
+            a.taken(seq)
+        else:
+            a.deq += 1
+            if seq <= a.acked:
+                return
+            a.acked = seq
+            a.dirty = True
+        if a.dirty and not was:  # already dirty: already waiting for the next flush
+            self._schedule_acks(a)
 
     def _taken_all(self) -> None:
         tags = self._tags
