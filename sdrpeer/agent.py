@@ -16,17 +16,10 @@ import logging
 import os
 import random
 import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from sdrpeer import agent_keys, agent_views
-from sdrpeer.agent_files import (
-    load_clock_offset,
-    load_token,
-    save_clock_offset,
-    seq_start,
-    write_agent_json,
-)
+from sdrpeer import agent_files, agent_keys, agent_views
+from sdrpeer.agent_files import load_token, write_agent_json
 from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
@@ -149,13 +142,13 @@ class Agent:
             self.host = HostMetrics()
         gossip_preset = preset(cfg.preset)
         host, port = parse_hostport(cfg.bind)
-        first = seq_start(cfg.data_dir, time.time_ns() // 1000)
+        first = agent_files.seq_start(cfg.data_dir, time.time_ns() // 1000)
         codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=first)
         if self.keyring is not None:
-            codec.clock_offset_ms = self._saved_offset = load_clock_offset(cfg.data_dir)
-        skew = self.robot.file.clock_skew if self.robot is not None else 0.0
+            codec.clock.offset_ms = self._saved_offset = agent_files.load_clock_offset(cfg.data_dir)
+        wall = self.robot.file.wall if self.robot is not None else time.time
         self.shell, addr = await open_gossip(
-            host, port, codec, self._on_core_event, self._on_reject, wall=_skewed(skew)
+            host, port, codec, self._on_core_event, self._on_reject, wall=wall
         )
         self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
         self.shell.attach(self.core)
@@ -224,7 +217,7 @@ class Agent:
 
     # ----------------------------------------------------------------- monitoring
     async def _metrics_loop(self) -> None:
-        interval = self.config.metrics_interval
+        interval, cfg_dir = self.config.metrics_interval, self.config.data_dir
         loop = asyncio.get_running_loop()
         t_prev = 0.0
         while True:
@@ -239,10 +232,8 @@ class Agent:
                     self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
             self.instances.sample()
             self._publish()
-            offset = self.shell.codec.clock_offset_ms if self.shell is not None else 0
-            if offset != self._saved_offset:
-                save_clock_offset(self.config.data_dir, offset)
-                self._saved_offset = offset
+            offset = self.shell.codec.clock.offset_ms if self.shell is not None else 0
+            self._saved_offset = agent_files.keep_clock_offset(cfg_dir, offset, self._saved_offset)
             if self.coordinator is not None and self.metrics is not None:
                 self.coordinator.local.sample(self.metrics.mem_free, self.metrics.cpu_pct)
 
@@ -459,10 +450,3 @@ def _trap_json(trap: Any) -> dict[str, Any]:
 
 def _states_of(record: RobotRecord) -> list[tuple[str, str, str]]:
     return [(i.name, i.state, i.role) for i in record.instances]
-
-
-def _skewed(skew: float) -> Callable[[], float]:
-    """The wall clock of a robot whose clock is `skew` seconds off (virtual robots)."""
-    if not skew:
-        return time.time
-    return lambda: time.time() + skew

@@ -70,6 +70,14 @@ def load_clock_offset(data_dir: Path) -> int:
         return 0
 
 
+def keep_clock_offset(data_dir: Path, offset_ms: int, saved_ms: int) -> int:
+    """Record the cluster-time offset for the next start if it moved since `saved_ms`; returns
+    what is recorded now."""
+    if offset_ms != saved_ms:
+        save_clock_offset(data_dir, offset_ms)
+    return offset_ms
+
+
 def save_clock_offset(data_dir: Path, offset_ms: int) -> None:
     """Record the cluster-time offset (atomically), for the next start."""
     path = data_dir / "clock.offset"

@@ -88,7 +88,7 @@ def agent_view(self: Agent) -> dict[str, Any]:
         },
         "rejected": {r: codec.get(r, 0) for r in REASONS},
         "clock": {
-            "offset_ms": self.shell.codec.clock_offset_ms,
+            "offset_ms": self.shell.codec.clock.offset_ms,
             "advanced": codec.get("clock_advanced", 0),
             "nudges": c["clock_nudges"],
         },

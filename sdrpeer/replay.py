@@ -7,12 +7,24 @@ it at the newest authenticated timestamp it has seen, so a datagram dated *later
 not refused — a replay can only be older), and as "replayed" when its seq was seen already or
 is older than the window. Time is passed in; at most `max_senders` senders are tracked (the least
 recently seen is forgotten first), so a flood of forged names cannot exhaust memory.
+
+Time (`ClusterClock`): robots far from any NTP server cannot keep their clocks within the window
+of each other, so the codec keeps a *cluster time*: its own wall clock plus an offset that only
+grows, to the newest timestamp of any authenticated datagram accepted (a hybrid logical clock on
+wall time: the fleet runs on its fastest clock). Datagrams are stamped with it; the agent keeps
+the offset in its data directory, so a restarted robot does not fall back to its own clock. A
+robot whose clock is behind adopts the fleet's time with the first datagram it hears; a replay,
+always older than the newest traffic, stays stale. Without keys nothing moves the time and a
+datagram more than the window in the future is refused too; a timestamp past `MAX_TS_MS` is
+always refused (the time must stay encodable).
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
 
+MAX_TS_MS = 1 << 52
+"""Timestamps beyond this (year ~142,000) are refused."""
 REPLAY_WINDOW = 1024
 """How many seqs below a sender's highest one are remembered (older ones are rejected)."""
 _WINDOW_MASK = (1 << REPLAY_WINDOW) - 1
@@ -55,3 +67,31 @@ class ReplayGuard:
             state[1] = bits | (1 << offset)
         self._senders.move_to_end(sender)
         return None
+
+
+class ClusterClock:
+    """This robot's cluster time (see the module docstring); no clock of its own."""
+
+    __slots__ = ("offset_ms",)
+
+    def __init__(self) -> None:
+        self.offset_ms = 0
+        """How far the cluster time is ahead of this robot's wall clock (only grows)."""
+
+    def now_ms(self, wall: float) -> int:
+        """The cluster time, in ms, at wall-clock time `wall` (seconds)."""
+        return int(wall * 1000) + self.offset_ms
+
+    @staticmethod
+    def too_new(ts_ms: int, now_ms: int, window_ms: int, *, authenticated: bool) -> bool:
+        """True for a timestamp to refuse for being in the future: past `MAX_TS_MS`, or, when
+        nothing vouches for it, more than the window ahead."""
+        return ts_ms > MAX_TS_MS or (not authenticated and ts_ms - now_ms > window_ms)
+
+    def observe(self, ts_ms: int, now_ms: int) -> bool:
+        """An authenticated datagram of `ts_ms` was accepted at `now_ms`: True if it moved the
+        cluster time on."""
+        if ts_ms <= now_ms:
+            return False
+        self.offset_ms += ts_ms - now_ms
+        return True

@@ -22,16 +22,9 @@ is parsed), body (every field type-checked), then freshness (ts no older than th
 the cluster time, below) and replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs,
 as in IPsec).
 
-Time: robots far from any NTP server cannot keep their clocks within the window of each other,
-so a codec keeps a *cluster time*: its own wall clock plus `clock_offset_ms`, which only grows,
-to the newest timestamp of any authenticated datagram it accepted (a hybrid logical clock on
-wall time: the fleet runs on its fastest clock). Datagrams are stamped with it; the agent keeps
-the offset in its data directory, so a restarted robot does not fall back to its own clock.
-Without keys (`--insecure`) nothing moves the time and a datagram more than the window in the
-future is refused too, as before; a timestamp past `MAX_TS_MS` is always refused. A robot whose
-clock is behind adopts the fleet's time with the first datagram it hears; a replay, always older
-than the newest traffic, stays stale. `Codec.stale_hint` tells the shell when an authenticated
-datagram was stale — its sender is behind and catches up as soon as we send it anything.
+Time: timestamps are in cluster time (`replay.ClusterClock`: the wall clock plus an offset that
+only grows to the newest authenticated timestamp accepted), so robots need no common clock;
+`Codec.stale_hint` tells the shell when an authenticated datagram was stale (its sender is behind).
 
 A failure raises `WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else
 escapes `decode`.
@@ -81,7 +74,7 @@ from sdrpeer.keyring import (
     key_id,
     parse_key,
 )
-from sdrpeer.replay import REPLAY_WINDOW, ReplayGuard
+from sdrpeer.replay import REPLAY_WINDOW, ClusterClock, ReplayGuard
 
 __all__ = [  # the keyring and replay guard live in their own modules; re-exported here
     "HEADER_SIZE",
@@ -350,10 +343,6 @@ def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, i
 # The codec
 
 
-MAX_TS_MS = 1 << 52
-"""Timestamps beyond this (year ~142,000) are refused: cluster time must stay encodable."""
-
-
 class Codec:
     """Encodes this robot's packets into datagrams and checks and decodes incoming ones."""
 
@@ -383,11 +372,10 @@ class Codec:
         "send_oversized" (packets too big to encode) and "clock_advanced" (datagrams that moved
         the cluster time on)."""
         self._seq = seq_start
-        self.clock_offset_ms = 0
-        """How far the cluster time is ahead of this robot's wall clock (only grows)."""
+        self.clock = ClusterClock()
+        """This robot's cluster time (`clock.offset_ms` is kept across restarts by the agent)."""
         self.stale_hint = False
-        """True after `decode` refused an authenticated datagram as stale (its sender's clock is
-        behind the cluster's: the shell may send it something to catch up with)."""
+        """True after `decode` refused an authenticated datagram as stale (its sender is behind)."""
         self._unpacker = _new_unpacker(max_datagram)
         self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
 
@@ -407,7 +395,7 @@ class Codec:
             raise ValueError(f"codec of {self.sender!r} cannot send as {packet.sender!r}")
         seq = int(now_wall * 1e6) if self._seq is None else self._seq
         self._seq = seq + 1
-        body = packet_body(packet, seq, int(now_wall * 1000) + self.clock_offset_ms)
+        body = packet_body(packet, seq, self.clock.now_ms(now_wall))
         if len(body) + HEADER_SIZE > self.max_datagram:
             self.counters["send_oversized"] += 1
             raise WireError(
@@ -451,17 +439,15 @@ class Codec:
             if isinstance(e, Exception):  # msgpack's ValueError, OutOfData, ...: all malformed
                 raise self.reject("malformed", f"{type(e).__name__}: {e}"[:120]) from None
             raise
-        cluster_ms = int(now_wall * 1000) + self.clock_offset_ms
-        if ts_ms > MAX_TS_MS or (
-            self.keyring is None and ts_ms - cluster_ms > self.guard.freshness_ms
-        ):  # unauthenticated datagrams do not move the time: a future one is refused
+        cluster_ms = self.clock.now_ms(now_wall)
+        secure = self.keyring is not None
+        if self.clock.too_new(ts_ms, cluster_ms, self.guard.freshness_ms, authenticated=secure):
             raise self.reject("stale", f"from {packet.sender!r}: ts {ts_ms} ms in the future")
         reason = self.guard.check(packet.sender, seq, ts_ms, cluster_ms)
         if reason is not None:
-            self.stale_hint = reason == "stale" and self.keyring is not None
+            self.stale_hint = reason == "stale" and secure
             raise self.reject(reason, f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms")
-        if ts_ms > cluster_ms and self.keyring is not None:  # a clock ahead: time moves on
-            self.clock_offset_ms += ts_ms - cluster_ms
+        if secure and self.clock.observe(ts_ms, cluster_ms):
             self.counters["clock_advanced"] += 1
         self.counters["accepted"] += 1
         if unknown:

@@ -9,7 +9,8 @@ between two processes on one machine.
 from sdrpeer.dataplane.connection import Connection
 from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, FrameDecoder, FrameError
 from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
-from sdrpeer.dataplane.server import DataServer, InPortLike
+from sdrpeer.dataplane.port_api import InPortLike
+from sdrpeer.dataplane.server import DataServer
 
 __all__ = [
     "DEFAULT_MAX_FRAME",

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import random
 import re
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -133,6 +134,10 @@ class RobotFile:
     priority: int = 0
     clock_skew: float = 0.0
     """Seconds this robot's clock is off true time (its gossip sees time.time() + skew)."""
+
+    def wall(self) -> float:
+        """This robot's wall clock: true time plus `clock_skew`."""
+        return time.time() + self.clock_skew
 
     @classmethod
     def load(cls, path: Path | str) -> RobotFile:

@@ -22,11 +22,13 @@ import signal
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
 from sdrpeer import launchers
+from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
+from sdrpeer.datakeys import keys_to_env
 from sdrpeer.launchers import get_launcher
 from sdrpeer.runtime.spec import InstanceSpec
 
@@ -42,11 +44,21 @@ def host_argv(spec: InstanceSpec) -> list[str]:
 
 
 def host_env(
-    base: Mapping[str, str], spec: InstanceSpec, *, fd: int, data_host: str, run_dir: Path
+    base: Mapping[str, str],
+    spec: InstanceSpec,
+    *,
+    fd: int,
+    data_host: str,
+    run_dir: Path,
+    data_keys: Sequence[bytes] = (),
 ) -> dict[str, str]:
-    """The host's environment: the agent's plus the control channel variables (and params)."""
+    """The host's environment: the agent's plus the control channel variables (and params),
+    and the data keys its connections authenticate with (none: SDRPEER_DATA_KEYS unset)."""
     env = dict(base)
     env.pop("SDRPEER_PARAMS", None)
+    env.pop(DATA_KEYS_ENV, None)
+    if data_keys:
+        env[DATA_KEYS_ENV] = keys_to_env(data_keys)
     env.update(
         launchers.host_env(
             instance=spec.name,

@@ -32,8 +32,6 @@ from typing import Any
 
 import psutil
 
-from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
-from sdrpeer.datakeys import keys_to_env
 from sdrpeer.errors import ConfigError
 from sdrpeer.runtime import problems
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
@@ -112,9 +110,8 @@ class Supervisor:
         self.on_fault = on_fault
         """Called at once with (self, kind, detail) for every fault the component reports."""
         self.on_problem = on_problem
-        self.data_keys = data_keys
-        """The data keys a new host gets (SDRPEER_DATA_KEYS; sdrpeer.dataplane.auth)."""
         """Called at once with (self, cause): component_error or crashed (runtime.problems)."""
+        self.data_keys = data_keys  # what a new host authenticates its data connections with
         self.faults: deque[problems.Fault] = deque(maxlen=config.max_faults)
         """The last faults reported, oldest first."""
         self.policy = RestartPolicy(config.restart)
@@ -280,11 +277,8 @@ class Supervisor:
             fd=child.fileno(),
             data_host=self.config.data_host,
             run_dir=self._run_dir,
+            data_keys=self.data_keys(),
         )
-        keys = self.data_keys()
-        env.pop(DATA_KEYS_ENV, None)
-        if keys:
-            env[DATA_KEYS_ENV] = keys_to_env(keys)
         out = open_log(self.data_dir, self.name, argv)
         self._spawned = asyncio.get_running_loop().time()
         try:

@@ -1,0 +1,341 @@
+"""One accepted data connection: hello (and proof), frames to the port, credits and acks back.
+
+How it works: see sdrpeer.dataplane.server, whose `DataServer` makes one `Receiver` per
+accepted connection; this module is that connection's protocol. It reads into its own
+`FrameReader`, answers the hello (and, when the host authenticates, checks the sender's proof
+before any frame: sdrpeer.dataplane.auth), maps an offered shared-memory ring (Unix sockets
+only), delivers every frame at once, writes back ring credits and acknowledgements, and keeps
+the socket open after the sender's end of stream until what it delivered is acknowledged.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+from typing import TYPE_CHECKING, Any, Final, cast
+
+import msgpack
+
+from sdrpeer.dataplane.auth import proof_names
+from sdrpeer.dataplane.frames import (
+    PROTOCOL_VERSION,
+    FrameError,
+    Hello,
+    encode_reply,
+    parse_hello,
+)
+from sdrpeer.dataplane.port_api import AckingPort, InPortLike
+from sdrpeer.dataplane.reader import FrameReader
+from sdrpeer.dataplane.shm import ReceiverRing
+
+if TYPE_CHECKING:
+    from sdrpeer.dataplane.server import DataServer
+
+log = logging.getLogger("sdrpeer.dataplane")
+_RCVBUF = 4 * 1024 * 1024
+_packb: Final = msgpack.packb
+_LOWAT_MAX: Final = 512 * 1024
+
+
+class Receiver(asyncio.BufferedProtocol):
+    """One accepted data connection."""
+
+    def __init__(self, server: DataServer) -> None:
+        self.server = server
+        self.reader = FrameReader(server.max_frame)
+        self.transport: asyncio.Transport | None = None
+        self.port: InPortLike | None = None
+        self.conn = "?"
+        self.key = "?"
+        """What frames are delivered under: the connection id, or its stream's session key."""
+        self.in_port = ""
+        self.ring: ReceiverRing | None = None
+        self.acking: AckingPort | None = None
+        """The port, when this stream is acknowledged."""
+        self._proving: tuple[Hello, InPortLike, bool, bytes] | None = None  # hello answered
+        self._last_seq = 0  # the highest seq delivered on this socket
+        self._eof = False  # the sender ended its side; we close once all is acknowledged
+        self._credited = 0
+        self._sock: Any = None
+        self._lowat = 1
+        self._timer: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        server = self.server
+        if len(server._receivers) >= server.max_connections:
+            server.counters["rejected"] += 1
+            server._report("rejected", "?", f"over {server.max_connections} connections")
+            transport.write(encode_reply(f"too many connections (max {server.max_connections})"))
+            transport.close()
+            return
+        server._receivers.add(self)
+        server.counters["accepted"] += 1
+        sock = transport.get_extra_info("socket")
+        if sock is not None and sock.family != socket.AF_UNIX:
+            self._sock = sock  # TCP: big frames wake us in big pieces (see _wake_later)
+        if sock is not None and sock.family == socket.AF_UNIX:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF)
+        loop = asyncio.get_running_loop()
+        self._timer = loop.call_later(server.hello_timeout, self._hello_timeout)
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self.reader.buffer()
+
+    def buffer_updated(self, nbytes: int) -> None:
+        reader = self.reader
+        reader.received(nbytes)
+        if self.port is not None:
+            self.server.bytes_in[self.in_port] += nbytes
+        try:
+            if self.port is None and not self._hello():
+                return
+            frames = reader.frames()
+        except FrameError as exc:
+            self._bad(exc)
+            return
+        self._deliver(frames)
+        if self._sock is not None and (reader.big_frame or self._lowat != 1):
+            self._wake_later(reader.awaiting)
+        ring = self.ring
+        if ring is not None and ring.consumed != self._credited and self.port is not None:
+            self._credited = ring.consumed
+            assert self.transport is not None
+            self.transport.write(_packb(ring.consumed))  # room for the sender
+        if reader.failed:
+            try:
+                reader.frames()
+            except FrameError as exc:
+                self._bad(exc)
+
+    def _wake_later(self, awaiting: int) -> None:
+        """While a big frame arrives, have the kernel wake us only once a good part of the
+        rest is there (SO_RCVLOWAT), not for every segment; at once again between frames."""
+        lowat = min(awaiting, _LOWAT_MAX) or 1
+        if lowat != self._lowat:
+            self._lowat = lowat
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVLOWAT, lowat)
+            except OSError:
+                self._sock = None
+
+    def _deliver(self, frames: list[list[Any]]) -> None:
+        if self.port is None:
+            return
+        if self.ring is not None:
+            self._deliver_from_ring(frames)
+            return
+        deliver = self.port.deliver
+        conn = self.key
+        for seq, value in frames:
+            try:
+                deliver(value, seq, conn)
+            except Exception as exc:
+                self.server.counters["deliver_error"] += 1
+                self.server._report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
+        if frames and self.acking is not None:
+            self._last_seq = max(self._last_seq, frames[-1][0])
+
+    def _deliver_from_ring(self, frames: list[list[Any]]) -> None:
+        """Deliver frames, taking each ``[seq, pos, length]`` value out of the ring just before
+        (counted in bytes_in like the socket's bytes)."""
+        ring, port, conn = self.ring, self.port, self.key
+        assert ring is not None
+        assert port is not None
+        bytes_in = self.server.bytes_in
+        for frame in frames:
+            if len(frame) == 3:
+                try:
+                    value = ring.take(frame)
+                except FrameError as exc:
+                    self._bad(exc)
+                    return
+                bytes_in[self.in_port] += frame[2]
+            else:
+                value = frame[1]
+            try:
+                port.deliver(value, frame[0], conn)
+            except Exception as exc:
+                self.server.counters["deliver_error"] += 1
+                self.server._report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
+            del value  # the next value may reuse its memory
+        if frames and self.acking is not None:
+            self._last_seq = max(self._last_seq, frames[-1][0])
+
+    def _hello(self) -> bool:
+        """Handle the hello (and, when we authenticate, the sender's proof behind it) once it
+        has arrived; True when frames may follow."""
+        if self._proving is not None:
+            return self._proof()
+        obj = self.reader.first_map()
+        if obj is None:
+            return False
+        hello = parse_hello(obj)
+        self.conn = self.key = hello.conn
+        error = None
+        port = None
+        auth = self.server.auth
+        if hello.version != PROTOCOL_VERSION:
+            error = f"protocol version {hello.version} not supported (this is {PROTOCOL_VERSION})"
+        elif auth is not None and auth.enabled and hello.auth is None:
+            error = "this receiver only takes authenticated connections (a data key's nonce)"
+            self.server.counters["refused_auth"] += 1
+        else:
+            port = self.server.resolve(hello.in_port)
+            if port is None:
+                error = f"unknown in-port {hello.in_port!r}"
+        assert self.transport is not None
+        if error is None and hello.shm is not None and self.server.shm and self._local():
+            self._attach(hello.shm)
+        acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
+        proof = None
+        if error is None and auth is not None and auth.enabled and hello.auth is not None:
+            nonce = auth.nonce()
+            proof = (nonce, auth.receiver_proof(hello.auth, nonce, proof_names(hello)))
+        reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof)
+        self.transport.write(reply)
+        if error is not None or port is None:
+            self.server.counters["rejected"] += 1
+            self.server._report("rejected", hello.conn, error or "")
+            self.transport.close()
+            return False
+        self._proving = (hello, port, acks, proof[0] if proof is not None else b"")
+        return self._proof() if proof is not None else self._open()
+
+    def _proof(self) -> bool:
+        """The sender's proof, the first map after our reply; True once it holds."""
+        assert self._proving is not None
+        obj = self.reader.first_map()
+        if obj is None:
+            return False
+        hello, _, _, nonce = self._proving
+        auth = self.server.auth
+        assert auth is not None
+        proof = obj.get("auth") if isinstance(obj, dict) else None
+        names = proof_names(hello)
+        if (
+            type(proof) is not bytes
+            or hello.auth is None
+            or not auth.check_sender(nonce, hello.auth, names, proof)
+        ):
+            self._proving = None
+            self.server.counters["refused_auth"] += 1
+            self.server.counters["rejected"] += 1
+            self.server._report("refused_auth", hello.conn, "the sender's proof does not hold")
+            self.abort()
+            return False
+        return self._open()
+
+    def _open(self) -> bool:
+        """The connection is accepted: frames go to the port from now on."""
+        assert self._proving is not None
+        hello, port, acks, _ = self._proving
+        self._proving = None
+        if self._timer is not None:
+            self._timer.cancel()
+        self.port = port
+        self.in_port = hello.in_port
+        if acks and hello.ack is not None:
+            self.acking = cast(AckingPort, port)
+            ack = hello.ack
+            self.key = self.acking.attach_stream(hello.conn, ack.session, ack.next, self._ack)
+            self.server.counters["acked"] += 1
+        return True
+
+    def _ack(self, seq: int) -> None:
+        """The port acknowledges every frame up to `seq`."""
+        transport = self.transport
+        if transport is None or transport.is_closing():
+            return
+        transport.write(_packb([seq]))
+        if self._eof and seq >= self._last_seq:
+            transport.close()  # the sender left and has heard everything
+
+    def eof_received(self) -> bool | None:
+        """The sender ended its side: close now, or once what we delivered is acknowledged."""
+        if self.acking is None:
+            return None
+        self.acking.flush_acks()  # what the component took so far goes out before any close
+        if not self.server.quiesced and self.acking.acked(self.key) < self._last_seq:
+            self._eof = True
+            return True  # keep the socket open for the acks
+        return None
+
+    def quiesce(self) -> None:
+        """Our component stopped taking frames: send the acks due; close if the sender left."""
+        if self.acking is None:
+            return
+        self.acking.flush_acks()
+        if self._eof and self.transport is not None:
+            self.transport.close()
+
+    def finish(self) -> None:
+        """Close for the server's end: send the acknowledgements due, then close gracefully."""
+        acking, self.acking = self.acking, None
+        if acking is not None:
+            acking.flush_acks()
+            acking.detach_stream(self.key, self._ack)
+        self.port = None
+        if self.transport is not None:
+            self.transport.close()
+
+    def _local(self) -> bool:
+        """True on a Unix socket (a ring is only for a sender on this machine)."""
+        assert self.transport is not None
+        sock = self.transport.get_extra_info("socket")
+        return sock is not None and sock.family == socket.AF_UNIX
+
+    def _attach(self, offer: object) -> None:
+        """Map the ring the sender offered; without it the stream carries every value."""
+        try:
+            self.ring = ReceiverRing.attach(offer, self.server.max_frame)
+        except (OSError, ValueError) as exc:
+            log.info("data connection %s: no shared memory (%s)", self.conn, exc)
+            return
+        self.server.counters["shm"] += 1
+        self.reader.decoder.refs = self.ring.check
+
+    def _bad(self, exc: FrameError) -> None:
+        server = self.server
+        reason = f"refused_{exc.reason}"
+        server.counters[reason] += 1
+        if self.port is not None:
+            self.port.refuse()
+        else:  # a bad hello: tell the sender why before closing
+            assert self.transport is not None
+            self.transport.write(encode_reply(f"bad hello: {exc}"))
+        server._report(reason, self.conn, str(exc))
+        self.abort(graceful=self.port is None)
+
+    def _hello_timeout(self) -> None:
+        self.server.counters["rejected"] += 1
+        self.server._report("rejected", self.conn, "no hello in time")
+        self.abort()
+
+    def abort(self, *, graceful: bool = False) -> None:
+        """Close this connection now (graceful: after the reply written, if any)."""
+        self.port = None
+        if self.transport is not None:
+            if graceful:
+                self.transport.close()
+            else:
+                self.transport.abort()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+        if self._proving is not None and self._proving[3]:  # left without proving itself
+            self._proving = None
+            self.server.counters["refused_auth"] += 1
+        if self.acking is not None:
+            self.acking.detach_stream(self.key, self._ack)
+            self.acking = None
+        self.port = None
+        self.server._receivers.discard(self)
+        if self.ring is not None:
+            self.ring.close()
+            self.ring = None
