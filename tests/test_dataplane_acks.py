@@ -38,10 +38,10 @@ def test_retention_holds_frames_until_acknowledged() -> None:
     assert r.ack(1) == 0
     assert r.ack(9) == 0  # not written yet: ignored
     assert r.unacked() == [(3, b"ccc"), (4, b"dddd")]
-    assert r.next_seq == 5
-    r.reset(12)
+    assert r.base + len(r) == 5  # the next frame written gets seq 5
+    r = Retention(first_seq=12)  # acknowledged from seq 12 on
     assert len(r) == 0
-    assert r.next_seq == 12
+    assert r.base == 12
     assert r.acked == 11
 
 

@@ -333,8 +333,7 @@ class Connection:
         writer.replay(link.write)
         if link.acks and self.window is not None:
             if writer.retention is None:
-                writer.retention = Retention(*self.window)
-                writer.retention.reset(writer.seq + 1)
+                writer.retention = Retention(*self.window, first_seq=writer.seq + 1)
 
             def paused() -> bool:
                 return link.is_paused() or writer.window_full

@@ -179,9 +179,10 @@ class Receiver(asyncio.BufferedProtocol):
         error = None
         port = None
         auth = self.server.auth
+        authenticating = auth is not None and auth.enabled
         if hello.version != PROTOCOL_VERSION:
             error = f"protocol version {hello.version} not supported (this is {PROTOCOL_VERSION})"
-        elif auth is not None and auth.enabled and hello.auth is None:
+        elif authenticating and hello.auth is None:
             error = "this receiver only takes authenticated connections (a data key's nonce)"
             self.server.counters["refused_auth"] += 1
         else:
@@ -193,7 +194,7 @@ class Receiver(asyncio.BufferedProtocol):
             self._attach(hello.shm)
         acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
         proof = None
-        if error is None and auth is not None and auth.enabled and hello.auth is not None:
+        if error is None and authenticating and auth is not None and hello.auth is not None:
             nonce = auth.nonce()
             proof = (nonce, auth.receiver_proof(hello.auth, nonce, proof_names(hello)))
         reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof)

@@ -30,27 +30,23 @@ class Retention(Generic[T]):
 
     __slots__ = ("acked", "base", "bytes", "items", "max_bytes", "max_frames")
 
-    def __init__(self, max_frames: int = DEFAULT_FRAMES, max_bytes: int = DEFAULT_BYTES) -> None:
+    def __init__(
+        self, max_frames: int = DEFAULT_FRAMES, max_bytes: int = DEFAULT_BYTES, first_seq: int = 1
+    ) -> None:
+        """`first_seq`: the seq the first frame written gets (a connection that starts being
+        acknowledged after frames it already wrote)."""
         if max_frames < 1 or max_bytes < 1:
             raise ValueError("retention: the window must hold at least one frame and one byte")
         self.max_frames = max_frames
         self.max_bytes = max_bytes
         self.items: deque[T] = deque()
         """The encoded values held (seq `base` first)."""
-        self.base = 1
+        self.base = first_seq
         """The seq of items[0] (the next seq to be written, when nothing is held)."""
-        self.acked = 0
+        self.acked = first_seq - 1
         """The highest seq acknowledged."""
         self.bytes = 0
         """Bytes held."""
-
-    def reset(self, next_seq: int) -> None:
-        """Hold nothing; the next frame written will be `next_seq` (a receiver that does not
-        acknowledge: nothing can be replayed to anyone)."""
-        self.items.clear()
-        self.bytes = 0
-        self.base = next_seq
-        self.acked = next_seq - 1
 
     def written(self, items: Sequence[T]) -> None:
         """Frames just written, with the seqs following the last one held."""
@@ -80,11 +76,6 @@ class Retention(Generic[T]):
     def full(self) -> bool:
         """True while the window is full: nothing more may be written until an ack."""
         return len(self.items) >= self.max_frames or self.bytes >= self.max_bytes
-
-    @property
-    def next_seq(self) -> int:
-        """The seq the frame written next gets."""
-        return self.base + len(self.items)
 
     def unacked(self) -> list[tuple[int, T]]:
         """(seq, encoded value) of every frame held, oldest first."""

@@ -141,7 +141,7 @@ class FrameWriter:
             or self._rest is not None
             or self.seq + 1 >= _SEQ32
             or (type(value) is bytes and len(value) >= BIG)
-            or (self.retention is not None and self.retention.full)
+            or self.window_full
         ):
             return self.offer(value)
         try:

@@ -107,8 +107,7 @@ class InPortRuntime:
     def connect(self, conn: str, policy: ConnectorPolicy | None = None) -> None:
         """Register connection `conn` with its policy (None: the port's default)."""
         old = self._conns.get(conn)
-        c = self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
-        c.acks = old.acks if old else None
+        self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
 
     def disconnect(self, conn: str) -> None:
         """Forget connection `conn` (frames already queued stay readable)."""
