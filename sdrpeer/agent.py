@@ -1,12 +1,14 @@
 """The agent: one per robot. Wires gossip, monitoring and the HTTP API together.
 
-How it works: the agent binds its UDP gossip socket and its HTTP API (either may be port 0),
-writes `DATA_DIR/agent.json` so a lab or a person can find them, joins through the seeds, and
-then once per metrics interval samples the robot (real hardware, or a virtual robot driven by a
-robot file and a scenario), raises traps on threshold crossings at once, and publishes its record
-(metrics, measured links, API address, priority) through gossip. Everything the API shows comes
-from the gossip core's view plus the records decoded here. SIGINT/SIGTERM: graceful leave;
-a second signal: immediate exit.
+How it works: the agent binds its UDP gossip socket and its HTTP API (either may be port 0), writes
+`DATA_DIR/agent.json` so a lab or a person can find them, joins through the seeds, and then once per
+metrics interval samples the robot (real hardware, or a virtual robot driven by a robot file and a
+scenario), raises traps on threshold crossings at once, and builds its record (metrics, link
+summary, API address, priority, instances, election, plan). The `Publisher`
+(sdrpeer.monitor.publish) decides whether the sample makes a new record (spread to every robot), a
+vitals revision (carried on our probes) or nothing. Everything the API shows comes from the gossip
+core's view plus the records decoded here, each with its newest vitals laid over it. SIGINT/SIGTERM:
+graceful leave; a second signal: immediate exit.
 """
 
 from __future__ import annotations
@@ -38,11 +40,12 @@ from sdrpeer.gossip.events import (
     MemberChanged,
     ProbeOutcome,
     RecordChanged,
+    VitalsChanged,
 )
 from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.monitor.links import LinkTable
-from sdrpeer.monitor.publish import worth_publishing
+from sdrpeer.monitor.publish import RECORD, VITALS, Publisher, boundaries, link_bounds
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
@@ -50,11 +53,17 @@ from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
 from sdrpeer.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.record import (
     InstanceInfo,
+    LinkBounds,
     Metrics,
     RobotRecord,
+    Vitals,
+    apply_vitals,
     decode_record,
+    decode_vitals,
     encode_record,
+    encode_vitals,
     metrics_to_json,
+    vitals_of,
 )
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.supervisor import SupervisorConfig
@@ -64,7 +73,6 @@ if TYPE_CHECKING:
     from aiohttp.web import AppRunner
 
 log = logging.getLogger("sdrpeer.agent")
-_HEARTBEAT = 5.0  # publish the record at least this often even when nothing changed (seconds)
 
 
 class Agent:
@@ -75,6 +83,11 @@ class Agent:
         self.events = EventLog()
         self.links = LinkTable()
         self.records: dict[str, tuple[int, RobotRecord]] = {}
+        """Each other robot's record version and record, with its newest vitals laid over."""
+        self._received: dict[str, tuple[int, RobotRecord]] = {}
+        """Each other robot's record as it came (before vitals)."""
+        self._vitals: dict[str, tuple[int, int, Vitals]] = {}
+        """Each other robot's newest vitals: (record version, revision, vitals)."""
         self.metrics: Metrics | None = None
         self.api_url: str | None = None
         self.shell: GossipShell | None = None
@@ -89,9 +102,13 @@ class Agent:
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = time.time()
         self._started = 0.0
-        self._published: RobotRecord | None = None
+        self.current: RobotRecord | None = None
+        """This robot's latest sample, whatever was published of it."""
+        self.publisher = Publisher()
+        self._bounds_for: object = ()
+        self._link_bounds = link_bounds(None)
+        self._versions = (1, 0)  # (first record version of this run, reserved limit)
         self._states: dict[str, tuple[str, str]] = {}
-        self._last_publish = -1e9
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
         self.peer_tokens: list[str] = []
@@ -150,7 +167,15 @@ class Agent:
         self.shell, addr = await open_gossip(
             host, port, codec, self._on_core_event, self._on_reject, wall=wall
         )
-        self.core = Membership(cfg.name, addr, gossip_preset, now=loop.time(), rng=random.Random())
+        self._versions = agent_files.record_versions(cfg.data_dir)
+        self.core = Membership(
+            cfg.name,
+            addr,
+            gossip_preset,
+            now=loop.time(),
+            rng=random.Random(),
+            first_version=self._versions[0],
+        )
         self.shell.attach(self.core)
         self.coordinator = Coordinator(
             cfg.name,
@@ -244,7 +269,8 @@ class Agent:
         return self.host.sample(now)
 
     def _publish(self, *, force: bool = False) -> None:
-        """Sample, raise traps, and publish the record if it changed or the heartbeat is due."""
+        """Sample, raise traps, and publish what the publisher decides: a new record, a vitals
+        revision, or nothing."""
         if self.shell is None:
             return
         now = asyncio.get_running_loop().time()
@@ -254,28 +280,39 @@ class Agent:
             self.events.add(time.time(), "trap", self.name, **_trap_json(trap))
             force = True
         self._update_rates(now)
-        links = self.links.snapshot(now)
         infos = self.instances.infos()
         self._log_states(infos)
         coord = self.coordinator
         record = RobotRecord(
             metrics,
-            links,
+            self.links.summary(now, self._bounds()),
             self.api_url,
             self.priority,
             infos,
-            time.time(),
             election=None if coord is None else coord.election.info(),
             plan=None if coord is None else coord.store.info(),
         )
-        if (
-            force
-            or worth_publishing(self._published, record)
-            or now - self._last_publish >= _HEARTBEAT
-        ):
-            self._published = record
-            self._last_publish = now
-            self.shell.set_record(encode_record(record))
+        self.current = record
+        decision = self.publisher.decide(now, record, force=force)
+        if decision == RECORD:
+            version = self.shell.set_record(encode_record(record))
+            if version >= self._versions[1]:
+                limit = agent_files.reserve_record_versions(self.config.data_dir, version)
+                self._versions = (self._versions[0], limit)
+        elif decision == VITALS:
+            self.shell.set_vitals(encode_vitals(vitals_of(record)))
+
+    def _bounds(self) -> LinkBounds:
+        """The link bounds and publishing boundaries of the deployed system (kept per plan)."""
+        plan = None if self.coordinator is None else self.coordinator.store.plan
+        system = None if plan is None else plan.system
+        key = None if system is None else (system.recovery, system.allocation.thresholds)
+        if key != self._bounds_for:
+            self._bounds_for = key
+            recovery, thresholds = (None, None) if key is None else key
+            self.publisher.boundaries = boundaries(recovery, thresholds)
+            self._link_bounds = link_bounds(thresholds)
+        return self._link_bounds
 
     def _log_states(self, infos: tuple[InstanceInfo, ...]) -> None:
         """An `instance.state` event for every instance whose state or role changed."""
@@ -341,8 +378,8 @@ class Agent:
                     rec = self.records.get(m.name)
                     if rec is not None:
                         alive[m.name] = rec[1]
-        if self._published is not None:
-            alive[self.name] = self._published
+        if self.current is not None:
+            alive[self.name] = self.current
         return ClusterState(alive, sorted(alive))
 
     def allocator_api(self) -> str | None:
@@ -361,13 +398,23 @@ class Agent:
                 return
             try:
                 record = decode_record(event.payload)
-                old = self.records.get(event.name)
-                self.records[event.name] = (event.version, record)
-                self._wake_coordinator()
-                if old is None or _states_of(old[1]) != _states_of(record):
-                    self.dashboard.poke()  # a page shows another robot's state change at once
             except WireError as e:
                 self.events.add(wall, "record.malformed", event.name, error=str(e))
+                return
+            old = self.records.get(event.name)
+            self._received[event.name] = (event.version, record)
+            self._overlay(event.name)
+            self._wake_coordinator()
+            if old is None or _states_of(old[1]) != _states_of(record):
+                self.dashboard.poke()  # a page shows another robot's state change at once
+        elif isinstance(event, VitalsChanged):
+            try:
+                vitals = decode_vitals(event.payload)
+            except WireError as e:
+                self.events.add(wall, "vitals.malformed", event.name, error=str(e))
+                return
+            self._vitals[event.name] = (event.version, event.revision, vitals)
+            self._overlay(event.name)
         elif isinstance(event, MemberChanged):
             self._on_member(event, wall)
         elif isinstance(event, EventReceived) and event.kind == "trap":
@@ -378,6 +425,21 @@ class Agent:
                 return
             self.events.add(wall, "trap", event.source, **_trap_json(trap))
 
+    def _overlay(self, name: str) -> None:
+        """records[name]: the record received, with the newest vitals of it (or of a newer
+        record not received yet) laid over it; older vitals are dropped."""
+        received = self._received.get(name)
+        if received is None:
+            return
+        version, record = received
+        vitals = self._vitals.get(name)
+        if vitals is not None:
+            if vitals[0] < version:
+                del self._vitals[name]
+            else:
+                record = apply_vitals(record, vitals[2], same_version=vitals[0] == version)
+        self.records[name] = (version, record)
+
     def _on_reject(self, reason: str, detail: str, count: int) -> None:
         self.events.add(
             time.time(), "wire.rejected", self.name, reason=reason, count=count, detail=detail
@@ -386,6 +448,8 @@ class Agent:
     def _on_member(self, event: MemberChanged, wall: float) -> None:
         if event.state == REAPED:
             self.records.pop(event.name, None)
+            self._received.pop(event.name, None)
+            self._vitals.pop(event.name, None)
             self.links.forget(event.name)
             kind = "member.reaped"
         elif event.previous is None:

@@ -1,12 +1,15 @@
-"""The agent's files in its data directory: the API token, agent.json and the seq floor.
+"""The agent's files in its data directory: the API token, agent.json and the floors.
 
 How it works: the token is read from `--token-file` (which must exist) or `DATA_DIR/token`,
 generated (mode 0600) when absent. `agent.json` (name, gossip and API addresses, pid) is written
 atomically once both sockets are bound, so a lab or a person can find the agent. `seq_start`
 picks the first gossip seq: wall-clock microseconds, but never below `DATA_DIR/seq.floor`, which
 it then moves `SEQ_RESERVE` past what it returns — so seqs keep rising across restarts even when
-the clock went back (receivers would refuse lower ones as replays). `clock.offset` keeps the
-gossip codec's cluster-time offset (sdrpeer.wire) across restarts.
+the clock went back (receivers would refuse lower ones as replays). `record.floor` does the
+same for the versions of this robot's gossip record (`record_versions`): a new life starts past
+every version an old one may have spread, so no robot keeps an old life's bytes under a version
+the new life reuses. `clock.offset` keeps the gossip codec's cluster-time offset (sdrpeer.wire)
+across restarts.
 """
 
 from __future__ import annotations
@@ -34,6 +37,41 @@ def seq_start(data_dir: Path, now_us: int) -> int:
     tmp.write_text(f"{start + SEQ_RESERVE}\n")
     os.replace(tmp, path)
     return start
+
+
+RECORD_RESERVE = 1_000_000
+"""Record versions one run takes before it moves `record.floor` again."""
+
+
+def _read_floor(path: Path) -> int:
+    try:
+        return max(0, int(path.read_text().strip()))
+    except (OSError, ValueError):
+        return 0
+
+
+def _write_floor(path: Path, value: int) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(f"{value}\n")
+    os.replace(tmp, path)
+
+
+def record_versions(data_dir: Path) -> tuple[int, int]:
+    """(first record version of this run, the limit now reserved): the floor kept in
+    DATA_DIR/record.floor, which moves `RECORD_RESERVE` on."""
+    path = data_dir / "record.floor"
+    first = max(1, _read_floor(path))
+    limit = first + RECORD_RESERVE
+    _write_floor(path, limit)
+    return first, limit
+
+
+def reserve_record_versions(data_dir: Path, version: int) -> int:
+    """Move the floor `RECORD_RESERVE` past `version` (a run that used up its reserve);
+    returns the new limit."""
+    limit = version + RECORD_RESERVE
+    _write_floor(data_dir / "record.floor", limit)
+    return limit
 
 
 def load_token(data_dir: Path, token_file: Path | None) -> str:

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 from sdrpeer import __version__
 from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.monitor.links import distance
-from sdrpeer.record import RobotRecord, decode_record, record_to_json
+from sdrpeer.record import RobotRecord, link_to_json, record_to_json
 from sdrpeer.wire import REASONS
 
 if TYPE_CHECKING:
@@ -25,7 +25,9 @@ def _wall_of(t: float) -> float:
 
 
 def members_view(self: Agent) -> list[dict[str, Any]]:
-    """Every known member with its metrics and links (see AgentView)."""
+    """Every known member with its metrics and links (see AgentView): this robot's own links
+    are all listed, another robot's only those its record lists (past the bounds); every
+    member's `link_summary` sums up all of its links."""
     if self.core is None:
         return []
     out = []
@@ -35,11 +37,14 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
         rec: RobotRecord | None
         if m.name == self.name:
             own = self.core.record_of(self.name)
-            rec = decode_record(own[1]) if own else None
+            rec = self.current
             version = own[0] if own else 0
         else:
             version, rec = self.records.get(m.name, (0, None))
         doc = record_to_json(rec) if rec is not None else {"metrics": None, "links": {}}
+        if m.name == self.name:
+            now = asyncio.get_running_loop().time()
+            doc["links"] = {p: link_to_json(s) for p, s in self.links.snapshot(now).items()}
         for peer, link in doc["links"].items():
             d = distance(positions.get(m.name), positions.get(peer))
             link["distance_m"] = None if d is None else round(d, 2)
@@ -52,12 +57,22 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
                 "since": _wall_of(m.since),
                 "api": rec.api if rec is not None else None,
                 "record_version": version,
+                "vitals_revision": _revision(self, m.name, version),
                 "metrics": doc["metrics"],
                 "links": doc["links"],
+                "link_summary": doc.get("link_summary"),
                 "instances": doc.get("instances", []),
             }
         )
     return out
+
+
+def _revision(self: Agent, name: str, version: int) -> int:
+    """The vitals revision of record `version` that `name`'s entry shows (0: the record's own)."""
+    if self.core is None:
+        return 0
+    vitals = self.core.vitals_of(name)
+    return vitals.revision if vitals is not None and vitals.version == version else 0
 
 
 def agent_view(self: Agent) -> dict[str, Any]:

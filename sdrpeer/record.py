@@ -1,49 +1,66 @@
-"""A robot's gossip record: its metrics, its measured links and the instances it hosts.
+"""A robot's gossip record and its vitals: what the fleet needs to know of one robot.
 
 How it works: the owning robot builds a `RobotRecord`, `encode_record` turns it into compact
-msgpack and gossip versions and spreads those bytes without looking inside. Every receiver calls
-`decode_record`, which checks each field and raises `WireError("malformed", ...)` on anything
-unexpected (never another exception), so a bad peer cannot crash an agent.
+msgpack, and gossip spreads those bytes epidemically without looking inside, as one versioned
+record per robot. Every receiver calls `decode_record`, which checks each field and raises
+`WireError("malformed", ...)` on anything unexpected (never another exception), so a bad peer
+cannot crash an agent.
+
+What a record carries is bounded by what the fleet decides with, not by the fleet's size: the
+robot's metrics; a *summary* of the links it measures (how many peers, the typical round-trip
+time, jitter and loss — the values a strict majority of its links reach or pass, the same rule
+the recovery judge applies — and, exactly, the few links past the bounds the deployed system
+cares about: `LinkSummary`); its API address and election priority; the instances it hosts;
+its election belief and the plan it holds. A record is O(1) in the number of robots.
+
+The *vitals* of a robot (its metrics, link summary and the measured load of each instance) also
+travel as a revision of the current record: `encode_vitals` bytes that the gossip core carries
+directly to each peer on its probes (not epidemically), ordered by (record version, revision).
+`apply_vitals` lays the newest vitals over the record they revise. See
+`sdrpeer.monitor.publish` for which changes make a new record and which only a new revision.
 
 Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
 
-    [FORMAT, metrics, links, api, priority, components, instances, ts, election, plan]
+    record    = [FORMAT, metrics, links, api, priority, components, instances, election, plan]
+    vitals    = [FORMAT, metrics, links, loads]
     metrics   = [cpu_dpct, mem_total_kib, mem_free_kib, battery_dpct|nil, rssi_ddbm|nil,
                  [x_cm, y_cm]|nil]
-    links     = [peer, rtt_10us, jitter_10us, loss_permille, peer, ...]   (flat, 4 per link)
+    links     = [peers, rtt_10us|nil, jitter_10us|nil, loss_permille|nil, bad,
+                 [rtt_bound, jitter_bound, loss_bound] (each |nil),
+                 [peer, rtt_10us, jitter_10us, loss_permille, ...]]   (at most MAX_LISTED)
     components= [component name, ...]                 (each distinct component once)
     instances = [[component_index, shared_prefix_len, name_rest, state, role, cpu_dpct,
                   rss_kib, data_addr|nil, out_bytes_per_s], ...]
+    loads     = [cpu_dpct, rss_kib, out_bytes_per_s, ...]   (3 per instance, in record order)
     election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
     plan      = [epoch, version, digest, allocator] | nil   (the newest plan this robot holds)
-
-Records of the first layout (8 fields, 7 per instance) and instances of 8 fields (no traffic)
-are still accepted.
 
 `dpct` is 0.1 %, `ddbm` 0.1 dB, `10us` 0.01 ms, `permille` 0.1 % loss. An instance name usually
 starts with its component's name (`CameraRTC2` of `CameraRTC`), so only the differing tail is
 sent. Well-known states and roles are sent as a small index, any other as its string.
 Decoding returns the rounded values: `decode_record(encode_record(r))` equals `r` only once `r`
-is already on that grid.
+is already on that grid. Format 2 (this one) replaced format 1, whose record listed every link
+and a timestamp; a format-1 record is refused, so a fleet is upgraded all at once.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import msgpack
 
 from sdrpeer.errors import WireError
 
-FORMAT = 1
+FORMAT = 2
 """Version of the wire layout above; a decoder refuses any other."""
 
 STATES = ("created", "inactive", "active", "error", "finalized", "starting", "stopping")
 """Instance states sent as an index; others go as strings."""
 ROLES = ("active", "standby")
 """Instance roles sent as an index; others go as strings."""
+MAX_LISTED = 8
+"""Links past the bounds a summary lists exactly (the worst first); the rest are only counted."""
 
 _MAX_NAME = 255
 _MAX_ITEMS = 1024
@@ -68,6 +85,84 @@ class LinkStats:
     rtt_ms: float
     jitter_ms: float
     loss: float
+
+
+@dataclass(frozen=True, slots=True)
+class LinkBounds:
+    """Where a link starts to matter to the deployed system: a link with a value at or past
+    any bound is listed in a `LinkSummary`; None means no bound on that metric."""
+
+    rtt_ms: float | None = None
+    jitter_ms: float | None = None
+    loss: float | None = None
+
+    def past(self, s: LinkStats) -> bool:
+        """Whether `s` is at or past any bound."""
+        return (
+            (self.rtt_ms is not None and s.rtt_ms >= self.rtt_ms)
+            or (self.jitter_ms is not None and s.jitter_ms >= self.jitter_ms)
+            or (self.loss is not None and s.loss >= self.loss)
+        )
+
+    def badness(self, s: LinkStats) -> float:
+        """How far past its bounds `s` is (the largest value / bound ratio); orders the list."""
+        ratios = [
+            value / bound
+            for value, bound in (
+                (s.rtt_ms, self.rtt_ms),
+                (s.jitter_ms, self.jitter_ms),
+                (s.loss, self.loss),
+            )
+            if bound is not None and bound > 0
+        ]
+        return max(ratios, default=0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class LinkSummary:
+    """How a robot's links look, in O(1): the typical link and the few that matter.
+
+    `typical` holds, metric by metric, the value a strict majority of the `peers` measured
+    links reach or pass (the (n//2 + 1)-th worst): one bad peer cannot move it, a bad radio
+    moves it at once. `bad` links are at or past `bounds`; the worst `MAX_LISTED` of them are in
+    `listed` with their exact values.
+    """
+
+    peers: int = 0
+    typical: LinkStats | None = None
+    bad: int = 0
+    bounds: LinkBounds = field(default_factory=LinkBounds)
+    listed: dict[str, LinkStats] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        """Whether every link past the bounds is listed (an unlisted one is then inside)."""
+        return self.bad <= len(self.listed)
+
+    def towards(self, peer: str) -> LinkStats | None:
+        """The best estimate of the link to `peer`: exact when listed; else the typical link,
+        kept just inside each bound when the list is complete (it is known to be inside)."""
+        exact = self.listed.get(peer)
+        if exact is not None:
+            return exact
+        t = self.typical
+        if t is None:
+            return None
+        if not self.complete:
+            return t
+        b = self.bounds
+        return LinkStats(
+            rtt_ms=_inside(t.rtt_ms, b.rtt_ms, 0.01),
+            jitter_ms=_inside(t.jitter_ms, b.jitter_ms, 0.01),
+            loss=_inside(t.loss, b.loss, 0.001),
+        )
+
+
+def _inside(value: float, bound: float | None, quantum: float) -> float:
+    """`value`, or the largest value on the wire's grid below `bound` when it is not below."""
+    if bound is None or value < bound:
+        return value
+    return max(0.0, round(bound - quantum, 6))
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,16 +208,42 @@ class PlanInfo:
 
 @dataclass(frozen=True, slots=True)
 class RobotRecord:
-    """Everything a robot gossips about itself; `ts` is when it was sampled."""
+    """Everything a robot gossips about itself."""
 
     metrics: Metrics
-    links: dict[str, LinkStats]
+    links: LinkSummary
     api: str | None
     priority: int
     instances: tuple[InstanceInfo, ...]
-    ts: float
     election: ElectionInfo | None = None
     plan: PlanInfo | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Vitals:
+    """A revision of a record's measured values: metrics, link summary, and each instance's
+    (cpu %, RSS bytes, out bytes/s) in the record's instance order."""
+
+    metrics: Metrics
+    links: LinkSummary
+    loads: tuple[tuple[float, int, int], ...] = ()
+
+
+def vitals_of(r: RobotRecord) -> Vitals:
+    """The measured values of a record."""
+    return Vitals(r.metrics, r.links, tuple((i.cpu_pct, i.rss, i.out_bps) for i in r.instances))
+
+
+def apply_vitals(r: RobotRecord, v: Vitals, *, same_version: bool = True) -> RobotRecord:
+    """`r` with newer vitals laid over it. Instance loads apply only to the record version the
+    vitals revise (`same_version`), where the instances are the same and in the same order."""
+    instances = r.instances
+    if same_version and len(v.loads) == len(instances):
+        instances = tuple(
+            replace(i, cpu_pct=cpu, rss=rss, out_bps=out)
+            for i, (cpu, rss, out) in zip(instances, v.loads, strict=True)
+        )
+    return replace(r, metrics=v.metrics, links=v.links, instances=instances)
 
 
 def _fix(x: float, scale: float) -> int:
@@ -150,10 +271,8 @@ def _common_prefix(a: str, b: str) -> int:
     return n
 
 
-def encode_record(r: RobotRecord) -> bytes:
-    """The record as compact msgpack bytes (see the module docstring for the layout)."""
-    m = r.metrics
-    metrics = [
+def _wire_metrics(m: Metrics) -> list[Any]:
+    return [
         _fix(m.cpu_pct, 10),
         _kib(m.mem_total),
         _kib(m.mem_free),
@@ -161,10 +280,31 @@ def encode_record(r: RobotRecord) -> bytes:
         None if m.rssi_dbm is None else _fix(m.rssi_dbm, 10),
         None if m.pos is None else [_fix(m.pos[0], 100), _fix(m.pos[1], 100)],
     ]
-    links: list[Any] = []
-    for peer in sorted(r.links):
-        s = r.links[peer]
-        links += [peer, _fix(s.rtt_ms, 100), _fix(s.jitter_ms, 100), _fix(s.loss, 1000)]
+
+
+def _opt(x: float | None, scale: float) -> int | None:
+    return None if x is None else _fix(x, scale)
+
+
+def _wire_links(s: LinkSummary) -> list[Any]:
+    t = s.typical
+    listed: list[Any] = []
+    for peer, link in s.listed.items():
+        listed += [peer, _fix(link.rtt_ms, 100), _fix(link.jitter_ms, 100), _fix(link.loss, 1000)]
+    b = s.bounds
+    return [
+        s.peers,
+        None if t is None else _fix(t.rtt_ms, 100),
+        None if t is None else _fix(t.jitter_ms, 100),
+        None if t is None else _fix(t.loss, 1000),
+        s.bad,
+        [_opt(b.rtt_ms, 100), _opt(b.jitter_ms, 100), _opt(b.loss, 1000)],
+        listed,
+    ]
+
+
+def encode_record(r: RobotRecord) -> bytes:
+    """The record as compact msgpack bytes (see the module docstring for the layout)."""
     components: list[str] = []
     instances = []
     for inst in r.instances:
@@ -187,13 +327,12 @@ def encode_record(r: RobotRecord) -> bytes:
     e, p = r.election, r.plan
     wire = [
         FORMAT,
-        metrics,
-        links,
+        _wire_metrics(r.metrics),
+        _wire_links(r.links),
         r.api,
         r.priority,
         components,
         instances,
-        float(r.ts),
         None if e is None else [e.epoch, e.leader, e.claiming],
         None if p is None else [p.epoch, p.version, p.digest, p.allocator],
     ]
@@ -201,8 +340,19 @@ def encode_record(r: RobotRecord) -> bytes:
     return data
 
 
+def encode_vitals(v: Vitals) -> bytes:
+    """Vitals as compact msgpack bytes (see the module docstring for the layout)."""
+    loads: list[int] = []
+    for cpu, rss, out in v.loads:
+        loads += [_fix(cpu, 10), _kib(rss), max(0, int(out))]
+    data: bytes = msgpack.packb(
+        [FORMAT, _wire_metrics(v.metrics), _wire_links(v.links), loads], use_bin_type=True
+    )
+    return data
+
+
 class _Malformed(Exception):
-    """Internal: a field failed validation (turned into WireError by decode_record)."""
+    """Internal: a field failed validation (turned into WireError by the decoders)."""
 
 
 def _list(x: object, what: str, n: int | None = None) -> list[Any]:
@@ -235,39 +385,69 @@ def _named(x: object, table: tuple[str, ...], what: str) -> str:
     return _str(x, what)
 
 
+_MAX_COORD = 10**9
+"""Largest position coordinate on the wire, in cm (10,000 km)."""
+_MAX_MS = 10**9
+"""Largest RTT or jitter on the wire, in 0.01 ms (about 115 days)."""
+
+
 def _metrics(x: object) -> Metrics:
     """Validate and scale the metrics array."""
     cpu, total, free, battery, rssi, pos = _list(x, "metrics", 6)
     xy = None
     if pos is not None:
         px, py = _list(pos, "metrics.pos", 2)
-        xy = (_int(px, "pos.x", None) / 100, _int(py, "pos.y", None) / 100)
+        xy = (
+            _int(px, "pos.x", -_MAX_COORD, _MAX_COORD) / 100,
+            _int(py, "pos.y", -_MAX_COORD, _MAX_COORD) / 100,
+        )
     return Metrics(
         cpu_pct=_int(cpu, "cpu_pct", 0, 100_000) / 10,
-        mem_total=_int(total, "mem_total") * 1024,
-        mem_free=_int(free, "mem_free") * 1024,
+        mem_total=_int(total, "mem_total", 0, 1 << 50) * 1024,
+        mem_free=_int(free, "mem_free", 0, 1 << 50) * 1024,
         battery_pct=None if battery is None else _int(battery, "battery_pct", 0, 1000) / 10,
         rssi_dbm=None if rssi is None else _int(rssi, "rssi_dbm", -2000, 1000) / 10,
         pos=xy,
     )
 
 
-def _links(x: object) -> dict[str, LinkStats]:
-    """Validate the flat [peer, rtt, jitter, loss, ...] array."""
-    flat = _list(x, "links")
-    if len(flat) % 4:
-        raise _Malformed("links: expected groups of 4")
-    links: dict[str, LinkStats] = {}
+def _stats(rtt: object, jitter: object, loss: object, what: str) -> LinkStats:
+    return LinkStats(
+        rtt_ms=_int(rtt, f"{what}.rtt_ms", 0, _MAX_MS) / 100,
+        jitter_ms=_int(jitter, f"{what}.jitter_ms", 0, _MAX_MS) / 100,
+        loss=_int(loss, f"{what}.loss", 0, 1000) / 1000,
+    )
+
+
+def _links(x: object) -> LinkSummary:
+    """Validate the link summary."""
+    peers, rtt, jitter, loss, bad, bounds, flat = _list(x, "links", 7)
+    n = _int(peers, "links.peers", 0, 1 << 20)
+    typical = None
+    if rtt is not None or jitter is not None or loss is not None or n:
+        typical = _stats(rtt, jitter, loss, "links.typical")
+    b_rtt, b_jitter, b_loss = _list(bounds, "links.bounds", 3)
+    summary_bounds = LinkBounds(
+        rtt_ms=None if b_rtt is None else _int(b_rtt, "links.bounds", 0, _MAX_MS) / 100,
+        jitter_ms=None if b_jitter is None else _int(b_jitter, "links.bounds", 0, _MAX_MS) / 100,
+        loss=None if b_loss is None else _int(b_loss, "links.bounds", 0, 1000) / 1000,
+    )
+    flat = _list(flat, "links.listed")
+    if len(flat) % 4 or len(flat) > 4 * MAX_LISTED:
+        raise _Malformed(f"links.listed: expected at most {MAX_LISTED} groups of 4")
+    listed: dict[str, LinkStats] = {}
     for i in range(0, len(flat), 4):
         peer = _str(flat[i], "links.peer")
-        if peer in links:
+        if peer in listed:
             raise _Malformed(f"links: peer {peer!r} twice")
-        links[peer] = LinkStats(
-            rtt_ms=_int(flat[i + 1], "rtt_ms") / 100,
-            jitter_ms=_int(flat[i + 2], "jitter_ms") / 100,
-            loss=_int(flat[i + 3], "loss", 0, 1000) / 1000,
-        )
-    return links
+        listed[peer] = _stats(flat[i + 1], flat[i + 2], flat[i + 3], "links.listed")
+    return LinkSummary(
+        peers=n,
+        typical=typical,
+        bad=_int(bad, "links.bad", len(listed), 1 << 20),
+        bounds=summary_bounds,
+        listed=listed,
+    )
 
 
 def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
@@ -275,12 +455,7 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
     components = [_str(c, "component") for c in _list(comps, "components")]
     out = []
     for item in _list(x, "instances"):
-        fields = _list(item, "instance")
-        if len(fields) == 7:
-            fields = [*fields, None]
-        if len(fields) == 8:
-            fields = [*fields, 0]
-        ci, shared, rest, state, role, cpu, rss, data, out_bps = _list(fields, "instance", 9)
+        ci, shared, rest, state, role, cpu, rss, data, out_bps = _list(item, "instance", 9)
         component = components[_int(ci, "instance.component", 0, len(components) - 1)]
         prefix = component[: _int(shared, "instance.prefix", 0, len(component))]
         out.append(
@@ -290,7 +465,7 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
                 state=_named(state, STATES, "instance.state"),
                 role=_named(role, ROLES, "instance.role"),
                 cpu_pct=_int(cpu, "instance.cpu_pct", 0, 1_000_000) / 10,
-                rss=_int(rss, "instance.rss") * 1024,
+                rss=_int(rss, "instance.rss", 0, 1 << 50) * 1024,
                 data=None if data is None else _str(data, "instance.data"),
                 out_bps=_int(out_bps, "instance.out_bps", 0, 1 << 40),
             )
@@ -323,23 +498,24 @@ def _plan(x: object) -> PlanInfo | None:
     )
 
 
-def decode_record(b: bytes) -> RobotRecord:
-    """Bytes from the wire -> a checked record; raises WireError("malformed", ...) otherwise."""
+def _unpack(b: bytes, what: str) -> list[Any]:
     try:
         wire = msgpack.unpackb(b, raw=False, strict_map_key=True, use_list=True)
     except Exception as e:  # msgpack raises many types on garbage; all mean the same here
-        raise WireError("malformed", f"record: not msgpack ({type(e).__name__})") from None
+        raise WireError("malformed", f"{what}: not msgpack ({type(e).__name__})") from None
+    if not isinstance(wire, list) or not wire:
+        raise WireError("malformed", f"{what}: expected a list")
+    fmt = wire[0]
+    if fmt != FORMAT or isinstance(fmt, bool):
+        raise WireError("malformed", f"{what}: format {fmt!r} not understood")
+    return wire
+
+
+def decode_record(b: bytes) -> RobotRecord:
+    """Bytes from the wire -> a checked record; raises WireError("malformed", ...) otherwise."""
+    wire = _unpack(b, "record")
     try:
-        top = _list(wire, "record")
-        if len(top) == 8:
-            top = [*top, None, None]
-        fmt, metrics, links, api, priority, comps, instances, ts, elect, plan = _list(
-            top, "record", 10
-        )
-        if fmt != FORMAT or isinstance(fmt, bool):
-            raise _Malformed(f"record: format {fmt!r} not understood")
-        if not isinstance(ts, float) or not math.isfinite(ts):
-            raise _Malformed("ts: expected a finite float")
+        _, metrics, links, api, priority, comps, instances, elect, plan = _list(wire, "record", 9)
         if api is not None:
             _str(api, "api")
         return RobotRecord(
@@ -348,12 +524,32 @@ def decode_record(b: bytes) -> RobotRecord:
             api=api,
             priority=_int(priority, "priority", -(2**31), 2**31 - 1),
             instances=_instances(comps, instances),
-            ts=ts,
             election=_election(elect),
             plan=_plan(plan),
         )
     except (_Malformed, ValueError, TypeError) as e:
         # ValueError/TypeError come from unpacking a list of the wrong length.
+        raise WireError("malformed", str(e)) from None
+
+
+def decode_vitals(b: bytes) -> Vitals:
+    """Bytes from a probe -> checked vitals; raises WireError("malformed", ...) otherwise."""
+    wire = _unpack(b, "vitals")
+    try:
+        _, metrics, links, flat = _list(wire, "vitals", 4)
+        flat = _list(flat, "vitals.loads")
+        if len(flat) % 3:
+            raise _Malformed("vitals.loads: expected groups of 3")
+        loads = tuple(
+            (
+                _int(flat[i], "loads.cpu_pct", 0, 1_000_000) / 10,
+                _int(flat[i + 1], "loads.rss", 0, 1 << 50) * 1024,
+                _int(flat[i + 2], "loads.out_bps", 0, 1 << 40),
+            )
+            for i in range(0, len(flat), 3)
+        )
+        return Vitals(_metrics(metrics), _links(links), loads)
+    except (_Malformed, ValueError, TypeError) as e:
         raise WireError("malformed", str(e)) from None
 
 
@@ -369,14 +565,30 @@ def metrics_to_json(m: Metrics) -> dict[str, Any]:
     }
 
 
+def link_to_json(s: LinkStats) -> dict[str, Any]:
+    """One link as the HTTP API shows it."""
+    return {"rtt_ms": s.rtt_ms, "jitter_ms": s.jitter_ms, "loss": s.loss}
+
+
+def summary_to_json(s: LinkSummary) -> dict[str, Any]:
+    """A link summary as the HTTP API shows it (`listed` are the links past the bounds)."""
+    b = s.bounds
+    return {
+        "peers": s.peers,
+        "typical": None if s.typical is None else link_to_json(s.typical),
+        "bad": s.bad,
+        "bounds": {"rtt_ms": b.rtt_ms, "jitter_ms": b.jitter_ms, "loss": b.loss},
+        "listed": {peer: link_to_json(link) for peer, link in sorted(s.listed.items())},
+    }
+
+
 def record_to_json(r: RobotRecord) -> dict[str, Any]:
-    """The record as JSON-ready dicts for the HTTP API."""
+    """The record as JSON-ready dicts for the HTTP API (`links`: the listed links only; the
+    whole summary is `link_summary`)."""
     return {
         "metrics": metrics_to_json(r.metrics),
-        "links": {
-            peer: {"rtt_ms": s.rtt_ms, "jitter_ms": s.jitter_ms, "loss": s.loss}
-            for peer, s in sorted(r.links.items())
-        },
+        "links": {peer: link_to_json(s) for peer, s in sorted(r.links.listed.items())},
+        "link_summary": summary_to_json(r.links),
         "api": r.api,
         "priority": r.priority,
         "instances": [
@@ -392,7 +604,6 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
             }
             for i in r.instances
         ],
-        "ts": r.ts,
         "election": None
         if r.election is None
         else {
@@ -420,12 +631,14 @@ PAPER_COMPONENTS = (
 )
 
 
-def reference_record(peers: int = 10, instances: int = 10, ts: float = 0.0) -> RobotRecord:
-    """The record whose encoded size we quote: `peers` measured links and `instances` hosted
-    instances with the paper's component names (a realistic upper bound for one robot)."""
-    links = {
-        f"robot-{i}": LinkStats(rtt_ms=3.17 + i, jitter_ms=0.42 * i, loss=0.05 * (i % 3))
-        for i in range(2, 2 + peers)
+def reference_record(peers: int = 10, instances: int = 10, bad: int = 2) -> RobotRecord:
+    """The record whose encoded size we quote: `peers` measured links of which `bad` are past
+    the bounds (listed), and `instances` hosted instances with the paper's component names (a
+    realistic upper bound for one robot; the size no longer depends on `peers`)."""
+    bounds = LinkBounds(rtt_ms=50.0, jitter_ms=10.0, loss=0.05)
+    listed = {
+        f"robot-{i}": LinkStats(rtt_ms=63.17 + i, jitter_ms=12.42 * i, loss=0.05 * (i % 3))
+        for i in range(2, 2 + min(bad, MAX_LISTED))
     }
     hosted = tuple(
         InstanceInfo(
@@ -440,9 +653,14 @@ def reference_record(peers: int = 10, instances: int = 10, ts: float = 0.0) -> R
     )
     return RobotRecord(
         metrics=Metrics(37.5, 4_000_000_000, 1_234_567_890, 87.26, -47.0, (12.346, -3.2)),
-        links=links,
+        links=LinkSummary(
+            peers=peers,
+            typical=LinkStats(rtt_ms=3.17, jitter_ms=0.42, loss=0.01),
+            bad=bad,
+            bounds=bounds,
+            listed=listed,
+        ),
         api="http://192.168.10.11:8080",
         priority=3,
         instances=hosted,
-        ts=ts,
     )

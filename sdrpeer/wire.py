@@ -12,7 +12,8 @@ A datagram is a fixed 39-byte header followed by a msgpack body::
   MAC itself, so the version and key id cannot be altered either); all zeros when unsigned.
 - *body* is a short *stream* of msgpack arrays, not one nested array:
   the head ``[tag, sender, seq, ts_ms, *fields]``, then (Sync only) one array per entry, then
-  one array per piggybacked update ``[utag, *fields]``. Keeping every array small and flat lets
+  one array per piggybacked update ``[utag, *fields]``. A ping's head may end with the sender's
+  vitals revision ``version, revision, payload``. Keeping every array small and flat lets
   the decoder cap each array at `MAX_FIELDS` elements, so a hostile datagram cannot make msgpack
   preallocate megabytes of nested lists; and a packet's size is exactly its head plus the sum of
   `encoded_size(u)` of its updates.
@@ -52,6 +53,7 @@ from sdrpeer.gossip.messages import (
     Addr,
     Alive,
     Dead,
+    Digest,
     Event,
     Gossip,
     Nack,
@@ -63,6 +65,7 @@ from sdrpeer.gossip.messages import (
     Sync,
     SyncEntry,
     Update,
+    VitalsRevision,
 )
 from sdrpeer.keyring import (
     INSECURE_KEY_ID,
@@ -97,8 +100,9 @@ __all__ = [  # the keyring and replay guard live in their own modules; re-export
     "parse_key",
 ]
 
-PROTOCOL_VERSION = 1
-"""Bumped on any incompatible change of the header or body layout."""
+PROTOCOL_VERSION = 2
+"""Bumped on any incompatible change of the header or body layout (2: digests, vitals on pings,
+format-2 records)."""
 MAGIC = b"SP"
 HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + MAC_SIZE
 """Bytes the envelope adds before the body (39; `GossipConfig.packet_overhead` budgets 48)."""
@@ -119,7 +123,7 @@ REASONS = (
 """Every reason `Codec.decode` can reject a datagram for."""
 
 # Packet and update tags (small ints on the wire; never reuse a retired one).
-T_PING, T_PINGREQ, T_ACK, T_NACK, T_GOSSIP, T_SYNC = range(6)
+T_PING, T_PINGREQ, T_ACK, T_NACK, T_GOSSIP, T_SYNC, T_DIGEST = range(7)
 U_ALIVE, U_SUSPECT, U_DEAD, U_RECORD, U_EVENT = range(5)
 
 _PACKER = msgpack.Packer(use_bin_type=True)
@@ -149,7 +153,10 @@ def encoded_size(u: Update) -> int:
 
 def _head(p: Packet, seq: int, ts_ms: int) -> tuple[object, ...]:
     if isinstance(p, Ping):
-        return (T_PING, p.sender, seq, ts_ms, p.seq, p.target)
+        v = p.vitals
+        if v is None:
+            return (T_PING, p.sender, seq, ts_ms, p.seq, p.target)
+        return (T_PING, p.sender, seq, ts_ms, p.seq, p.target, v.version, v.revision, v.payload)
     if isinstance(p, PingReq):
         return (T_PINGREQ, p.sender, seq, ts_ms, p.seq, p.target, p.target_addr, p.want_nack)
     if isinstance(p, Ack):
@@ -160,6 +167,8 @@ def _head(p: Packet, seq: int, ts_ms: int) -> tuple[object, ...]:
         return (T_GOSSIP, p.sender, seq, ts_ms)
     if isinstance(p, Sync):
         return (T_SYNC, p.sender, seq, ts_ms, p.reply, len(p.entries))
+    if isinstance(p, Digest):
+        return (T_DIGEST, p.sender, seq, ts_ms, p.digest, p.count)
     raise TypeError(f"not a packet: {p!r}")
 
 
@@ -267,7 +276,8 @@ def _entry(obj: object) -> SyncEntry:
 
 
 # Fields in a head after [tag, sender, seq, ts_ms], per packet tag.
-_HEAD_FIELDS = {T_PING: 2, T_PINGREQ: 4, T_ACK: 1, T_NACK: 1, T_GOSSIP: 0, T_SYNC: 2}
+_HEAD_FIELDS = {T_PING: 2, T_PINGREQ: 4, T_ACK: 1, T_NACK: 1, T_GOSSIP: 0, T_SYNC: 2, T_DIGEST: 2}
+_DIGEST_MAX = (1 << 64) - 1
 
 
 def _new_unpacker(max_size: int) -> msgpack.Unpacker:
@@ -318,7 +328,14 @@ def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, i
     ups = tuple(updates)
     packet: Packet
     if tag == T_PING:
-        packet = Ping(sender, _uint(head[4], "probe seq"), _name(head[5], "target"), ups)
+        vitals = None
+        if len(head) >= 9:
+            vitals = VitalsRevision(
+                _uint(head[6], "vitals version"),
+                _uint(head[7], "vitals revision"),
+                _bytes(head[8], "vitals"),
+            )
+        packet = Ping(sender, _uint(head[4], "probe seq"), _name(head[5], "target"), ups, vitals)
     elif tag == T_PINGREQ:
         packet = PingReq(
             sender,
@@ -334,6 +351,11 @@ def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, i
         packet = Nack(sender, _uint(head[4], "probe seq"), ups)
     elif tag == T_GOSSIP:
         packet = Gossip(sender, ups)
+    elif tag == T_DIGEST:
+        digest = _uint(head[4], "digest")
+        if digest > _DIGEST_MAX:
+            raise _bad("digest", digest)
+        packet = Digest(sender, digest, _uint(head[5], "count"), ups)
     else:
         packet = Sync(sender, _bool(head[4], "reply"), entries, ups)
     return packet, seq, ts_ms, unknown

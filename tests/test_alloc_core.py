@@ -13,7 +13,7 @@ from sdrpeer.alloc.result import AllocationResult
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.errors import ConfigError
 from sdrpeer.plan import Plan
-from sdrpeer.record import InstanceInfo, LinkStats, Metrics
+from sdrpeer.record import InstanceInfo, LinkStats, LinkSummary, Metrics
 from sdrpeer.system.loader import load_system
 from sdrpeer.system.model import (
     AllocationDef,
@@ -41,7 +41,12 @@ def robot(
     links: dict[str, LinkStats] | None = None,
 ) -> RobotView:
     metrics = Metrics(10.0, 4000 * MB, free, battery, rssi, pos)
-    return RobotView(name, metrics, links or {}, instances)
+    return RobotView(name, metrics, listing(links or {}), instances)
+
+
+def listing(links: dict[str, LinkStats]) -> LinkSummary:
+    """A summary that lists `links` exactly and says nothing of any other link."""
+    return LinkSummary(peers=len(links), bad=len(links), listed=links)
 
 
 def comp(name: str, mem: int = 500 * MB, **kw: object) -> ComponentDef:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from sdrpeer.cli_status import format_status
 from sdrpeer.deploy.status import SinceTracker, all_active, status_doc
 from sdrpeer.plan import Placement, Plan
-from sdrpeer.record import InstanceInfo, Metrics, PlanInfo, RobotRecord
+from sdrpeer.record import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.model import ComponentDef, SystemDef
 
 SYSTEM = SystemDef(
@@ -32,7 +32,7 @@ PLAN = Plan(
 def record(instances: list[tuple[str, str]], key: tuple[int, int] | None = (3, 2)) -> RobotRecord:
     infos = tuple(InstanceInfo(n, n[0], st, "active", 0.0, 0) for n, st in instances)
     plan = None if key is None else PlanInfo(key[0], key[1], "d", "r1")
-    return RobotRecord(Metrics(0, 1, 1, None, None, None), {}, None, 0, infos, 0.0, plan=plan)
+    return RobotRecord(Metrics(0, 1, 1, None, None, None), LinkSummary(), None, 0, infos, plan=plan)
 
 
 def test_states_from_records_standbys_and_since() -> None:

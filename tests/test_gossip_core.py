@@ -19,6 +19,7 @@ from sdrpeer.gossip.messages import (
     Addr,
     Alive,
     Dead,
+    Digest,
     Gossip,
     Nack,
     Packet,
@@ -457,7 +458,7 @@ def test_periodic_sync_goes_to_a_live_seed_no_more_than_to_any_peer() -> None:
         t = round(t + 0.05, 6)
         core.handle_timer(t)
         for dst, p in answer_pings(core, t):
-            if isinstance(p, Sync) and p.reply:
+            if isinstance(p, Digest):
                 targets.append(dst)
     assert len(targets) > 60
     share = targets.count(addr(1)) / len(targets)
@@ -473,7 +474,7 @@ def test_periodic_sync_retries_a_dead_members_last_address() -> None:
     for _ in range(3000):
         t = round(t + 0.05, 6)
         core.handle_timer(t)
-        targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Sync) and p.reply]
+        targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Digest)]
     assert targets.count(addr(9)) / len(targets) > 0.2  # about one sync in three heals partitions
 
 
@@ -487,6 +488,6 @@ def test_a_member_back_from_the_dead_is_no_longer_a_reconnect_target() -> None:
     for _ in range(10_000):
         t = round(t + 0.05, 6)
         core.handle_timer(t)
-        targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Sync) and p.reply]
+        targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Digest)]
     assert len(targets) > 60
     assert targets.count(addr(9)) / len(targets) < 0.25  # a peer like any other, not 1 in 3

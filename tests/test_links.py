@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from sdrpeer.monitor.links import LinkEstimator, LinkTable, distance
-from sdrpeer.record import LinkStats
+from sdrpeer.monitor.links import LinkEstimator, LinkTable, distance, majority_worst, summarize
+from sdrpeer.record import MAX_LISTED, LinkBounds, LinkStats
 
 
 def test_no_stats_before_first_ack() -> None:
@@ -117,3 +117,44 @@ def test_distance(
 ) -> None:
     assert distance(a, b) == expected
     assert distance(b, a) == expected
+
+
+def test_majority_worst_is_what_more_than_half_reach() -> None:
+    assert majority_worst([0.4]) == 0.4
+    assert majority_worst([0.0, 0.4]) == 0.0
+    assert majority_worst([0.0, 0.4, 0.5]) == 0.4
+    assert majority_worst([0.4, 0.5, 0.0, 0.6]) == 0.4
+
+
+def test_summary_of_fifty_links() -> None:
+    bounds = LinkBounds(rtt_ms=50.0, jitter_ms=10.0, loss=0.05)
+    links = {f"robot-{k}": LinkStats(2.0 + k / 10, 0.5, 0.0) for k in range(50)}
+    links["robot-7"] = LinkStats(80.0, 0.5, 0.0)  # slow
+    links["robot-8"] = LinkStats(3.0, 0.5, 0.3)  # lossy: worse (0.3 / 0.05 = 6 > 80 / 50)
+    links["robot-9"] = LinkStats(3.0, 10.0, 0.0)  # jitter exactly at the bound: listed
+    s = summarize(links, bounds)
+    assert s.peers == 50
+    assert s.bad == 3
+    assert s.complete
+    assert list(s.listed) == ["robot-8", "robot-7", "robot-9"]  # worst first
+    assert s.typical is not None
+    assert s.typical.loss == 0.0
+    assert 4.0 < s.typical.rtt_ms < 5.0
+    many = {f"robot-{k}": LinkStats(3.0, 0.5, 0.1 + k / 1000) for k in range(20)}
+    t = summarize(many, bounds)
+    assert t.bad == 20
+    assert len(t.listed) == MAX_LISTED
+    assert not t.complete
+    assert next(iter(t.listed)) == "robot-19"
+    assert summarize({}, bounds).typical is None
+
+
+def test_link_table_summary() -> None:
+    table = LinkTable()
+    for t in range(4):
+        table.observe("robot-2", 0.002, float(t))
+        table.observe("robot-3", None if t % 2 else 0.004, float(t))
+    s = table.summary(4.0, LinkBounds(loss=0.2))
+    assert s.peers == 2
+    assert list(s.listed) == ["robot-3"]
+    assert s.listed["robot-3"].loss == 0.5

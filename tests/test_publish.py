@@ -1,4 +1,4 @@
-"""The publishing deadband."""
+"""The publisher: which samples make a record (spread), vitals (on probes) or nothing."""
 
 from __future__ import annotations
 
@@ -6,17 +6,35 @@ from dataclasses import replace
 
 import pytest
 
-from sdrpeer.monitor.publish import worth_publishing
-from sdrpeer.record import InstanceInfo, LinkStats, Metrics, RobotRecord
+from sdrpeer.monitor.publish import (
+    DEFAULT_LINK_BOUNDS,
+    NONE,
+    RECORD,
+    VITALS,
+    Publisher,
+    boundaries,
+    link_bounds,
+)
+from sdrpeer.record import (
+    ElectionInfo,
+    InstanceInfo,
+    LinkBounds,
+    LinkStats,
+    LinkSummary,
+    Metrics,
+    PlanInfo,
+    RobotRecord,
+)
+from sdrpeer.system.model import RecoveryDef, RecoveryRule, Thresholds
 
 GB = 1 << 30
+CAM = InstanceInfo("Cam1", "Cam", "active", "active", 10.0, 100 << 20)
 BASE = RobotRecord(
     Metrics(10.0, 4 * GB, 3 * GB, 80.0, -47.0, (1.0, 2.0)),
-    {"robot-2": LinkStats(0.5, 0.1, 0.0)},
+    LinkSummary(peers=4, typical=LinkStats(0.5, 0.1, 0.0), bounds=DEFAULT_LINK_BOUNDS),
     "http://127.0.0.1:1",
     0,
-    (),
-    1000.0,
+    (CAM,),
 )
 
 
@@ -24,52 +42,115 @@ def metrics(**changes: object) -> RobotRecord:
     return replace(BASE, metrics=replace(BASE.metrics, **changes))  # type: ignore[arg-type]
 
 
-def link(**changes: object) -> RobotRecord:
-    return replace(BASE, links={"robot-2": replace(BASE.links["robot-2"], **changes)})  # type: ignore[arg-type]
+def typical(**changes: object) -> RobotRecord:
+    assert BASE.links.typical is not None
+    t = replace(BASE.links.typical, **changes)  # type: ignore[arg-type]
+    return replace(BASE, links=replace(BASE.links, typical=t))
+
+
+def instance(**changes: object) -> RobotRecord:
+    return replace(BASE, instances=(replace(CAM, **changes),))  # type: ignore[arg-type]
+
+
+def published() -> Publisher:
+    p = Publisher()
+    assert p.decide(0.0, BASE) == RECORD  # the first sample is always a record
+    return p
 
 
 @pytest.mark.parametrize(
     ("new", "expected"),
     [
-        (replace(BASE, ts=2000.0), False),  # only the timestamp
-        (metrics(cpu_pct=14.9), False),
-        (metrics(cpu_pct=15.0), True),
-        (metrics(mem_free=3 * GB - 20 * 2**20), False),  # 20 MiB < 1 % of 4 GB
-        (metrics(mem_free=3 * GB - 50 * 2**20), True),
-        (metrics(battery_pct=79.5), False),
-        (metrics(battery_pct=79.0), True),
-        (metrics(rssi_dbm=-48.9), False),
-        (metrics(rssi_dbm=-55.0), True),
-        (metrics(rssi_dbm=None), True),
-        (metrics(pos=(1.0, 2.5)), True),
-        (link(rtt_ms=1.4), False),  # 0.9 ms < 1 ms
-        (link(rtt_ms=1.6), True),
-        (link(loss=0.04), False),
-        (link(loss=0.3), True),
-        (link(jitter_ms=0.9), False),
-        (replace(BASE, links={}), True),
-        (replace(BASE, priority=5), True),
+        (BASE, NONE),
+        (metrics(cpu_pct=14.9), NONE),
+        (metrics(cpu_pct=15.0), VITALS),
+        (metrics(mem_free=3 * GB - 20 * 2**20), NONE),  # 20 MiB < 1 % of 4 GB
+        (metrics(mem_free=3 * GB - 50 * 2**20), VITALS),
+        (metrics(battery_pct=79.5), NONE),
+        (metrics(battery_pct=79.0), VITALS),
+        (metrics(rssi_dbm=-48.9), NONE),
+        (metrics(rssi_dbm=-49.5), VITALS),
+        (metrics(pos=(1.05, 2.0)), NONE),
+        (metrics(pos=(1.5, 2.0)), VITALS),
+        (typical(rtt_ms=1.4), NONE),  # 0.9 ms < 1 ms
+        (typical(rtt_ms=1.6), VITALS),
+        (typical(loss=0.009), NONE),
+        (typical(jitter_ms=0.9), NONE),
+        (instance(cpu_pct=20.0), VITALS),
+        (instance(out_bps=12345), NONE),  # rides along with the next revision
+        # What the fleet decides with: a new record.
+        (replace(BASE, priority=5), RECORD),
+        (replace(BASE, api="http://127.0.0.1:2"), RECORD),
+        (metrics(pos=None), RECORD),
+        (metrics(mem_total=8 * GB), RECORD),
+        (instance(state="error"), RECORD),
+        (instance(data="tcp://127.0.0.1:9"), RECORD),
+        (replace(BASE, instances=()), RECORD),
+        (replace(BASE, election=ElectionInfo(1, "robot-1", True)), RECORD),
+        (replace(BASE, plan=PlanInfo(1, 1, "d", "robot-1")), RECORD),
+        (replace(BASE, links=replace(BASE.links, bounds=LinkBounds(loss=0.01))), RECORD),
+        # Boundaries: trap levels and the election's health steps.
+        (metrics(rssi_dbm=-52.5), RECORD),  # onto the trap threshold
+        (metrics(battery_pct=74.9), RECORD),  # health step 75 %
+        (metrics(cpu_pct=91.0), RECORD),
+        (metrics(mem_free=199_000_000), RECORD),
+        (typical(loss=0.01), RECORD),  # health step 1 %
+        (metrics(battery_pct=None), RECORD),
     ],
 )
-def test_deadband(new: RobotRecord, expected: bool) -> None:
-    assert worth_publishing(BASE, new) is expected
+def test_decisions(new: RobotRecord, expected: str) -> None:
+    assert published().decide(1.0, new) == expected
 
 
-def test_first_record_is_always_published() -> None:
-    assert worth_publishing(None, BASE) is True
+def test_deadband_is_measured_from_the_last_values_sent() -> None:
+    p = published()
+    assert p.decide(1.0, metrics(cpu_pct=13.0)) == NONE
+    assert p.decide(2.0, metrics(cpu_pct=16.0)) == VITALS  # 6 points from the record
+    assert p.decide(3.0, metrics(cpu_pct=19.0)) == NONE  # 3 points from the vitals sent
+    assert p.decide(4.0, metrics(cpu_pct=21.0)) == VITALS
 
 
-def test_noise_around_a_value_does_not_flap() -> None:
-    # RTT hovering around 0.5 ms: bucketed rounding would flip 0 <-> 1 ms every sample.
-    assert not any(worth_publishing(BASE, link(rtt_ms=r)) for r in (0.45, 0.55, 0.49, 0.51, 0.6))
+def test_a_crossing_soon_after_a_record_waits_for_the_gap_as_vitals() -> None:
+    p = published()
+    assert p.decide(0.5, metrics(rssi_dbm=-53.0)) == VITALS  # 0.5 s < min_gap 1 s
+    assert p.decide(0.9, metrics(rssi_dbm=-53.0)) == NONE
+    assert p.decide(1.0, metrics(rssi_dbm=-53.0)) == RECORD  # still across: now a record
+    assert p.decide(1.5, metrics(rssi_dbm=-47.0)) == VITALS  # back across, within the gap
+    assert p.decide(2.0, metrics(rssi_dbm=-47.0)) == RECORD
 
 
-def test_instances_compare_by_identity_and_state_with_bands_for_load() -> None:
-    cam = InstanceInfo("CameraRTC2", "Camera", "active", "active", 12.0, 100 << 20)
-    last = replace(BASE, instances=(cam,))
-    assert not worth_publishing(last, replace(BASE, instances=(replace(cam, cpu_pct=14.0),)))
-    assert not worth_publishing(last, replace(BASE, instances=(replace(cam, rss=110 << 20),)))
-    assert worth_publishing(last, replace(BASE, instances=(replace(cam, cpu_pct=20.0),)))
-    assert worth_publishing(last, replace(BASE, instances=(replace(cam, rss=600 << 20),)))
-    assert worth_publishing(last, replace(BASE, instances=(replace(cam, state="error"),)))
-    assert worth_publishing(last, replace(BASE, instances=()))
+def test_force_always_makes_a_record() -> None:
+    assert published().decide(0.1, BASE, force=True) == RECORD
+
+
+def test_nothing_is_resent_on_a_timer() -> None:
+    p = published()
+    assert all(p.decide(float(t), BASE) == NONE for t in range(1, 3600, 7))
+
+
+def test_boundaries_of_a_deployed_system() -> None:
+    recovery = RecoveryDef(
+        rules=(
+            RecoveryRule("low_battery", "battery", "<=", 30.0, 6.0, 35.0),
+            RecoveryRule("communication_failure", "delay", ">=", 200.0, 6.0, 150.0),
+            RecoveryRule("component_error"),
+        )
+    )
+    b = boundaries(recovery, Thresholds(battery_above_pct=40.0, loss_below=0.1))
+    assert {30.0, 35.0, 40.0, 20.0, 25.0, 50.0, 75.0} <= set(b.cuts["battery"])
+    assert b.cuts["delay"] == (150.0, 200.0)
+    assert 0.1 in b.cuts["loss"]
+    p = Publisher(b)
+    base = replace(BASE, links=replace(BASE.links, typical=LinkStats(100.0, 0.1, 0.0)))
+    assert p.decide(0.0, base) == RECORD
+    slower = replace(base, links=replace(base.links, typical=LinkStats(149.0, 0.1, 0.0)))
+    assert p.decide(2.0, slower) == VITALS
+    past = replace(base, links=replace(base.links, typical=LinkStats(151.0, 0.1, 0.0)))
+    assert p.decide(3.0, past) == RECORD
+    assert boundaries().crossed(BASE, typical(rtt_ms=300.0)) is None  # no rule: no cut
+
+
+def test_link_bounds_take_the_tighter_of_defaults_and_thresholds() -> None:
+    assert link_bounds(None) == DEFAULT_LINK_BOUNDS
+    t = Thresholds(jitter_below_ms=30.0, loss_below=0.01, delay_below_ms=20.0)
+    assert link_bounds(t) == LinkBounds(rtt_ms=20.0, jitter_ms=10.0, loss=0.01)

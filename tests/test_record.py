@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import replace
 
 import msgpack
@@ -12,22 +13,30 @@ from hypothesis import strategies as st
 
 from sdrpeer.errors import WireError
 from sdrpeer.record import (
+    MAX_LISTED,
     ElectionInfo,
     InstanceInfo,
+    LinkBounds,
     LinkStats,
+    LinkSummary,
     Metrics,
     PlanInfo,
     RobotRecord,
+    Vitals,
+    apply_vitals,
     decode_record,
+    decode_vitals,
     encode_record,
+    encode_vitals,
     record_to_json,
     reference_record,
+    vitals_of,
 )
 
 
 def big_record() -> RobotRecord:
-    """A robot with 10 measured peers and 10 instances: a realistic upper bound."""
-    return reference_record(ts=1_732_240_000.123)
+    """A robot with 10 measured peers (2 past the bounds) and 10 instances."""
+    return reference_record()
 
 
 def test_round_trip_rounds_to_the_grid() -> None:
@@ -39,8 +48,11 @@ def test_round_trip_rounds_to_the_grid() -> None:
     assert m.battery_pct == 87.3  # 0.1 % grid
     assert m.rssi_dbm == -47.0
     assert m.pos == (12.35, -3.2)  # cm
-    assert r.links["robot-3"] == LinkStats(rtt_ms=6.17, jitter_ms=1.26, loss=0.0)
-    assert r.links["robot-4"].loss == 0.05
+    assert r.links.listed["robot-3"] == LinkStats(rtt_ms=66.17, jitter_ms=37.26, loss=0.0)
+    assert r.links.listed["robot-2"].loss == 0.1
+    assert r.links.typical == LinkStats(rtt_ms=3.17, jitter_ms=0.42, loss=0.01)
+    assert (r.links.peers, r.links.bad) == (10, 2)
+    assert r.links.bounds == LinkBounds(50.0, 10.0, 0.05)
     assert [i.name for i in r.instances][:3] == [
         "OmnidirectionalCameraRTC1",
         "AnomalyDetectionRTC2",
@@ -51,28 +63,73 @@ def test_round_trip_rounds_to_the_grid() -> None:
     assert r.instances[0].rss == round(512_000_000 / 1024) * 1024
     assert r.api == "http://192.168.10.11:8080"
     assert r.priority == 3
-    assert r.ts == 1_732_240_000.123
     # Once on the grid, a record survives unchanged.
     assert decode_record(encode_record(r)) == r
 
 
-def test_size_of_ten_peers_and_ten_instances() -> None:
-    size = len(encode_record(big_record()))
-    print(f"record with 10 links + 10 instances: {size} bytes")
-    assert size < 500  # 449 when written; the paper's own names are long
+def test_size_does_not_grow_with_the_fleet() -> None:
+    sizes = {n: len(encode_record(reference_record(peers=n))) for n in (10, 100, 1000)}
+    print(f"record with 2 listed links + 10 instances: {sizes} bytes")
+    assert max(sizes.values()) - min(sizes.values()) <= 2  # the number of peers: one integer
+    assert sizes[10] < 400  # 361 when written; the paper's own names are long
+    worst = reference_record(peers=1000, bad=1000)  # every link bad: still MAX_LISTED listed
+    back = decode_record(encode_record(worst))
+    assert len(back.links.listed) == MAX_LISTED
+    assert back.links.bad == 1000
+    assert len(encode_record(worst)) < 500
 
 
 def test_minimal_record_and_unknown_names() -> None:
     r = RobotRecord(
         metrics=Metrics(0.0, 1024, 0, None, None, None),
-        links={},
+        links=LinkSummary(),
         api=None,
         priority=-1,
         instances=(InstanceInfo("cam", "camera_driver", "weird-state", "observer", 0.0, 0),),
-        ts=0.0,
     )
     assert decode_record(encode_record(r)) == r
-    assert len(encode_record(r)) == 68  # 30 of them are the three free-form strings
+    assert len(encode_record(r)) == 69  # 30 of them are the three free-form strings
+
+
+def test_vitals_round_trip_and_overlay() -> None:
+    r = decode_record(encode_record(big_record()))
+    v = vitals_of(r)
+    assert decode_vitals(encode_vitals(v)) == v
+    assert len(encode_vitals(v)) < len(encode_record(r))
+    newer = Vitals(
+        metrics=Metrics(80.0, r.metrics.mem_total, 1 << 30, 50.0, -60.0, None),
+        links=LinkSummary(peers=3, typical=LinkStats(1.0, 0.5, 0.2)),
+        loads=tuple((1.0, 1024 * (i + 1), 7) for i in range(len(r.instances))),
+    )
+    same = apply_vitals(r, newer)
+    assert same.metrics == newer.metrics
+    assert same.links == newer.links
+    assert [i.rss for i in same.instances] == [1024 * (i + 1) for i in range(10)]
+    assert same.instances[0].name == r.instances[0].name  # identity stays the record's
+    # Vitals of a newer record than the one held: its instances may differ, only the
+    # robot's own values apply.
+    ahead = apply_vitals(r, newer, same_version=False)
+    assert ahead.metrics == newer.metrics
+    assert ahead.instances == r.instances
+    short = Vitals(newer.metrics, newer.links, newer.loads[:3])
+    assert apply_vitals(r, short).instances == r.instances
+
+
+def test_towards_a_peer() -> None:
+    bounds = LinkBounds(rtt_ms=50.0, jitter_ms=None, loss=0.05)
+    s = LinkSummary(
+        peers=5,
+        typical=LinkStats(80.0, 2.0, 0.01),  # most links slow, but none lossy
+        bad=1,
+        bounds=bounds,
+        listed={"robot-9": LinkStats(120.0, 3.0, 0.3)},
+    )
+    assert s.towards("robot-9") == LinkStats(120.0, 3.0, 0.3)
+    # Complete list: an unlisted link is inside every bound, just below it at worst.
+    assert s.towards("robot-2") == LinkStats(49.99, 2.0, 0.01)
+    partial = LinkSummary(peers=50, typical=LinkStats(80.0, 2.0, 0.2), bad=20, bounds=bounds)
+    assert partial.towards("robot-2") == LinkStats(80.0, 2.0, 0.2)  # unknown: typical
+    assert LinkSummary().towards("robot-2") is None
 
 
 def test_record_to_json() -> None:
@@ -85,7 +142,10 @@ def test_record_to_json() -> None:
         "rssi_dbm": -47.0,
         "pos": [12.35, -3.2],
     }
-    assert d["links"]["robot-2"] == {"rtt_ms": 5.17, "jitter_ms": 0.84, "loss": 0.1}
+    assert d["links"]["robot-2"] == {"rtt_ms": 65.17, "jitter_ms": 24.84, "loss": 0.1}
+    assert d["link_summary"]["typical"] == {"rtt_ms": 3.17, "jitter_ms": 0.42, "loss": 0.01}
+    assert d["link_summary"]["peers"] == 10
+    assert d["link_summary"]["bounds"] == {"rtt_ms": 50.0, "jitter_ms": 10.0, "loss": 0.05}
     assert d["instances"][0]["component"] == "OmnidirectionalCameraRTC"
     json.dumps(d)  # JSON-ready
 
@@ -93,16 +153,17 @@ def test_record_to_json() -> None:
 def wire(**changes: object) -> bytes:
     """A valid wire array with some positions replaced."""
     base: list[object] = [
-        1,
+        2,
         [100, 4, 2, None, None, None],
-        ["p", 1, 1, 0],
+        [3, 1, 1, 0, 1, [None, None, 500], ["p", 1, 1, 900]],
         None,
         0,
         ["C"],
-        [[0, 1, "1", 2, 0, 0, 0]],
-        1.0,
+        [[0, 1, "1", 2, 0, 0, 0, None, 0]],
+        None,
+        None,
     ]
-    names = ["fmt", "metrics", "links", "api", "priority", "comps", "instances", "ts"]
+    names = ["fmt", "metrics", "links", "api", "priority", "comps", "instances", "e", "p"]
     for k, v in changes.items():
         base[names.index(k)] = v
     data: bytes = msgpack.packb(base)
@@ -112,31 +173,37 @@ def wire(**changes: object) -> bytes:
 def test_wire_helper_is_valid() -> None:
     r = decode_record(wire())
     assert r.instances[0].name == "C1"
-    assert r.links == {"p": LinkStats(0.01, 0.01, 0.0)}
+    assert r.links.listed == {"p": LinkStats(0.01, 0.01, 0.9)}
+    assert r.links.typical == LinkStats(0.01, 0.01, 0.0)
 
 
 @pytest.mark.parametrize(
     ("changes", "detail"),
     [
-        ({"fmt": 2}, "format 2"),
+        ({"fmt": 1}, "format 1"),
         ({"fmt": True}, "format True"),
         ({"metrics": [1, 2, 3]}, "metrics: expected a list of 6"),
         ({"metrics": [-1, 4, 2, None, None, None]}, "cpu_pct: -1 out of range"),
         ({"metrics": [1.5, 4, 2, None, None, None]}, "cpu_pct: expected an integer"),
         ({"metrics": [1, 4, 2, 1001, None, None]}, "battery_pct: 1001 out of range"),
         ({"metrics": [1, 4, 2, None, None, [1]]}, "metrics.pos: expected a list of 2"),
-        ({"links": ["p", 1, 1]}, "links: expected groups of 4"),
-        ({"links": ["p", 1, 1, 1001]}, "loss: 1001 out of range"),
-        ({"links": ["p", 1, 1, 0, "p", 1, 1, 0]}, "peer 'p' twice"),
-        ({"links": ["", 1, 1, 0]}, "links.peer: expected a name"),
+        ({"links": ["p", 1, 1]}, "links: expected a list of 7"),
+        ({"links": [1, 1, 1, 0, 1, [None] * 3, ["p", 1, 1]]}, "expected at most 8 groups of 4"),
+        ({"links": [1, 1, 1, 0, 1, [None] * 3, ["p", 1, 1, 1001]]}, "loss: 1001 out of range"),
+        ({"links": [1, 1, 1, 0, 2, [None] * 3, ["p", 1, 1, 0] * 2]}, "peer 'p' twice"),
+        ({"links": [1, 1, 1, 0, 1, [None] * 3, ["", 1, 1, 0]]}, "links.peer: expected a name"),
+        ({"links": [1, 1, 1, 0, 0, [None] * 3, ["p", 1, 1, 0]]}, "links.bad: 0 out of range"),
+        ({"links": [1, 1, 1, 0, 0, [None] * 2, []]}, "links.bounds: expected a list of 3"),
+        ({"links": [1, -1, 1, 0, 0, [None] * 3, []]}, "rtt_ms: -1 out of range"),
+        ({"links": [1, 1, 1, 0, 9, [None] * 3, ["p", 1, 1, 0] * 9]}, "at most 8 groups"),
         ({"api": 5}, "api: expected a name"),
         ({"priority": 2**40}, "priority"),
-        ({"instances": [[1, 1, "1", 2, 0, 0, 0]]}, "instance.component: 1 out of range"),
-        ({"instances": [[0, 2, "1", 2, 0, 0, 0]]}, "instance.prefix: 2 out of range"),
-        ({"instances": [[0, 1, "1", 99, 0, 0, 0]]}, "instance.state: 99 out of range"),
-        ({"instances": [[0, 0, "", 2, 0, 0, 0]]}, "instance.name: expected a name"),
-        ({"ts": 1}, "ts: expected a finite float"),
-        ({"ts": float("nan")}, "ts: expected a finite float"),
+        ({"instances": [[1, 1, "1", 2, 0, 0, 0, None, 0]]}, "instance.component: 1 out of"),
+        ({"instances": [[0, 2, "1", 2, 0, 0, 0, None, 0]]}, "instance.prefix: 2 out of range"),
+        ({"instances": [[0, 1, "1", 99, 0, 0, 0, None, 0]]}, "instance.state: 99 out of range"),
+        ({"instances": [[0, 0, "", 2, 0, 0, 0, None, 0]]}, "instance.name: expected a name"),
+        ({"instances": [[0, 1, "1", 2, 0, 0, 0]]}, "instance: expected a list of 9"),
+        ({"metrics": [1, 4, 2, None, None, [10**10, 0]]}, "pos.x: 10000000000 out of range"),
     ],
 )
 def test_malformed_fields_are_named(changes: dict[str, object], detail: str) -> None:
@@ -174,17 +241,27 @@ def _mutations(data: bytes) -> st.SearchStrategy[bytes]:
     )
 
 
+def _decodes_or_fails_cleanly(data: bytes, decode: Callable[[bytes], object]) -> None:
+    """`decode(data)` raises only WireError("malformed"), or returns what encodes back to it."""
+    try:
+        value = decode(data)
+    except WireError as e:
+        assert e.reason == "malformed"  # noqa: PT017 - the reason is the point
+        return
+    encode = encode_record if isinstance(value, RobotRecord) else encode_vitals
+    assert decode(encode(value)) == value  # type: ignore[arg-type]
+
+
 @settings(max_examples=500)
 @given(_mutations(encode_record(big_record())))
 def test_mutated_records_decode_or_fail_cleanly(data: bytes) -> None:
-    try:
-        r = decode_record(data)
-    except WireError as e:
-        reason = e.reason
-    else:
-        assert decode_record(encode_record(r)) == r
-        reason = "malformed"
-    assert reason == "malformed"
+    _decodes_or_fails_cleanly(data, decode_record)
+
+
+@settings(max_examples=300)
+@given(_mutations(encode_vitals(vitals_of(big_record()))))
+def test_mutated_vitals_decode_or_fail_cleanly(data: bytes) -> None:
+    _decodes_or_fails_cleanly(data, decode_vitals)
 
 
 def test_election_plan_and_data_address_round_trip() -> None:
@@ -203,14 +280,10 @@ def test_election_plan_and_data_address_round_trip() -> None:
     assert back.instances[1].data is None
 
 
-def test_first_layout_still_accepted() -> None:
-    wire = msgpack.unpackb(encode_record(big_record()), raw=False)
-    old = wire[:8]
-    old[6] = [item[:7] for item in old[6]]
-    back = decode_record(msgpack.packb(old, use_bin_type=True))
-    assert back.election is None
-    assert back.plan is None
-    assert all(i.data is None for i in back.instances)
+def test_first_format_is_refused_by_name() -> None:
+    old = [1, [100, 4, 2, None, None, None], [], None, 0, [], [], 1.0]
+    with pytest.raises(WireError, match="format 1 not understood"):
+        decode_record(msgpack.packb(old, use_bin_type=True))
 
 
 @pytest.mark.parametrize(
@@ -219,6 +292,6 @@ def test_first_layout_still_accepted() -> None:
 )
 def test_malformed_election_refused(election: list[object]) -> None:
     wire = msgpack.unpackb(encode_record(big_record()), raw=False)
-    wire[8] = election
+    wire[7] = election
     with pytest.raises(WireError, match="malformed"):
         decode_record(msgpack.packb(wire, use_bin_type=True))

@@ -1,15 +1,24 @@
-"""RobotMonitor: robot-wide conditions from gossip, others' views of a sick robot, dwell."""
+"""RobotMonitor: robot-wide conditions from gossip (own metrics, link summaries), dwell."""
 
 from __future__ import annotations
 
+from sdrpeer.monitor.links import summarize
+from sdrpeer.record import LinkBounds, LinkStats
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Cleared, RobotCondition, RobotEvent
-from sdrpeer.recovery.robot_conditions import RobotMonitor, majority_value
+from sdrpeer.recovery.robot_conditions import RobotMonitor
 from sdrpeer.system.recovery_defaults import default_recovery
 
 CONFIG = RecoveryConfig(gossip_stale_after_s=12.0)
-GOOD = {"rtt_ms": 3.0, "jitter_ms": 1.0, "loss": 0.0}
-LOSSY = {"rtt_ms": 3.0, "jitter_ms": 1.0, "loss": 0.4}
+GOOD = LinkStats(rtt_ms=3.0, jitter_ms=1.0, loss=0.0)
+LOSSY = LinkStats(rtt_ms=3.0, jitter_ms=1.0, loss=0.4)
+
+
+def typical(links: dict[str, LinkStats]) -> dict[str, float | None]:
+    """The link metrics a robot's record reports of the links it measures."""
+    t = summarize(links, LinkBounds()).typical
+    assert t is not None
+    return {"delay": t.rtt_ms, "jitter": t.jitter_ms, "loss": t.loss}
 
 
 def events(m: RobotMonitor) -> list[RobotEvent]:
@@ -48,47 +57,32 @@ def test_heartbeat_records_keep_a_run_alive_a_silence_breaks_it() -> None:
     assert [e.robot for e in events(m)] == ["robot-1"]
 
 
-def test_peers_measuring_loss_make_a_silent_robot_sick() -> None:
-    """robot-1's own record is silent; robot-2 and robot-3 measure 40% loss toward it."""
+def test_a_robot_whose_links_are_mostly_lossy_is_sick() -> None:
+    """robot-1's radio is bad: every link it measures loses 40 %."""
     m = RobotMonitor(default_recovery(), CONFIG)
     for now in (0.0, 3.0, 6.0):
-        m.observe_link(now, "robot-2", "robot-1", **LOSSY)
-        m.observe_link(now, "robot-3", "robot-1", **LOSSY)
-        m.observe_link(now, "robot-2", "robot-3", **GOOD)
-        m.observe_link(now, "robot-3", "robot-2", **GOOD)
+        m.observe_robot(now, "robot-1", typical({"robot-2": LOSSY, "robot-3": LOSSY}))
+        m.observe_robot(now, "robot-2", typical({"robot-1": LOSSY, "robot-3": GOOD}))
+        m.observe_robot(now, "robot-3", typical({"robot-1": LOSSY, "robot-2": GOOD}))
     [e] = events(m)
     assert e == RobotCondition("robot-1", "communication_failure", "loss", 0.4, 0.0, 6.0)
     assert m.degraded(6.0) == {"robot-1"}
 
 
-def test_one_observer_with_a_bad_link_does_not_make_the_target_sick() -> None:
-    """robot-1's radio is bad: it sees robot-2 lossy, but robot-3 sees robot-2 fine."""
+def test_one_bad_peer_does_not_make_a_robot_sick() -> None:
+    """robot-2 measures one lossy link (to robot-1, whose radio is bad) among four good ones."""
+    m = RobotMonitor(default_recovery(), CONFIG)
+    links = {"robot-1": LOSSY, **{f"robot-{k}": GOOD for k in (3, 4, 5, 6)}}
+    for now in (0.0, 3.0, 6.0, 9.0):
+        m.observe_robot(now, "robot-2", typical(links))
+    assert m.degraded(9.0) == set()
+
+
+def test_half_the_links_is_not_a_majority() -> None:
     m = RobotMonitor(default_recovery(), CONFIG)
     for now in (0.0, 3.0, 6.0, 9.0):
-        m.observe_link(now, "robot-1", "robot-2", **LOSSY)
-        m.observe_link(now, "robot-3", "robot-2", **GOOD)
-        m.observe_link(now, "robot-2", "robot-1", **LOSSY)
-        m.observe_link(now, "robot-3", "robot-1", **LOSSY)
-    assert m.degraded(9.0) == {"robot-1"}
-
-
-def test_stale_observers_no_longer_count() -> None:
-    m = RobotMonitor(default_recovery(), CONFIG)
-    m.observe_link(0.0, "robot-3", "robot-1", **LOSSY)  # robot-3 then goes quiet
-    for now in (13.0, 16.0, 19.0):
-        m.observe_link(now, "robot-2", "robot-1", **GOOD)
-        m.observe_link(now, "robot-4", "robot-1", **GOOD)
-    assert m.degraded(19.0) == set()
-    m.observe_link(20.0, "robot-3", "robot-1", **LOSSY)  # one of three: not a majority
-    assert m.degraded(20.0) == set()
-
-
-def test_majority_value_is_the_view_of_more_than_half() -> None:
-    assert majority_value([0.4], ">=") == 0.4
-    assert majority_value([0.0, 0.4], ">=") == 0.0
-    assert majority_value([0.0, 0.4, 0.5], ">=") == 0.4
-    assert majority_value([0.4, 0.5, 0.0, 0.6], ">=") == 0.4
-    assert majority_value([-60.0, -40.0, -55.0], "<=") == -55.0
+        m.observe_robot(now, "robot-2", typical({"robot-1": LOSSY, "robot-3": GOOD}))
+    assert m.degraded(9.0) == set()
 
 
 def test_low_battery_clears_past_its_clear_level_then_dwells() -> None:
@@ -119,16 +113,13 @@ def test_dwell_starts_when_the_last_condition_clears() -> None:
     assert m.excluded(50.0) == set()
 
 
-def test_robot_gone_forgets_it_and_its_measurements() -> None:
+def test_robot_gone_forgets_it() -> None:
     m = RobotMonitor(default_recovery(), CONFIG)
     m.observe_robot(0.0, "robot-1", {"battery": 10.0})
-    m.observe_link(0.0, "robot-1", "robot-2", **LOSSY)
     m.robot_gone(1.0, "robot-1")
     assert m.degraded(1.0) == set()
     assert m.excluded(1.0) == {"robot-1"}  # it may come back: not at once
     assert m.fired() == []
-    m.observe_link(2.0, "robot-3", "robot-2", **GOOD)  # robot-1's old view is gone
-    assert m.degraded(2.0) == set()
 
 
 def test_cpu_and_memory_are_left_to_the_robot_s_agent() -> None:

@@ -36,6 +36,7 @@ from sdrpeer.lab import default_robot_files
 from sdrpeer.lab_up import RunningLab, UpOptions, log_tail, start_lab
 from sdrpeer.record import (
     LinkStats,
+    LinkSummary,
     Metrics,
     RobotRecord,
     encode_record,
@@ -65,11 +66,18 @@ def record_from_member(member: dict[str, Any]) -> RobotRecord | None:
         m.get("rssi_dbm"),
         None if pos is None else (float(pos[0]), float(pos[1])),
     )
-    links = {
-        peer: LinkStats(float(s["rtt_ms"]), float(s["jitter_ms"]), float(s["loss"]))
-        for peer, s in (member.get("links") or {}).items()
-    }
-    return RobotRecord(metrics, links, member.get("api"), 0, (), time.time())
+    summary = member.get("link_summary") or {}
+    t = summary.get("typical")
+    links = LinkSummary(
+        peers=int(summary.get("peers") or 0),
+        typical=None if not t else LinkStats(t["rtt_ms"], t["jitter_ms"], t["loss"]),
+        bad=int(summary.get("bad") or 0),
+        listed={
+            peer: LinkStats(float(s["rtt_ms"]), float(s["jitter_ms"]), float(s["loss"]))
+            for peer, s in (summary.get("listed") or {}).items()
+        },
+    )
+    return RobotRecord(metrics, links, member.get("api"), 0, ())
 
 
 # --- measuring -----------------------------------------------------------------------------------
@@ -209,7 +217,7 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
     finally:
         for line in running.stop():
             print(f"  {line}", flush=True)
-    synthetic = encode_record(reference_record(ts=time.time()))
+    synthetic = encode_record(reference_record())
     return {
         "preset": "lan",
         "robots": args.robots,

@@ -26,7 +26,8 @@ from typing import Any
 
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.view import ClusterView, RobotView
-from sdrpeer.record import LinkStats, Metrics
+from sdrpeer.monitor.publish import DEFAULT_LINK_BOUNDS
+from sdrpeer.record import LinkStats, LinkSummary, Metrics
 from sdrpeer.system.model import (
     AllocationDef,
     ComponentDef,
@@ -79,15 +80,21 @@ def make_view(rng: random.Random, n: int) -> ClusterView:
             rssi_dbm=rng.uniform(-80, -35),
             pos=(rng.uniform(0, 200), rng.uniform(0, 200)),
         )
-        links = {
+        bad = {  # what a record lists: a few links past the bounds, exactly
             peer: LinkStats(
-                rtt_ms=rng.uniform(1, 30),
-                jitter_ms=rng.expovariate(1 / 4),
-                loss=rng.uniform(0, 0.05),
+                rtt_ms=rng.uniform(1, 60),
+                jitter_ms=rng.expovariate(1 / 8),
+                loss=rng.uniform(0, 0.2),
             )
-            for peer in names
-            if peer != name
+            for peer in rng.sample([p for p in names if p != name], min(3, len(names) - 1))
         }
+        links = LinkSummary(
+            peers=len(names) - 1,
+            typical=LinkStats(rtt_ms=rng.uniform(1, 30), jitter_ms=2.0, loss=0.01),
+            bad=len(bad),
+            bounds=DEFAULT_LINK_BOUNDS,
+            listed=bad,
+        )
         robots.append(RobotView(name, metrics, links))
     return ClusterView(tuple(robots), origin=names[0])
 

@@ -1,10 +1,11 @@
 """Feeds the pure election core (`sdrpeer.election`) from this robot's gossip view.
 
 How it works: on every step the coordinator hands over the alive robots' records; each becomes a
-`Candidate` — eligible and coarse health from its battery, RSSI and worst measured link loss
-against the deployed system's allocation thresholds (none deployed: every alive robot is
-eligible), priority and published election state from its record. Robots not alive are left out
-of the view (the core treats a missing robot as gone). The core's timers are run here too.
+`Candidate` — eligible and coarse health from its battery, RSSI and typical link loss (the
+loss a strict majority of the links it measures reach, from its record's link summary) against the
+deployed system's allocation thresholds (none deployed: every alive robot is eligible), priority and
+published election state from its record. Robots not alive are left out of the view (the core treats
+a missing robot as gone). The core's timers are run here too.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from sdrpeer.system.model import Thresholds
 def candidate(rec: RobotRecord, thresholds: Thresholds, healthy: bool = True) -> Candidate:
     """What the election needs to know of one alive robot (`healthy`: no recovery condition)."""
     m = rec.metrics
-    loss = max((link.loss for link in rec.links.values()), default=None)
+    loss = None if rec.links.typical is None else rec.links.typical.loss
     e = rec.election
     return Candidate(
         alive=True,

@@ -1,9 +1,11 @@
 """Robot-wide recovery conditions judged on every agent from its gossip view.
 
 How it works: every coordinator step feeds `sdrpeer.recovery.RobotMonitor` with each alive
-robot's latest record — its own battery and RSSI, and every link it measured (which counts for
-the robot at the other end) — at the step's `now`: the last gossiped value is what the cluster
-believes until the next one arrives. Every agent runs it (it is cheap), so that when an
+robot's latest record — its own battery and RSSI, and its typical link delay, jitter and loss
+(the values a strict majority of the links it measures reach: its record's link summary) — at
+the step's `now`: the last gossiped value is what the cluster believes until the next one
+arrives (a value crossing a threshold of a rule is published at once, see
+`sdrpeer.monitor.publish`). Every agent runs it (it is cheap), so that when an
 allocator hands over, its successor already knows how long a condition has held. The outputs:
 `degraded(now)` (robots whose components must move and which may not hold the allocator role:
 the allocator moves first), `excluded(now)` (degraded plus those within the minimum dwell after
@@ -45,7 +47,7 @@ class HealthShell:
             monitor.robot_gone(now, gone)
         self._known = set(alive)
         for robot, rec in alive.items():
-            m = rec.metrics
+            m, t = rec.metrics, rec.links.typical
             monitor.observe_robot(
                 now,
                 robot,
@@ -54,18 +56,11 @@ class HealthShell:
                     "rssi": m.rssi_dbm,
                     "mem_free": float(m.mem_free),
                     "cpu": m.cpu_pct,
+                    "delay": None if t is None else t.rtt_ms,
+                    "jitter": None if t is None else t.jitter_ms,
+                    "loss": None if t is None else t.loss,
                 },
             )
-            for peer, link in rec.links.items():
-                if peer in alive:
-                    monitor.observe_link(
-                        now,
-                        robot,
-                        peer,
-                        rtt_ms=link.rtt_ms,
-                        jitter_ms=link.jitter_ms,
-                        loss=link.loss,
-                    )
         if monitor.next_timer() <= now:
             monitor.handle_timer(now)
 

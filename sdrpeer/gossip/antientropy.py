@@ -1,11 +1,13 @@
 """Anti-entropy: the periodic full-state exchange, joining through seeds, partition healing.
 
-How it works: every push-pull interval (scaled up above 32 robots) a robot sends its whole member
-table, with record versions, to one peer in self-contained `Sync` chunks under the MTU; the peer
-merges them, pushes back the records we lack, and answers with its own table (at most once a
-second per robot). A remote "dead" is merged as a suspicion only, since it may be stale. One time
-in three the partner is the last address of a dead member or a seed instead: that is how two
-halves of a healed partition find each other again.
+How it works: every push-pull interval (scaled up above 32 robots) a robot sends a `Digest` of its
+member table (who is alive or suspect, at which incarnation and record version) to one peer. Equal
+tables end there: one small datagram, whatever the fleet's size. A peer whose digest differs answers
+with its whole table in self-contained `Sync` chunks under the MTU and asks for ours: each side
+merges the other's, pushes back the records the other lacks (at most one answer a second per robot).
+Joining sends the whole table at once. A remote "dead" is merged as a suspicion only, since it may
+be stale. One time in three the partner is the last address of a dead member or a seed instead: that
+is how two halves of a healed partition find each other again.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from sdrpeer.gossip.messages import (
     Addr,
     Alive,
     Dead,
+    Digest,
     Gossip,
     Record,
     Suspect,
@@ -52,7 +55,19 @@ class AntiEntropy(CoreState):
         elif self._peers:
             target = self._members[self._peers.sample(self.rng, 1)[0]].addr
         if target is not None:
-            self._send_state(target, reply=True)
+            n = self.num_alive()
+            digest = Digest(self.name, self.table_digest(), n, self._take(self._budget - 32))
+            self._out.append((target, digest))
+
+    def _on_digest(self, src: Addr, d: Digest) -> None:
+        if d.digest == self.table_digest():
+            self._count("digest_same")
+            return
+        self._count("digest_differs")
+        last = self._sync_replied.get(d.sender)
+        if last is None or self._now - last >= SYNC_REPLY_GAP:
+            self._sync_replied[d.sender] = self._now
+            self._send_state(src, reply=True)
 
     def _retry_join(self, delay: float) -> None:
         if len(self._members) > 1 or not self._seeds:

@@ -8,6 +8,7 @@ Only `Membership` is meant to be used from outside.
 
 from __future__ import annotations
 
+import hashlib
 import heapq
 import random
 from collections import deque
@@ -31,6 +32,7 @@ from sdrpeer.gossip.messages import (
     Packet,
     Suspect,
     Update,
+    VitalsRevision,
 )
 from sdrpeer.gossip.queue import BroadcastQueue
 from sdrpeer.gossip.table import Member, PeerSet, ProbeRing
@@ -44,7 +46,7 @@ SEEN_EVENTS_MAX = 8192
 class Probe:
     """One probe round of one target; `pings` maps each ping's seq to when it was sent."""
 
-    __slots__ = ("acked", "confirming", "nacks", "pings", "target", "want_nacks")
+    __slots__ = ("acked", "confirming", "nacks", "pings", "target", "vitals", "want_nacks")
 
     def __init__(self, target: str, confirming: bool = False) -> None:
         self.target = target
@@ -54,6 +56,9 @@ class Probe:
         self.acked = False
         self.want_nacks = 0
         self.nacks = 0
+        self.vitals: dict[int, tuple[int, int]] = {}
+        """For each ping of this round that carried our vitals, which revision (its ack tells
+        that the target has it)."""
 
 
 class CoreState:
@@ -68,6 +73,7 @@ class CoreState:
         now: float,
         rng: random.Random,
         sizer: Callable[[Update], int] | None = None,
+        first_version: int = 1,
     ) -> None:
         if sizer is None:
             sizer = encoded_size
@@ -85,6 +91,18 @@ class CoreState:
         self._peers = PeerSet()
         self._ring = ProbeRing()
         self._records: dict[str, tuple[int, bytes]] = {}
+        self._first_version = first_version
+        """The version of our first record (a floor kept across restarts by the shell, so a new
+        life never reuses a version an old one spread with other bytes)."""
+        self._vitals: dict[str, VitalsRevision] = {}
+        """The newest vitals revision received from each member."""
+        self._my_vitals: VitalsRevision | None = None
+        self._vitals_acked: dict[str, tuple[int, int]] = {}
+        """Per peer, the newest of our vitals revisions it acknowledged (an ack of a ping that
+        carried it)."""
+        self._entry_hash: dict[str, int] = {}
+        self._dirty: set[str] = {name}
+        self._digest = 0
         self._queue = BroadcastQueue()
         self._out: list[tuple[Addr, Packet]] = []
         self._events: deque[CoreEvent] = deque()
@@ -120,11 +138,12 @@ class CoreState:
             return ()
         return tuple(self._queue.take(budget, self._limit()))
 
-    def _piggyback(self, target: Member) -> tuple[Update, ...]:
+    def _piggyback(self, target: Member, reserved: int = 0) -> tuple[Update, ...]:
+        budget = self._budget - reserved
         if target.state == SUSPECT:  # buddy system: the suspect hears it on our next ping
             fact = self._fact_about(target)
-            return (fact, *self._take(self._budget - 64))
-        return self._take(self._budget)
+            return (fact, *self._take(budget - 64))
+        return self._take(budget)
 
     def _gossip_round(self) -> None:
         if self._queue:
@@ -163,6 +182,45 @@ class CoreState:
             return Dead(m.name, m.incarnation, m.name if m.state == LEFT else self.name)
         return Alive(m.name, m.addr, m.incarnation)
 
+    # ----------------------------------------------------------------- table digest
+    def _mark(self, name: str) -> None:
+        """`name`'s incarnation, state or record version may have changed (digest upkeep)."""
+        self._dirty.add(name)
+
+    def table_digest(self) -> int:
+        """A 64-bit digest of the members alive or suspect, with their incarnations and record
+        versions: equal tables give equal digests, so anti-entropy can skip the full exchange.
+        Kept up to date incrementally (XOR of per-member hashes over the members marked)."""
+        digest = self._digest
+        for name in self._dirty:
+            old = self._entry_hash.pop(name, None)
+            if old is not None:
+                digest ^= old
+            h = self._hash_of(name)
+            if h is not None:
+                self._entry_hash[name] = h
+                digest ^= h
+        self._dirty.clear()
+        self._digest = digest
+        return digest
+
+    def _hash_of(self, name: str) -> int | None:
+        m = self._members.get(name)
+        if m is None or m.state not in (ALIVE, SUSPECT):
+            return None
+        rec = self._records.get(name)
+        text = f"{name}\0{m.incarnation}\0{rec[0] if rec else 0}".encode()
+        return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "big")
+
+    def digest_from_scratch(self) -> int:
+        """The same digest computed over the whole table (tests check the incremental one)."""
+        digest = 0
+        for name in self._members:
+            h = self._hash_of(name)
+            if h is not None:
+                digest ^= h
+        return digest
+
     # ----------------------------------------------------------------- records & events
 
     # Merge rules, implemented by `core.Membership`; probing and anti-entropy call them.
@@ -175,5 +233,5 @@ class CoreState:
     def _merge_dead(self, d: Dead) -> None:
         raise NotImplementedError
 
-    def _store_own_record(self, version: int, payload: bytes) -> None:
+    def _store_own_record(self, version: int, payload: bytes, *, jump: bool = False) -> None:
         raise NotImplementedError

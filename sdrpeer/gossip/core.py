@@ -14,7 +14,12 @@ How it works:
   sender with that Alive. Push gossip reaches almost everyone; corrections reach exactly the
   robots the epidemic missed. Together these took false deaths at 30 % loss to zero.
 - Records: each robot owns one versioned record; the higher version wins. A robot that finds a
-  record of its own with a higher version (it restarted) jumps past it.
+  record of its own with a higher version (it restarted) jumps past it; its first version comes
+  from the shell (a floor kept across restarts), so a new life does not reuse an old version.
+- Vitals: revisions of the measured part of a record (`set_vitals`) travel only on our direct
+  pings, to each peer until it acknowledges one, and are ordered by (record version, revision).
+- Anti-entropy starts with a digest of the member table; only a peer whose table differs gets
+  the full exchange.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from sdrpeer.gossip.events import (
     EventReceived,
     MemberChanged,
     RecordChanged,
+    VitalsChanged,
 )
 from sdrpeer.gossip.messages import (
     ALIVE,
@@ -53,6 +59,7 @@ from sdrpeer.gossip.messages import (
     Addr,
     Alive,
     Dead,
+    Digest,
     Event,
     Gossip,
     Nack,
@@ -63,6 +70,7 @@ from sdrpeer.gossip.messages import (
     Suspect,
     Sync,
     Update,
+    VitalsRevision,
 )
 from sdrpeer.gossip.probing import Probing
 from sdrpeer.gossip.table import Member, MemberInfo, Suspicion
@@ -87,18 +95,32 @@ class Membership(Probing, AntiEntropy):
         self.leaving = True
         self._me.state = LEFT
         self._me.since = now
+        self._mark(self.name)
         dead = Dead(self.name, self.incarnation, self.name)
         self._enqueue(("m", self.name), dead)
         for name in self._peers.names():
             self._out.append((self._members[name].addr, Gossip(self.name, (dead,))))
 
     def set_record(self, now: float, payload: bytes) -> int:
-        """Publish a new version of our own record; returns its version."""
+        """Publish a new version of our own record (spread to everyone); returns its version."""
         self._now = now
         old = self._records.get(self.name)
-        version = (old[0] if old else 0) + 1
+        version = old[0] + 1 if old else self._first_version
         self._store_own_record(version, payload)
         return version
+
+    def set_vitals(self, now: float, payload: bytes) -> int:
+        """A new revision of the measured part of our current record, carried on our pings to
+        each peer until it acknowledges it (not spread); returns the revision (0: no record
+        published yet, nothing done)."""
+        self._now = now
+        own = self._records.get(self.name)
+        if own is None:
+            return 0
+        last = self._my_vitals
+        revision = last.revision + 1 if last is not None and last.version == own[0] else 1
+        self._my_vitals = VitalsRevision(own[0], revision, payload)
+        return revision
 
     def broadcast_event(self, now: float, kind: str, payload: bytes) -> None:
         """Broadcast a one-off event (a trap) at once, without waiting for the next round."""
@@ -122,6 +144,8 @@ class Membership(Probing, AntiEntropy):
         if packet.updates:
             self._merge_updates(packet.updates, src)
         if isinstance(packet, Ping):
+            if packet.vitals is not None:
+                self._merge_vitals(sender, packet.vitals)
             self._on_ping(src, packet)
         elif isinstance(packet, Ack):
             self._on_ack(packet)
@@ -133,6 +157,8 @@ class Membership(Probing, AntiEntropy):
                 probe.nacks += 1
         elif isinstance(packet, Sync):
             self._on_sync(src, packet)
+        elif isinstance(packet, Digest):
+            self._on_digest(src, packet)
 
     def handle_timer(self, now: float) -> None:
         """Run every timer that is due at `now`."""
@@ -191,6 +217,10 @@ class Membership(Probing, AntiEntropy):
         """(version, payload) of the record owned by `name`, if known."""
         return self._records.get(name)
 
+    def vitals_of(self, name: str) -> VitalsRevision | None:
+        """The newest vitals revision of `name` (ours included), if any."""
+        return self._my_vitals if name == self.name else self._vitals.get(name)
+
     def queue_len(self) -> int:
         """Updates waiting to be disseminated."""
         return len(self._queue)
@@ -246,6 +276,7 @@ class Membership(Probing, AntiEntropy):
         if m is None:
             m = Member(a.name, a.addr, a.incarnation, ALIVE, self._now)
             self._members[a.name] = m
+            self._mark(a.name)
             self._dead_addrs.pop(a.name, None)
             self._peers.add(a.name)
             self._ring.insert(self.rng, a.name)
@@ -315,12 +346,16 @@ class Membership(Probing, AntiEntropy):
                 or r.version > mine[0]
                 or (r.version == mine[0] and r.payload != mine[1])
             ):
-                self._store_own_record(r.version + 1, mine[1] if mine else b"")
+                self._store_own_record(r.version + 1, mine[1] if mine else b"", jump=True)
             return
         old = self._records.get(r.name)
         if old is not None and old[0] >= r.version:
             return
         self._records[r.name] = (r.version, r.payload)
+        self._mark(r.name)
+        vitals = self._vitals.get(r.name)
+        if vitals is not None and vitals.version < r.version:
+            del self._vitals[r.name]  # revisions of an older record
         self._events.append(RecordChanged(r.name, r.version, r.payload, self._now))
         self._enqueue(("r", r.name), r)
 
@@ -332,9 +367,22 @@ class Membership(Probing, AntiEntropy):
         self._events.append(EventReceived(e.source, e.seq, e.kind, e.payload, self._now))
         self._enqueue(("e", e.source, e.seq), e)
 
+    def _merge_vitals(self, sender: str, v: VitalsRevision) -> None:
+        if sender not in self._members:
+            return
+        old = self._vitals.get(sender)
+        if old is not None and old.key >= v.key:
+            return
+        rec = self._records.get(sender)
+        if rec is not None and rec[0] > v.version:
+            return  # a revision of a record older than the one we hold
+        self._vitals[sender] = v
+        self._events.append(VitalsChanged(sender, v.version, v.revision, v.payload, self._now))
+
     def _refute(self, incarnation: int) -> None:
         self.incarnation = max(self.incarnation, incarnation) + 1
         self._me.incarnation = self.incarnation
+        self._mark(self.name)
         self._adjust_health(1)
         self._count("refutations")
         self._enqueue(("m", self.name), Alive(self.name, self.addr, self.incarnation))
@@ -342,6 +390,7 @@ class Membership(Probing, AntiEntropy):
 
     def _set_state(self, m: Member, state: int, incarnation: int) -> None:
         previous = m.state
+        self._mark(m.name)
         m.incarnation = incarnation
         if state != SUSPECT:
             m.suspicion = None
@@ -385,12 +434,21 @@ class Membership(Probing, AntiEntropy):
             return
         del self._members[name]
         self._records.pop(name, None)
+        self._vitals.pop(name, None)
+        self._vitals_acked.pop(name, None)
+        self._mark(name)
         self._queue.discard(("m", name))
         self._queue.discard(("r", name))
         self._events.append(MemberChanged(name, m.addr, REAPED, m.incarnation, m.state, self._now))
 
-    def _store_own_record(self, version: int, payload: bytes) -> None:
+    def _store_own_record(self, version: int, payload: bytes, *, jump: bool = False) -> None:
         self._records[self.name] = (version, payload)
+        vitals = self._my_vitals
+        if jump and vitals is not None:  # the same record under a new version: keep its values
+            self._my_vitals = VitalsRevision(version, 1, vitals.payload)
+        else:
+            self._my_vitals = None  # the record carries the current values; revisions restart
+        self._mark(self.name)
         r = Record(self.name, version, payload)
         self._events.append(RecordChanged(self.name, version, payload, self._now))
         self._enqueue(("r", self.name), r)

@@ -34,6 +34,17 @@ class RecordChanged:
 
 
 @dataclass(frozen=True, slots=True)
+class VitalsChanged:
+    """A newer vitals revision of a robot's record arrived (on a ping from that robot)."""
+
+    name: str
+    version: int
+    revision: int
+    payload: bytes
+    at: float
+
+
+@dataclass(frozen=True, slots=True)
 class EventReceived:
     """A one-off broadcast (a trap, for instance) arrived for the first time."""
 
@@ -53,5 +64,5 @@ class ProbeOutcome:
     at: float
 
 
-CoreEvent = MemberChanged | RecordChanged | EventReceived | ProbeOutcome
+CoreEvent = MemberChanged | RecordChanged | VitalsChanged | EventReceived | ProbeOutcome
 REAPED = -1

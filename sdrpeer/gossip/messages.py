@@ -3,8 +3,11 @@
 Two layers:
 - *updates* are facts that spread epidemically (piggybacked on any packet): a member is alive,
   suspect or dead; a robot's record changed; a one-off event (a trap) happened;
-- *packets* are what one datagram carries: a probe, its acks, a gossip round, a sync chunk. Every
-  packet names its sender and carries a tuple of piggybacked updates.
+- *packets* are what one datagram carries: a probe, its acks, a gossip round, a sync chunk or
+  digest. Every packet names its sender and carries a tuple of piggybacked updates.
+
+A ping may also carry the sender's `VitalsRevision`: the newest revision of the measured part of
+its record, sent directly to the robot probed (until it acknowledges one as new), never spread.
 """
 
 from __future__ import annotations
@@ -72,6 +75,21 @@ Update = Alive | Suspect | Dead | Record | Event
 
 
 @dataclass(frozen=True, slots=True)
+class VitalsRevision:
+    """Revision `revision` (1, 2, ...) of the measured part of record `version` of the sender
+    (opaque bytes to gossip; see `sdrpeer.record`). Ordered by (version, revision)."""
+
+    version: int
+    revision: int
+    payload: bytes
+
+    @property
+    def key(self) -> tuple[int, int]:
+        """Its order: a newer record version, then a higher revision, wins."""
+        return (self.version, self.revision)
+
+
+@dataclass(frozen=True, slots=True)
 class Ping:
     """Direct probe of `target` by `sender`; answered with an Ack of the same seq."""
 
@@ -79,6 +97,7 @@ class Ping:
     seq: int
     target: str
     updates: tuple[Update, ...] = ()
+    vitals: VitalsRevision | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,4 +156,16 @@ class Sync:
     updates: tuple[Update, ...] = ()
 
 
-Packet = Ping | PingReq | Ack | Nack | Gossip | Sync
+@dataclass(frozen=True, slots=True)
+class Digest:
+    """The digest of the sender's member table (anti-entropy's cheap first step): a receiver
+    whose own digest differs answers with its full state (a `Sync` asking for a reply)."""
+
+    sender: str
+    digest: int
+    count: int
+    """Members alive or suspect in the digest (shown in logs; not compared)."""
+    updates: tuple[Update, ...] = ()
+
+
+Packet = Ping | PingReq | Ack | Nack | Gossip | Sync | Digest

@@ -8,7 +8,9 @@ round: one more round is run at once (a false suspicion costs a broadcast to eve
 refutation back, so squaring its rate under loss is worth one probe interval of detection time);
 a second failure makes the target suspect. Missing nacks raise our own health score (our network
 may be the problem). Every direct ping's own ack gives an RTT sample; a ping without one counts
-as lost.
+as lost. A direct ping also carries our newest vitals revision while the target has not
+acknowledged it (an ack of a ping that carried it): each peer gets our measured values from our
+own probes, at a cost that does not grow with the fleet, and again after a lost ping.
 """
 
 from __future__ import annotations
@@ -59,7 +61,14 @@ class Probing(CoreState):
         seq = self._next_seq()
         probe.pings[seq] = self._now
         self._probes[seq] = probe
-        self._out.append((m.addr, Ping(self.name, seq, m.name, self._piggyback(m))))
+        vitals = self._my_vitals
+        if vitals is not None and self._vitals_acked.get(m.name, (0, 0)) < vitals.key:
+            probe.vitals[seq] = vitals.key
+            updates = self._piggyback(m, len(vitals.payload) + 16)
+        else:
+            vitals = None
+            updates = self._piggyback(m)
+        self._out.append((m.addr, Ping(self.name, seq, m.name, updates, vitals)))
         return seq
 
     def _probe_timeout(self, probe: Probe) -> None:
@@ -116,6 +125,9 @@ class Probing(CoreState):
                 sent = probe.pings.pop(ack.seq, None)
                 if sent is not None:
                     self._events.append(ProbeOutcome(probe.target, self._now - sent, self._now))
+                carried = probe.vitals.pop(ack.seq, None)
+                if carried is not None and carried > self._vitals_acked.get(ack.sender, (0, 0)):
+                    self._vitals_acked[ack.sender] = carried
             self._probe_succeeded(probe)
             return
         fwd = self._fwd.pop(ack.seq, None)

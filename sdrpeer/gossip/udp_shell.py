@@ -108,6 +108,11 @@ class GossipShell(asyncio.DatagramProtocol):
         self.flush()
         return version
 
+    def set_vitals(self, payload: bytes) -> int:
+        """A new revision of our record's measured part (carried on our pings)."""
+        assert self.core is not None
+        return self.core.set_vitals(self._loop.time(), payload)
+
     def broadcast_event(self, kind: str, payload: bytes) -> None:
         """Broadcast a one-off event (a trap) at once."""
         assert self.core is not None

@@ -8,7 +8,10 @@ peer a `LinkEstimator` keeps
 - loss, the fraction of lost probes among the last 20 outcomes, ignoring outcomes older than
   30 s (so a link that recovered does not carry old losses forever when probes are sparse).
 Until a first ack there is no RTT, so `stats()` is None. `LinkTable` holds one estimator per
-peer. Time is always passed in; nothing here reads a clock.
+peer, and `summary()` turns them into the O(1) `LinkSummary` a record carries: per metric the
+value a strict majority of the measured links reach or pass (the (n//2 + 1)-th worst), and the
+links at or past the given bounds, the worst `MAX_LISTED` of them exactly. Time is always passed
+in; nothing here reads a clock.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from sdrpeer.record import LinkStats
+from sdrpeer.record import MAX_LISTED, LinkBounds, LinkStats, LinkSummary
 
 SRTT_GAIN = 1 / 8
 """Weight of a new RTT sample in the smoothed RTT (TCP's alpha)."""
@@ -119,6 +122,10 @@ class LinkTable:
         """Peers with an estimator, sorted."""
         return sorted(self._peers)
 
+    def summary(self, now: float | None, bounds: LinkBounds) -> LinkSummary:
+        """The O(1) summary of every measured link (see `summarize`)."""
+        return summarize(self.snapshot(now), bounds)
+
     def snapshot(self, now: float | None = None) -> dict[str, LinkStats]:
         """Peer -> stats for every peer with at least one ack, sorted by peer."""
         out = {}
@@ -127,6 +134,30 @@ class LinkTable:
             if stats is not None:
                 out[peer] = stats
         return out
+
+
+def majority_worst(values: list[float]) -> float:
+    """The value a strict majority of `values` reach or pass, higher being worse: the
+    (n//2 + 1)-th highest (one outlier cannot move it; a majority can)."""
+    return sorted(values, reverse=True)[len(values) // 2]
+
+
+def summarize(links: dict[str, LinkStats], bounds: LinkBounds) -> LinkSummary:
+    """The summary a record carries of `links` (see the module docstring)."""
+    if not links:
+        return LinkSummary(bounds=bounds)
+    stats = list(links.values())
+    typical = LinkStats(
+        rtt_ms=majority_worst([s.rtt_ms for s in stats]),
+        jitter_ms=majority_worst([s.jitter_ms for s in stats]),
+        loss=majority_worst([s.loss for s in stats]),
+    )
+    past = [(bounds.badness(s), peer) for peer, s in links.items() if bounds.past(s)]
+    past.sort(key=lambda item: (-item[0], item[1]))
+    listed = {peer: links[peer] for _, peer in past[:MAX_LISTED]}
+    return LinkSummary(
+        peers=len(stats), typical=typical, bad=len(past), bounds=bounds, listed=listed
+    )
 
 
 def distance(a_pos: tuple[float, float] | None, b_pos: tuple[float, float] | None) -> float | None:

@@ -1,60 +1,222 @@
-"""When a robot's record is worth publishing before its heartbeat.
+"""When a robot publishes a new record, a revision of its vitals, or nothing.
 
-How it works: a deadband around the values last published: cpu 5 points, free memory 1 % of
-capacity or 16 MiB, battery 1 point, RSSI 2 dB (threshold crossings go out at once as traps
-anyway), link RTT 1 ms or 25 %, jitter 1 ms or 50 %, loss 5 points, and any change of identity,
-position, capacity, the set of links, or an instance's name, state or role (an instance's cpu
-and memory use the same bands as the robot's). Fixed buckets would flap at their edges on
-noise; a deadband only moves when the value really does. Without it every robot would publish a
-new version every second, and at N robots each version is sent 4*ceil(log10(N+1)) times by
-every robot.
+How it works: a record version is spread to every robot (each robot re-sends it a few times:
+the epidemic), so the fleet pays for every version in proportion to its size. Its vitals — the
+metrics, link summary and instance loads — are also sent as revisions of the current record,
+directly to each peer on the next probe that peer has not acknowledged (`sdrpeer.gossip`), which
+costs the same at any fleet size. `Publisher.decide(now, record)` picks:
+
+- RECORD when something the fleet decides with changed: identity (API address, priority,
+  capacity, position-less <-> positioned), an instance's name, component, state, role or data
+  address, the election belief, the plan held, the link bounds, or a measured value moved
+  across a `Boundaries` cut (a threshold some decision compares it with: the deployed system's
+  recovery rules and their clear levels, the allocation thresholds that decide who may be
+  allocator, the election's health steps, the default traps). So every robot sees each robot on
+  the correct side of every threshold it judges by, at the same moment, whatever the fleet's
+  size. A crossing less than `min_gap` after the last record goes out as vitals and makes a
+  record at the next sample after the gap (a value flapping across a cut costs at most one
+  record per gap);
+- VITALS when a measured value moved past its deadband since the last record or vitals sent
+  (cpu 5 points, free memory 1 % of capacity or 16 MiB, battery 1 point, RSSI 2 dB, position
+  10 cm, typical link RTT 1 ms or 25 %, jitter 1 ms or 50 %, loss 5 points, a listed link
+  added, gone or moved as much, an instance's cpu or memory as much as the robot's);
+- NONE otherwise: noise inside the deadbands is never sent, and nothing is re-sent on a timer.
+
+Time is passed in; nothing here reads a clock.
 """
 
 from __future__ import annotations
 
-from sdrpeer.record import RobotRecord
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+
+from sdrpeer.election.health import BATTERY_STEPS, LOSS_STEPS, RSSI_STEPS
+from sdrpeer.record import LinkBounds, LinkStats, LinkSummary, Metrics, RobotRecord
+from sdrpeer.system.model import RecoveryDef, Thresholds
+
+RECORD = "record"
+VITALS = "vitals"
+NONE = "none"
+
+DEFAULT_LINK_BOUNDS = LinkBounds(rtt_ms=50.0, jitter_ms=10.0, loss=0.05)
+"""Links at or past these are listed exactly in a record when the deployed system sets no
+tighter allocation bounds (`delay_below`, `jitter_below`, `loss_below`)."""
+
+_GETTERS: dict[str, Callable[[Metrics, LinkSummary], float | None]] = {
+    "cpu": lambda m, _: m.cpu_pct,
+    "mem_free": lambda m, _: float(m.mem_free),
+    "battery": lambda m, _: m.battery_pct,
+    "rssi": lambda m, _: m.rssi_dbm,
+    "delay": lambda _, s: None if s.typical is None else s.typical.rtt_ms,
+    "jitter": lambda _, s: None if s.typical is None else s.typical.jitter_ms,
+    "loss": lambda _, s: None if s.typical is None else s.typical.loss,
+}
+"""The record values a boundary may cut, by the recovery rules' metric names."""
 
 
-def worth_publishing(last: RobotRecord | None, new: RobotRecord) -> bool:
-    """Whether `new` differs enough from the last published record to publish before the
-    heartbeat: a deadband around the published values (not fixed buckets, whose edges would
-    flap on noise). Sampling noise must not make every robot publish every second.
-    """
-    if last is None:
+@dataclass(frozen=True, slots=True)
+class Boundaries:
+    """Values of each metric at which some decision changes (metric name -> cuts)."""
+
+    cuts: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+
+    def crossed(self, old: RobotRecord, new: RobotRecord) -> str | None:
+        """The first metric whose value moved across, onto or off a cut (None: none did)."""
+        for metric, cuts in self.cuts.items():
+            getter = _GETTERS.get(metric)
+            if getter is None:
+                continue
+            a = getter(old.metrics, old.links)
+            b = getter(new.metrics, new.links)
+            if a is None or b is None:
+                if (a is None) != (b is None):
+                    return metric
+                continue
+            if a != b and any(_side(a, c) != _side(b, c) for c in cuts):
+                return metric
+        return None
+
+
+def _side(value: float, cut: float) -> int:
+    return (value > cut) - (value < cut)
+
+
+def boundaries(
+    recovery: RecoveryDef | None = None, thresholds: Thresholds | None = None
+) -> Boundaries:
+    """The cuts for a deployed system (both None: nothing deployed): the election's health
+    steps and the default traps always; the allocation thresholds that decide eligibility;
+    every metric rule's threshold and clear level."""
+    cuts: dict[str, set[float]] = {
+        "battery": {*BATTERY_STEPS, 20.0, 25.0},
+        "rssi": {*RSSI_STEPS, -52.5, -50.0},
+        "loss": set(LOSS_STEPS),
+        "mem_free": {200e6, 250e6},
+        "cpu": {90.0, 80.0},
+    }
+    t = thresholds
+    if t is not None:
+        _add(cuts, "battery", [t.battery_above_pct])
+        _add(cuts, "rssi", [t.rssi_above_dbm])
+        _add(cuts, "loss", [t.loss_below])
+    for rule in () if recovery is None else recovery.rules:
+        if rule.metric is not None:
+            _add(cuts, rule.metric, [rule.threshold, rule.clear])
+    return Boundaries({m: tuple(sorted(v)) for m, v in sorted(cuts.items())})
+
+
+def _add(cuts: dict[str, set[float]], metric: str, values: Iterable[float | None]) -> None:
+    for v in values:
+        if v is not None:
+            cuts.setdefault(metric, set()).add(float(v))
+
+
+def link_bounds(thresholds: Thresholds | None) -> LinkBounds:
+    """The bounds past which a record lists a link: the tighter of the defaults and the
+    deployed system's allocation bounds, so a link the allocator must refuse is always listed
+    by both its ends (unless more than `MAX_LISTED` are)."""
+    d = DEFAULT_LINK_BOUNDS
+    if thresholds is None:
+        return d
+    t = thresholds
+    return LinkBounds(
+        rtt_ms=_tighter(d.rtt_ms, t.delay_below_ms),
+        jitter_ms=_tighter(d.jitter_ms, t.jitter_below_ms),
+        loss=_tighter(d.loss, t.loss_below),
+    )
+
+
+def _tighter(a: float | None, b: float | None) -> float | None:
+    if a is None or b is None:
+        return a if b is None else b
+    return min(a, b)
+
+
+class Publisher:
+    """This robot's publishing decisions (see the module docstring)."""
+
+    def __init__(self, bounds: Boundaries | None = None, *, min_gap: float = 1.0) -> None:
+        self.boundaries = bounds or boundaries()
+        self.min_gap = min_gap
+        self.record: RobotRecord | None = None
+        """The last record published."""
+        self.sent: RobotRecord | None = None
+        """The last values sent, as a record or as vitals."""
+        self._record_at = -1e18
+
+    def decide(self, now: float, new: RobotRecord, *, force: bool = False) -> str:
+        """RECORD, VITALS or NONE for this sample; the caller publishes what it says."""
+        last = self.record
+        if force or last is None or _identity_changed(last, new):
+            return self._published(now, new)
+        sent = self.sent
+        assert sent is not None
+        if self.boundaries.crossed(last, new) is not None:
+            if now - self._record_at >= self.min_gap:
+                return self._published(now, new)
+            if self.boundaries.crossed(sent, new) is None and not _vitals_moved(sent, new):
+                return NONE  # the crossing went out as vitals already
+            self.sent = new
+            return VITALS
+        if self.boundaries.crossed(sent, new) is not None or _vitals_moved(sent, new):
+            self.sent = new
+            return VITALS
+        return NONE
+
+    def _published(self, now: float, new: RobotRecord) -> str:
+        self.record = self.sent = new
+        self._record_at = now
+        return RECORD
+
+
+def _identity_changed(a: RobotRecord, b: RobotRecord) -> bool:
+    if (a.api, a.priority, a.metrics.mem_total) != (b.api, b.priority, b.metrics.mem_total):
         return True
-    a, b = last.metrics, new.metrics
-    if (last.api, last.priority, a.mem_total, a.pos) != (new.api, new.priority, b.mem_total, b.pos):
+    if (a.metrics.pos is None) != (b.metrics.pos is None):
         return True
-    if _instances_moved(last, new):
+    if (a.election, a.plan, a.links.bounds) != (b.election, b.plan, b.links.bounds):
         return True
-    if abs(a.cpu_pct - b.cpu_pct) >= 5.0 or abs(a.mem_free - b.mem_free) >= max(
-        16 << 20, b.mem_total // 100
+    return [(i.name, i.component, i.state, i.role, i.data) for i in a.instances] != [
+        (i.name, i.component, i.state, i.role, i.data) for i in b.instances
+    ]
+
+
+def _vitals_moved(a: RobotRecord, b: RobotRecord) -> bool:
+    """Whether the measured values of `b` moved past a deadband from those of `a` (same
+    identity and instances)."""
+    ma, mb = a.metrics, b.metrics
+    band = max(16 << 20, mb.mem_total // 100)
+    if abs(ma.cpu_pct - mb.cpu_pct) >= 5.0 or abs(ma.mem_free - mb.mem_free) >= band:
+        return True
+    if _moved(ma.battery_pct, mb.battery_pct, 1.0) or _moved(ma.rssi_dbm, mb.rssi_dbm, 2.0):
+        return True
+    if ma.pos != mb.pos and (
+        ma.pos is None
+        or mb.pos is None
+        or max(abs(p - q) for p, q in zip(ma.pos, mb.pos, strict=True)) >= 0.1
     ):
         return True
-    if _moved(a.battery_pct, b.battery_pct, 1.0) or _moved(a.rssi_dbm, b.rssi_dbm, 2.0):
+    if _links_moved(a.links, b.links):
         return True
-    if last.links.keys() != new.links.keys():
-        return True
-    for peer, link in new.links.items():
-        old = last.links[peer]
-        if abs(link.rtt_ms - old.rtt_ms) >= max(1.0, 0.25 * old.rtt_ms):
-            return True
-        if abs(link.loss - old.loss) >= 0.05 or abs(link.jitter_ms - old.jitter_ms) >= max(
-            1.0, 0.5 * old.jitter_ms
-        ):
-            return True
-    return False
-
-
-def _instances_moved(last: RobotRecord, new: RobotRecord) -> bool:
-    if [(i.name, i.component, i.state, i.role) for i in last.instances] != [
-        (i.name, i.component, i.state, i.role) for i in new.instances
-    ]:
-        return True
-    band = max(16 << 20, new.metrics.mem_total // 100)
     return any(
-        abs(a.cpu_pct - b.cpu_pct) >= 5.0 or abs(a.rss - b.rss) >= band
-        for a, b in zip(last.instances, new.instances, strict=True)
+        abs(x.cpu_pct - y.cpu_pct) >= 5.0 or abs(x.rss - y.rss) >= band
+        for x, y in zip(a.instances, b.instances, strict=True)
+    )
+
+
+def _links_moved(a: LinkSummary, b: LinkSummary) -> bool:
+    if (a.typical is None) != (b.typical is None) or a.listed.keys() != b.listed.keys():
+        return True
+    if a.typical is not None and b.typical is not None and _link_moved(a.typical, b.typical):
+        return True
+    return any(_link_moved(a.listed[p], b.listed[p]) for p in b.listed)
+
+
+def _link_moved(old: LinkStats, new: LinkStats) -> bool:
+    return (
+        abs(new.rtt_ms - old.rtt_ms) >= max(1.0, 0.25 * old.rtt_ms)
+        or abs(new.loss - old.loss) >= 0.05
+        or abs(new.jitter_ms - old.jitter_ms) >= max(1.0, 0.5 * old.jitter_ms)
     )
 
 

@@ -3,19 +3,16 @@
 How it works: `RobotMonitor` keeps one `ConditionTracker` per (robot, robot-wide metric rule)
 and feeds it from gossip:
 
-- `observe_robot(now, robot, metrics)`: what a robot says of itself (battery, rssi, and any
-  metric a plugin cause watches); `mem_free` and `cpu` are accepted and ignored here: memory
-  shortage and high CPU blame one instance and are handled by the robot's own agent
-  (`LocalRecovery`);
-- `observe_link(now, observer, target, rtt_ms, jitter_ms, loss)`: one robot's measurement of its
-  link to another. It counts for the *target*, as delay, jitter and loss. A robot whose radio is
-  bad may not manage to report itself, but its peers measure it: the value fed to the target's
-  tracker is the one a strict majority of the fresh observers (those heard within
-  `gossip_stale_after_s`) see as bad or worse, i.e. the (n//2 + 1)-th worst. One observer with a
-  bad link of its own cannot make a healthy target sick (at 3 observers, 2 must agree), while a
-  target every peer measures badly is sick with its own record silent. With a single observer
-  (two robots) its view decides, and the target's own RSSI is the tie-breaker the rules add.
-- `robot_gone(now, robot)`: the robot left or died; its trackers and measurements are dropped.
+- `observe_robot(now, robot, metrics)`: what a robot says of itself (battery, rssi, its typical
+  link delay, jitter and loss, and any metric a plugin cause watches); `mem_free` and `cpu` are
+  accepted and ignored here: memory shortage and high CPU blame one instance and are handled by
+  the robot's own agent (`LocalRecovery`). The link values are the ones a strict majority of
+  the links the robot measures reach or pass (`sdrpeer.monitor.links.summarize`): one peer
+  with a bad radio cannot make a healthy robot sick (its other links stay good), while a robot
+  whose own radio is bad is sick at once (all its links are). A probe measures the round trip,
+  so a robot's view of its links is also its peers' view of it. With a single peer (two robots)
+  that one link decides, and the robot's own RSSI is the tie-breaker the rules add;
+- `robot_gone(now, robot)`: the robot left or died; its trackers are dropped.
 
 Outputs: `next_event()` drains `RobotCondition` / `Cleared`; `fired()` lists what holds now.
 `degraded(now)`: robots with a fired robot-wide rule: the allocator places nothing on them and
@@ -30,27 +27,12 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 from sdrpeer.recovery.conditions import CLEARED, FIRED, ConditionTracker
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Cleared, RobotCondition, RobotEvent
 from sdrpeer.recovery.plugins import CONDITIONS, Condition
 from sdrpeer.system.model import RecoveryDef, RecoveryRule
-
-LINK_METRICS = ("delay", "jitter", "loss")
-"""Metrics measured by the other robots (`observe_link`); every other one is self-reported."""
-
-
-@dataclass(frozen=True, slots=True)
-class _Sample:
-    at: float
-    rtt_ms: float
-    jitter_ms: float
-    loss: float
-
-    def metric(self, name: str) -> float:
-        return {"delay": self.rtt_ms, "jitter": self.jitter_ms, "loss": self.loss}[name]
 
 
 def robot_wide_rules(recovery: RecoveryDef) -> list[tuple[RecoveryRule, Condition]]:
@@ -63,13 +45,6 @@ def robot_wide_rules(recovery: RecoveryDef) -> list[tuple[RecoveryRule, Conditio
     return out
 
 
-def majority_value(values: list[float], op: str) -> float:
-    """The value a strict majority of `values` reach or pass on the bad side of `op` (the
-    (n//2 + 1)-th worst): `loss >= 0.3` holds on it only if more than half of them do."""
-    worst_first = sorted(values, reverse=op.startswith(">"))
-    return worst_first[len(values) // 2]
-
-
 class RobotMonitor:
     """The allocator's judgement of every robot's robot-wide conditions."""
 
@@ -78,44 +53,17 @@ class RobotMonitor:
         self.config = config or RecoveryConfig()
         self.rules = robot_wide_rules(recovery)
         self._trackers: dict[tuple[str, int], ConditionTracker] = {}
-        self._links: dict[str, dict[str, _Sample]] = {}
-        """target -> observer -> its latest measurement of the link to target."""
         self._dwell_until: dict[str, float] = {}
         self._events: deque[RobotEvent] = deque()
 
     # -- inputs -------------------------------------------------------------------------------
 
     def observe_robot(self, now: float, robot: str, metrics: Mapping[str, float | None]) -> None:
-        """A robot's own metrics (from its gossiped record) at `now`."""
+        """A robot's own metrics and typical link values (from its gossiped record) at `now`."""
         for i, (rule, _) in enumerate(self.rules):
             assert rule.metric is not None
-            if rule.metric not in LINK_METRICS and rule.metric in metrics:
+            if rule.metric in metrics:
                 self._feed(now, robot, i, metrics[rule.metric])
-
-    def observe_link(
-        self,
-        now: float,
-        observer: str,
-        target: str,
-        *,
-        rtt_ms: float,
-        jitter_ms: float,
-        loss: float,
-    ) -> None:
-        """`observer` measured its link to `target` (RTT and jitter in ms, loss 0..1)."""
-        if observer == target:
-            return
-        self._links.setdefault(target, {})[observer] = _Sample(now, rtt_ms, jitter_ms, loss)
-        fresh = [
-            s
-            for s in self._links[target].values()
-            if now - s.at <= self.config.gossip_stale_after_s
-        ]
-        for i, (rule, _) in enumerate(self.rules):
-            if rule.metric in LINK_METRICS and fresh:
-                assert rule.op is not None
-                values = [s.metric(rule.metric) for s in fresh]
-                self._feed(now, target, i, majority_value(values, rule.op))
 
     def robot_gone(self, now: float, robot: str) -> None:
         """`robot` left or died: forget it (a dwell still starts if it was sick)."""
@@ -123,9 +71,6 @@ class RobotMonitor:
             self._dwell_until[robot] = now + self.recovery.min_dwell_s
         for key in [k for k in self._trackers if k[0] == robot]:
             del self._trackers[key]
-        self._links.pop(robot, None)
-        for observed in self._links.values():
-            observed.pop(robot, None)
 
     def handle_timer(self, now: float) -> None:
         """The deadline of `next_timer()` has passed."""
