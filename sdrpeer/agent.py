@@ -46,10 +46,8 @@ from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.monitor.links import LinkTable
 from sdrpeer.monitor.publish import RECORD, VITALS, Publisher, boundaries, link_bounds
-from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
-from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
 from sdrpeer.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.record import (
     InstanceInfo,
@@ -71,6 +69,9 @@ from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
+
+    from sdrpeer.monitor.scenario import Scenario
+    from sdrpeer.monitor.virtual import VirtualRobot
 
 log = logging.getLogger("sdrpeer.agent")
 
@@ -145,6 +146,10 @@ class Agent:
         self.instances.data_keys = agent_keys.data_keys(self.keyring)
         token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
+            # Only virtual robots read YAML files: real ones start without the parser.
+            from sdrpeer.monitor.scenario import Scenario  # noqa: PLC0415
+            from sdrpeer.monitor.virtual import RobotFile, VirtualRobot  # noqa: PLC0415
+
             robot_file = RobotFile.load(cfg.robot_file)
             if robot_file.name != cfg.name:
                 raise ConfigError(

@@ -15,8 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from sdrpeer.errors import ConfigError
 from sdrpeer.gossip.config import PRESETS
 
@@ -172,6 +170,8 @@ _PATH_FIELDS = ("robot_file", "scenario", "key_file", "token_file", "data_dir")
 
 def load_agent_config(path: Path | str) -> ConfigValues:
     """Read an agent config file into typed field values; relative paths are file-relative."""
+    import yaml  # noqa: PLC0415 - only --config FILE needs it (keeps the agent's start light)
+
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.cli import agent_flag_values, build_parser, main, parse_assignment
+from sdrpeer.agent_cli import agent_flag_values
+from sdrpeer.cli import build_parser, main, parse_assignment
 from sdrpeer.client import AgentClient, resolve_endpoint
 from sdrpeer.config import FIELDS, flag_name
 from sdrpeer.errors import ApiError, ConfigError

@@ -16,11 +16,10 @@ import json
 import logging
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from aiohttp import web
-from prometheus_client import CollectorRegistry
 
-from sdrpeer.api import metrics
 from sdrpeer.api.view import AgentView, InstancesView
 from sdrpeer.errors import ConfigError
 from sdrpeer.runtime import logfile
@@ -35,7 +34,9 @@ VIEW_KEY = web.AppKey("view", AgentView)
 TOKEN_KEY = web.AppKey("token", str)
 PEER_TOKEN_KEY = web.AppKey("peer_tokens", list[str])
 """Tokens other agents may present (one per cluster key); a list changed in place on rotation."""
-REGISTRY_KEY = web.AppKey("registry", CollectorRegistry)
+REGISTRY_KEY = web.AppKey("registry", list[Any])
+"""Holds the Prometheus registry once the first scrape made it (prometheus_client is loaded
+then, not at start)."""
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 MAX_EVENTS_LIMIT = 10_000
 _TOKEN_ATTR = "_sdrpeer_requires_token"
@@ -141,7 +142,12 @@ async def get_events(request: web.Request) -> web.Response:
 
 async def get_metrics(request: web.Request) -> web.Response:
     """GET /metrics: Prometheus text exposition."""
-    body = metrics.render(request.app[REGISTRY_KEY])
+    from sdrpeer.api import metrics  # noqa: PLC0415 - loaded on the first scrape, not at start
+
+    made = request.app[REGISTRY_KEY]
+    if not made:
+        made.append(metrics.make_registry(view_of(request)))
+    body = metrics.render(made[0])
     return web.Response(body=body, headers={"Content-Type": metrics.CONTENT_TYPE})
 
 
@@ -311,6 +317,6 @@ def build_app(
     app[TOKEN_KEY] = token
     if peer_tokens is not None:
         app[PEER_TOKEN_KEY] = peer_tokens
-    app[REGISTRY_KEY] = metrics.make_registry(view)
+    app[REGISTRY_KEY] = []
     add_routes(app, [*ROUTES, *extra_routes])
     return app
