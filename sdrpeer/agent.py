@@ -18,6 +18,8 @@ import logging
 import os
 import random
 import time
+from collections import Counter
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_files, agent_keys, agent_views
@@ -45,7 +47,14 @@ from sdrpeer.gossip.events import (
 from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.monitor.links import LinkTable
-from sdrpeer.monitor.publish import RECORD, VITALS, Publisher, boundaries, link_bounds
+from sdrpeer.monitor.publish import (
+    RECORD,
+    VITALS,
+    Average,
+    Publisher,
+    boundaries,
+    link_bounds,
+)
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
 from sdrpeer.procstats import ProcessTreeMeter, trim_heap
@@ -105,7 +114,13 @@ class Agent:
         self._started = 0.0
         self.current: RobotRecord | None = None
         """This robot's latest sample, whatever was published of it."""
+        self._state: tuple[RobotRecord | None, ClusterState] | None = None
+        """The last cluster state made, with the own sample it was made with (None: stale)."""
         self.publisher = Publisher()
+        self._cpu = Average()
+        """The CPU average the record carries (`sdrpeer.monitor.publish.CPU_AVERAGE_S`)."""
+        self.published: Counter[str] = Counter()
+        """Records and vitals revisions published by this robot (`GET /v1/agent`)."""
         self._bounds_for: object = ()
         self._link_bounds = link_bounds(None)
         self._versions = (1, 0)  # (first record version of this run, reserved limit)
@@ -281,15 +296,15 @@ class Agent:
         now = asyncio.get_running_loop().time()
         self.metrics = metrics = self._sample(now)
         for trap in self.traps.feed(metrics, now):
-            self.shell.broadcast_event("trap", encode_trap(trap))
+            if trap.broadcast:  # its crossing also makes a new record (a publishing boundary)
+                self.shell.broadcast_event("trap", encode_trap(trap))
             self.events.add(time.time(), "trap", self.name, **_trap_json(trap))
-            force = True
         self._update_rates(now)
         infos = self.instances.infos()
         self._log_states(infos)
         coord = self.coordinator
         record = RobotRecord(
-            metrics,
+            replace(metrics, cpu_pct=round(self._cpu.add(now, metrics.cpu_pct), 1)),
             self.links.summary(now, self._bounds()),
             self.api_url,
             self.priority,
@@ -299,6 +314,7 @@ class Agent:
         )
         self.current = record
         decision = self.publisher.decide(now, record, force=force)
+        self.published[decision] += 1
         if decision == RECORD:
             version = self.shell.set_record(encode_record(record))
             if version >= self._versions[1]:
@@ -375,7 +391,11 @@ class Agent:
             self.coordinator.wake()
 
     def _cluster_state(self) -> ClusterState:
-        """Alive robots (ALIVE or SUSPECT; this one included) with their latest records."""
+        """Alive robots (ALIVE or SUSPECT; this one included) with their latest records (made
+        again only after a member, record or own sample changed: the coordinator asks often)."""
+        state = self._state
+        if state is not None and state[0] is self.current:
+            return state[1]
         alive: dict[str, RobotRecord] = {}
         if self.core is not None:
             for m in self.core.members():
@@ -385,7 +405,9 @@ class Agent:
                         alive[m.name] = rec[1]
         if self.current is not None:
             alive[self.name] = self.current
-        return ClusterState(alive, sorted(alive))
+        made = ClusterState(alive, sorted(alive))
+        self._state = (self.current, made)
+        return made
 
     def allocator_api(self) -> str | None:
         """API address of the robot this one believes holds the allocator role."""
@@ -396,6 +418,8 @@ class Agent:
     # ----------------------------------------------------------------- core events
     def _on_core_event(self, event: CoreEvent) -> None:
         wall = time.time()
+        if not isinstance(event, ProbeOutcome):
+            self._state = None  # a member, a record or vitals changed
         if isinstance(event, ProbeOutcome):
             self.links.observe(event.name, event.rtt, event.at)
         elif isinstance(event, RecordChanged):

@@ -100,6 +100,7 @@ def agent_view(self: Agent) -> dict[str, Any]:
             "bytes_out": c["bytes_out"],
             "bytes_in_per_s": round(self._rate["in_s"], 1),
             "bytes_out_per_s": round(self._rate["out_s"], 1),
+            "sent_by_kind": dict(sorted(self.shell.sent_by_kind.items())),
         },
         "rejected": {r: codec.get(r, 0) for r in REASONS},
         "clock": {
@@ -109,6 +110,7 @@ def agent_view(self: Agent) -> dict[str, Any]:
         },
         "members": states,
         "gossip": dict(self.core.counters),
+        "published": {k: self.published[k] for k in ("record", "vitals")},
     }
 
 

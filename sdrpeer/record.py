@@ -22,7 +22,9 @@ directly to each peer on its probes (not epidemically), ordered by (record versi
 Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
 
     record    = [FORMAT, metrics, links, api, priority, components, instances, election, plan]
-    vitals    = [FORMAT, metrics, links, loads]
+    vitals    = [FORMAT, [cpu, mem_free, battery, rssi, pos], [peers, rtt, jitter, loss, bad,
+                 listed], loads]   (metrics and links without what only a record changes:
+                 the capacity and the link bounds)
     metrics   = [cpu_dpct, mem_total_kib, mem_free_kib, battery_dpct|nil, rssi_ddbm|nil,
                  [x_cm, y_cm]|nil]
     links     = [peers, rtt_10us|nil, jitter_10us|nil, loss_permille|nil, bad,
@@ -222,7 +224,9 @@ class RobotRecord:
 @dataclass(frozen=True, slots=True)
 class Vitals:
     """A revision of a record's measured values: metrics, link summary, and each instance's
-    (cpu %, RSS bytes, out bytes/s) in the record's instance order."""
+    (cpu %, RSS bytes, out bytes/s) in the record's instance order. The memory capacity and
+    the link bounds change only with a new record, so vitals do not carry them: decoded vitals
+    hold 0 and empty bounds there, and `apply_vitals` keeps the record's."""
 
     metrics: Metrics
     links: LinkSummary
@@ -238,12 +242,14 @@ def apply_vitals(r: RobotRecord, v: Vitals, *, same_version: bool = True) -> Rob
     """`r` with newer vitals laid over it. Instance loads apply only to the record version the
     vitals revise (`same_version`), where the instances are the same and in the same order."""
     instances = r.instances
+    metrics = replace(v.metrics, mem_total=r.metrics.mem_total)
+    links = replace(v.links, bounds=r.links.bounds)
     if same_version and len(v.loads) == len(instances):
         instances = tuple(
             replace(i, cpu_pct=cpu, rss=rss, out_bps=out)
             for i, (cpu, rss, out) in zip(instances, v.loads, strict=True)
         )
-    return replace(r, metrics=v.metrics, links=v.links, instances=instances)
+    return replace(r, metrics=metrics, links=links, instances=instances)
 
 
 def _fix(x: float, scale: float) -> int:
@@ -345,9 +351,11 @@ def encode_vitals(v: Vitals) -> bytes:
     loads: list[int] = []
     for cpu, rss, out in v.loads:
         loads += [_fix(cpu, 10), _kib(rss), max(0, int(out))]
-    data: bytes = msgpack.packb(
-        [FORMAT, _wire_metrics(v.metrics), _wire_links(v.links), loads], use_bin_type=True
-    )
+    metrics = _wire_metrics(v.metrics)
+    del metrics[1]  # the capacity: a record's
+    links = _wire_links(v.links)
+    del links[5]  # the bounds: a record's
+    data: bytes = msgpack.packb([FORMAT, metrics, links, loads], use_bin_type=True)
     return data
 
 
@@ -548,7 +556,13 @@ def decode_vitals(b: bytes) -> Vitals:
             )
             for i in range(0, len(flat), 3)
         )
-        return Vitals(_metrics(metrics), _links(links), loads)
+        metrics = _list(metrics, "vitals.metrics", 5)
+        links = _list(links, "vitals.links", 6)
+        return Vitals(
+            _metrics([metrics[0], 0, *metrics[1:]]),
+            _links([*links[:5], [None, None, None], links[5]]),
+            loads,
+        )
     except (_Malformed, ValueError, TypeError) as e:
         raise WireError("malformed", str(e)) from None
 

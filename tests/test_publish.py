@@ -11,6 +11,7 @@ from sdrpeer.monitor.publish import (
     NONE,
     RECORD,
     VITALS,
+    Average,
     Publisher,
     boundaries,
     link_bounds,
@@ -92,8 +93,8 @@ def published() -> Publisher:
         # Boundaries: trap levels and the election's health steps.
         (metrics(rssi_dbm=-52.5), RECORD),  # onto the trap threshold
         (metrics(battery_pct=74.9), RECORD),  # health step 75 %
-        (metrics(cpu_pct=91.0), RECORD),
-        (metrics(mem_free=199_000_000), RECORD),
+        (metrics(cpu_pct=91.0), VITALS),  # CPU and memory: the robot's own agent decides
+        (metrics(mem_free=199_000_000), VITALS),
         (typical(loss=0.01), RECORD),  # health step 1 %
         (metrics(battery_pct=None), RECORD),
     ],
@@ -133,6 +134,7 @@ def test_boundaries_of_a_deployed_system() -> None:
         rules=(
             RecoveryRule("low_battery", "battery", "<=", 30.0, 6.0, 35.0),
             RecoveryRule("communication_failure", "delay", ">=", 200.0, 6.0, 150.0),
+            RecoveryRule("memory_shortage", "mem_free", "<=", 2e8, 0.0, 2.5e8),  # local: no cut
             RecoveryRule("component_error"),
         )
     )
@@ -140,6 +142,7 @@ def test_boundaries_of_a_deployed_system() -> None:
     assert {30.0, 35.0, 40.0, 20.0, 25.0, 50.0, 75.0} <= set(b.cuts["battery"])
     assert b.cuts["delay"] == (150.0, 200.0)
     assert 0.1 in b.cuts["loss"]
+    assert "mem_free" not in b.cuts
     p = Publisher(b)
     base = replace(BASE, links=replace(BASE.links, typical=LinkStats(100.0, 0.1, 0.0)))
     assert p.decide(0.0, base) == RECORD
@@ -154,3 +157,14 @@ def test_link_bounds_take_the_tighter_of_defaults_and_thresholds() -> None:
     assert link_bounds(None) == DEFAULT_LINK_BOUNDS
     t = Thresholds(jitter_below_ms=30.0, loss_below=0.01, delay_below_ms=20.0)
     assert link_bounds(t) == LinkBounds(rtt_ms=20.0, jitter_ms=10.0, loss=0.01)
+
+
+def test_the_cpu_average_follows_the_load_not_the_noise() -> None:
+    avg = Average(tau=10.0)
+    assert avg.add(0.0, 30.0) == 30.0
+    noisy = [avg.add(float(t), 30.0 + (8.0 if t % 2 else -8.0)) for t in range(1, 60)]
+    assert max(noisy) - min(noisy) < 2.0  # +-8 points every second: the average barely moves
+    for t in range(60, 100):
+        value = avg.add(float(t), 90.0)
+    assert 85.0 < value < 90.0  # a real change arrives within a few time constants
+    assert avg.add(100.0 + 1e-9, 0.0) < value  # a sample at the same moment weighs ~nothing

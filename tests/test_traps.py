@@ -48,7 +48,7 @@ def test_memory_and_cpu_defaults() -> None:
     d = TrapDetector()
     assert d.feed(metrics(), 0.0) == []
     assert d.feed(metrics(free=200 * MB), 1.0) == [
-        Trap("mem_free", 200_000_000.0, 200_000_000, "raised", 1.0)
+        Trap("mem_free", 200_000_000.0, 200_000_000, "raised", 1.0, broadcast=False)
     ]
     assert d.feed(metrics(free=240 * MB), 2.0) == []
     assert d.feed(metrics(free=250 * MB), 3.0) == []  # at 250MB still "250MB or less"
@@ -76,10 +76,12 @@ def test_first_sample_already_bad_raises() -> None:
 
 def test_default_rules_match_the_paper() -> None:
     rules = {r.metric: r for r in default_rules()}
-    assert rules["mem_free"] == TrapRule("mem_free", "<=", 200 * MB, 250 * MB)
+    assert rules["mem_free"] == TrapRule("mem_free", "<=", 200 * MB, 250 * MB, broadcast=False)
     assert rules["rssi_dbm"] == TrapRule("rssi_dbm", "<=", -52.5, -50.0)
     assert rules["battery_pct"] == TrapRule("battery_pct", "<", 20.0, 25.0)
-    assert rules["cpu_pct"] == TrapRule("cpu_pct", ">", 90.0, 80.0)
+    assert rules["cpu_pct"] == TrapRule("cpu_pct", ">", 90.0, 80.0, broadcast=False)
+    # Other robots act on battery and RSSI; memory and CPU are the robot's own agent's.
+    assert [r.metric for r in default_rules() if r.broadcast] == ["battery_pct", "rssi_dbm"]
 
 
 @pytest.mark.parametrize(

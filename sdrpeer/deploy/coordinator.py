@@ -138,7 +138,8 @@ class Coordinator:
             due = min(self.election.next_timer(), self.health.next_timer(), self.local.next_timer())
             wait = min(self.tick, max(0.0, due - loop.time()))
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), wait)
+                async with asyncio.timeout(wait):  # not wait_for: on 3.11 it can swallow a
+                    await self._wake.wait()  # cancel, and then stop() waited for ever
             self._wake.clear()
             try:
                 self.step()

@@ -47,6 +47,9 @@ class ElectionShell:
         self.config = config or lan()
         self.known_epoch = known_epoch
         self.core: Election | None = None
+        self._candidates: dict[str, tuple[RobotRecord, Thresholds, bool, Candidate]] = {}
+        """The candidate made of each robot's record (records are immutable: a step remakes
+        only those whose record, thresholds or health changed)."""
 
     def update(
         self,
@@ -60,12 +63,24 @@ class ElectionShell:
         if self.core is None:
             self.core = Election(self.name, self.config, now, known_epoch=self.known_epoch)
         t = thresholds or Thresholds()
-        view = {name: candidate(rec, t, name not in degraded) for name, rec in alive.items()}
+        view = {
+            name: self._candidate(name, rec, t, name not in degraded) for name, rec in alive.items()
+        }
+        for gone in self._candidates.keys() - alive.keys():
+            del self._candidates[gone]
         self.core.update(now, view)
         if self.core.next_timer() <= now:
             self.core.handle_timer(now)
         while self.core.next_event() is not None:
             pass
+
+    def _candidate(self, name: str, rec: RobotRecord, t: Thresholds, healthy: bool) -> Candidate:
+        made = self._candidates.get(name)
+        if made is not None and made[0] is rec and made[1] == t and made[2] == healthy:
+            return made[3]
+        c = candidate(rec, t, healthy)
+        self._candidates[name] = (rec, t, healthy, c)
+        return c
 
     def next_timer(self) -> float:
         """When the core wants to be woken (inf: nothing pending)."""

@@ -23,13 +23,44 @@ from typing import cast
 from sdrpeer.errors import WireError
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent
-from sdrpeer.gossip.messages import Addr, Gossip
+from sdrpeer.gossip.messages import (
+    Ack,
+    Addr,
+    Alive,
+    Dead,
+    Digest,
+    Event,
+    Gossip,
+    Nack,
+    Packet,
+    Ping,
+    PingReq,
+    Record,
+    Suspect,
+    Sync,
+)
 from sdrpeer.wire import Codec
 
 log = logging.getLogger("sdrpeer.gossip")
 _LOG_EVERY = 10.0
 _NUDGE_EVERY = 5.0
 _NUDGE_MAX = 1024
+_KIND: dict[type, str] = {
+    Ping: "ping",
+    Ack: "ack",
+    PingReq: "pingreq",
+    Nack: "nack",
+    Gossip: "gossip",
+    Sync: "sync",
+    Digest: "digest",
+}
+_UPDATE_KIND: dict[type, str] = {
+    Alive: "updates.alive",
+    Suspect: "updates.suspect",
+    Dead: "updates.dead",
+    Record: "updates.record",
+    Event: "updates.event",
+}
 
 
 class GossipShell(asyncio.DatagramProtocol):
@@ -54,6 +85,10 @@ class GossipShell(asyncio.DatagramProtocol):
         self._timer: asyncio.TimerHandle | None = None
         self._deadline = float("inf")
         self.counters: Counter[str] = Counter()
+        self.sent_by_kind: Counter[str] = Counter()
+        """Bytes sent per packet kind ("ping", "ack", "sync", ...), what pings carried as vitals
+        ("vitals"), and piggybacked updates sent per kind ("updates.record", ...): where the
+        traffic goes (`GET /v1/agent`)."""
         self._logged: dict[str, float] = {}
         self._nudged: dict[Addr, float] = {}
 
@@ -138,6 +173,7 @@ class GossipShell(asyncio.DatagramProtocol):
                 transport.sendto(data, dest)
                 self.counters["messages_out"] += 1
                 self.counters["bytes_out"] += len(data)
+                self._tally(packet, len(data))
         while (event := core.next_event()) is not None:
             self._on_event(event)
         deadline = core.next_timer()
@@ -148,6 +184,15 @@ class GossipShell(asyncio.DatagramProtocol):
             self._timer = (
                 None if deadline == float("inf") else self._loop.call_at(deadline, self._fire)
             )
+
+    def _tally(self, packet: Packet, size: int) -> None:
+        kinds = self.sent_by_kind
+        kinds[_KIND[type(packet)]] += size
+        vitals = getattr(packet, "vitals", None)
+        if vitals is not None:
+            kinds["vitals"] += len(vitals.payload)
+        for u in packet.updates:
+            kinds[_UPDATE_KIND[type(u)]] += 1
 
     def close(self) -> None:
         """Stop the timer and close the socket."""

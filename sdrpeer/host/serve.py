@@ -166,7 +166,8 @@ class Host:
         if self.inst.state == "FINALIZED":
             return 0
         try:
-            await asyncio.wait_for(runner.finalize(), self._exit_timeout())
+            async with asyncio.timeout(self._exit_timeout()):  # not wait_for (see below)
+                await runner.finalize()
         except TimeoutError:
             log.error("finalize did not finish within %.1f s", self._exit_timeout())
             self._error = "finalize timed out"
@@ -189,7 +190,8 @@ class Host:
             self.channel.send(control.reply(late.id, False, "the host is exiting"))
         self.channel.close()
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self.channel.wait_closed(), 1.0)
+            async with asyncio.timeout(1.0):  # wait_for can swallow a cancel on 3.11
+                await self.channel.wait_closed()
 
     def _unix_path(self) -> str:
         """Where the Unix data socket goes."""

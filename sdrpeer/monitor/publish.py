@@ -8,35 +8,45 @@ costs the same at any fleet size. `Publisher.decide(now, record)` picks:
 
 - RECORD when something the fleet decides with changed: identity (API address, priority,
   capacity, position-less <-> positioned), an instance's name, component, state, role or data
-  address, the election belief, the plan held, the link bounds, or a measured value moved
-  across a `Boundaries` cut (a threshold some decision compares it with: the deployed system's
-  recovery rules and their clear levels, the allocation thresholds that decide who may be
-  allocator, the election's health steps, the default traps). So every robot sees each robot on
-  the correct side of every threshold it judges by, at the same moment, whatever the fleet's
-  size. A crossing less than `min_gap` after the last record goes out as vitals and makes a
-  record at the next sample after the gap (a value flapping across a cut costs at most one
-  record per gap);
+  address, the election belief, the plan held, the link bounds, or a measured value moved across a
+  `Boundaries` cut (a threshold some decision compares it with: the deployed system's robot-wide
+  recovery rules and their clear levels, the allocation thresholds that decide who may be allocator,
+  the election's health steps, the broadcast default traps). So every robot sees each robot on the
+  correct side of every threshold it judges by, at the same moment, whatever the fleet's size. A
+  crossing less than `min_gap` after the last record goes out as vitals and makes a record at the
+  next sample after the gap (a value flapping across a cut costs at most one record per gap);
 - VITALS when a measured value moved past its deadband since the last record or vitals sent
   (cpu 5 points, free memory 1 % of capacity or 16 MiB, battery 1 point, RSSI 2 dB, position
   10 cm, typical link RTT 1 ms or 25 %, jitter 1 ms or 50 %, loss 5 points, a listed link
   added, gone or moved as much, an instance's cpu or memory as much as the robot's);
 - NONE otherwise: noise inside the deadbands is never sent, and nothing is re-sent on a timer.
 
+A robot's CPU is published as an average over the last `CPU_AVERAGE_S` seconds (`Average`,
+exponential, like a load average): one-second samples swing by tens of points on a busy
+computer, which would make a revision every few seconds and tell the allocator nothing about
+the load a component would meet. The robot's own agent still judges its raw samples (Table III's
+CPU rule, its traps).
+
 Time is passed in; nothing here reads a clock.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from sdrpeer.election.health import BATTERY_STEPS, LOSS_STEPS, RSSI_STEPS
 from sdrpeer.record import LinkBounds, LinkStats, LinkSummary, Metrics, RobotRecord
+from sdrpeer.recovery.plugins import CONDITIONS
 from sdrpeer.system.model import RecoveryDef, Thresholds
 
 RECORD = "record"
 VITALS = "vitals"
 NONE = "none"
+
+CPU_AVERAGE_S = 10.0
+"""Time constant of the published CPU average (seconds)."""
 
 DEFAULT_LINK_BOUNDS = LinkBounds(rtt_ms=50.0, jitter_ms=10.0, loss=0.05)
 """Links at or past these are listed exactly in a record when the deployed system sets no
@@ -85,14 +95,14 @@ def boundaries(
     recovery: RecoveryDef | None = None, thresholds: Thresholds | None = None
 ) -> Boundaries:
     """The cuts for a deployed system (both None: nothing deployed): the election's health
-    steps and the default traps always; the allocation thresholds that decide eligibility;
-    every metric rule's threshold and clear level."""
+    steps and the broadcast default traps (battery, RSSI) always; the allocation thresholds
+    that decide eligibility; every robot-wide rule's threshold and clear level. Rules the
+    robot's own agent judges (memory shortage, CPU: Table III's local steps) cut nothing: no
+    other robot decides on them, and the allocator reads CPU and memory from the vitals."""
     cuts: dict[str, set[float]] = {
         "battery": {*BATTERY_STEPS, 20.0, 25.0},
         "rssi": {*RSSI_STEPS, -52.5, -50.0},
         "loss": set(LOSS_STEPS),
-        "mem_free": {200e6, 250e6},
-        "cpu": {90.0, 80.0},
     }
     t = thresholds
     if t is not None:
@@ -100,7 +110,7 @@ def boundaries(
         _add(cuts, "rssi", [t.rssi_above_dbm])
         _add(cuts, "loss", [t.loss_below])
     for rule in () if recovery is None else recovery.rules:
-        if rule.metric is not None:
+        if rule.metric is not None and CONDITIONS.get(rule.cause).robot_wide:
             _add(cuts, rule.metric, [rule.threshold, rule.clear])
     return Boundaries({m: tuple(sorted(v)) for m, v in sorted(cuts.items())})
 
@@ -130,6 +140,25 @@ def _tighter(a: float | None, b: float | None) -> float | None:
     if a is None or b is None:
         return a if b is None else b
     return min(a, b)
+
+
+class Average:
+    """An exponential average with time constant `tau` over samples at any spacing."""
+
+    def __init__(self, tau: float = CPU_AVERAGE_S) -> None:
+        self.tau = tau
+        self.value: float | None = None
+        self._at = 0.0
+
+    def add(self, now: float, sample: float) -> float:
+        """Take `sample` at `now`; the average (the first sample as it is)."""
+        if self.value is None:
+            self.value = sample
+        else:
+            weight = 1.0 - math.exp(-max(0.0, now - self._at) / self.tau)
+            self.value += (sample - self.value) * weight
+        self._at = now
+        return self.value
 
 
 class Publisher:

@@ -11,6 +11,12 @@ travel in gossip `Event(kind="trap")` payloads, encoded by `encode_trap` and che
 Default rules follow the paper's Table VI where it gives values ("or less" is `<=`): free
 memory <= 200MB (clears above 250MB), RSSI <= -52.5 dBm (clears above -50 dBm); plus battery
 < 20 % (clears at 25 %) and cpu > 90 % (clears at 80 %).
+
+Who hears a trap: a rule with `broadcast` (battery, RSSI) sends its traps to every robot, since
+other robots act on them (robot-wide recovery, who may be allocator); the others (memory, CPU)
+are acted on by the robot's own agent (Table III's local recovery) and stay in its event log,
+while the fleet sees the values in its vitals. Broadcasting every robot's CPU trap would cost
+every robot a share that grows with the fleet.
 """
 
 from __future__ import annotations
@@ -47,6 +53,8 @@ class TrapRule:
     op: str
     threshold: float
     clear: float
+    broadcast: bool = True
+    """Whether its traps go to every robot (else only into this robot's event log)."""
 
     def __post_init__(self) -> None:
         if self.metric not in METRICS:
@@ -73,15 +81,17 @@ class Trap:
     state: str
     """"raised" or "cleared"."""
     ts: float
+    broadcast: bool = True
+    """Whether the rule sends it to every robot (not on the wire)."""
 
 
 def default_rules() -> tuple[TrapRule, ...]:
     """A robot's default traps (paper Table VI values for memory and RSSI)."""
     return (
-        TrapRule("mem_free", "<=", 200_000_000, 250_000_000),
+        TrapRule("mem_free", "<=", 200_000_000, 250_000_000, broadcast=False),
         TrapRule("battery_pct", "<", 20.0, 25.0),
         TrapRule("rssi_dbm", "<=", -52.5, -50.0),
-        TrapRule("cpu_pct", ">", 90.0, 80.0),
+        TrapRule("cpu_pct", ">", 90.0, 80.0, broadcast=False),
     )
 
 
@@ -101,10 +111,14 @@ class TrapDetector:
                 continue
             if not self._raised[i] and rule.holds(value, rule.threshold):
                 self._raised[i] = True
-                traps.append(Trap(rule.metric, float(value), rule.threshold, "raised", now))
+                traps.append(
+                    Trap(rule.metric, float(value), rule.threshold, "raised", now, rule.broadcast)
+                )
             elif self._raised[i] and not rule.holds(value, rule.clear):
                 self._raised[i] = False
-                traps.append(Trap(rule.metric, float(value), rule.threshold, "cleared", now))
+                traps.append(
+                    Trap(rule.metric, float(value), rule.threshold, "cleared", now, rule.broadcast)
+                )
         return traps
 
     def raised(self) -> list[TrapRule]:

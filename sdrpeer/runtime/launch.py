@@ -158,7 +158,8 @@ def exit_text(rc: int | None) -> str:
 async def wait_exit(proc: asyncio.subprocess.Process, seconds: float) -> bool:
     """Whether the process exited within `seconds`."""
     try:
-        await asyncio.wait_for(proc.wait(), max(0.0, seconds))
+        async with asyncio.timeout(max(0.0, seconds)):  # wait_for can swallow a cancel (3.11)
+            await proc.wait()
     except TimeoutError:
         return False
     return True
