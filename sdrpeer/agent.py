@@ -119,6 +119,8 @@ class Agent:
         self.publisher = Publisher()
         self._cpu = Average()
         """The CPU average the record carries (`sdrpeer.monitor.publish.CPU_AVERAGE_S`)."""
+        self.record_json: dict[str, tuple[RobotRecord, dict[str, Any]]] = {}
+        """Each robot's record as JSON, with the record it was made of (`agent_views`)."""
         self.published: Counter[str] = Counter()
         """Records and vitals revisions published by this robot (`GET /v1/agent`)."""
         self._bounds_for: object = ()
@@ -479,6 +481,7 @@ class Agent:
             self.records.pop(event.name, None)
             self._received.pop(event.name, None)
             self._vitals.pop(event.name, None)
+            self.record_json.pop(event.name, None)
             self.links.forget(event.name)
             kind = "member.reaped"
         elif event.previous is None:

@@ -41,7 +41,7 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
             version = own[0] if own else 0
         else:
             version, rec = self.records.get(m.name, (0, None))
-        doc = record_to_json(rec) if rec is not None else {"metrics": None, "links": {}}
+        doc = _record_json(self, m.name, rec)
         if m.name == self.name:
             now = asyncio.get_running_loop().time()
             doc["links"] = {p: link_to_json(s) for p, s in self.links.snapshot(now).items()}
@@ -65,6 +65,20 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+def _record_json(self: Agent, name: str, rec: RobotRecord | None) -> dict[str, Any]:
+    """`record_to_json(rec)`, made once per record (records are immutable: most robots'
+    records do not change between two dashboard frames), copied where the view adds to it."""
+    if rec is None:
+        return {"metrics": None, "links": {}}
+    cached = self.record_json.get(name)
+    if cached is None or cached[0] is not rec:
+        cached = (rec, record_to_json(rec))
+        self.record_json[name] = cached
+    doc = dict(cached[1])
+    doc["links"] = {peer: dict(link) for peer, link in doc["links"].items()}
+    return doc
 
 
 def _revision(self: Agent, name: str, version: int) -> int:

@@ -120,6 +120,26 @@ def format_links(links: Mapping[str, Mapping[str, Any]] | None) -> str:
     return ", ".join(format_link(peer, links[peer]) for peer in sorted(links))
 
 
+def format_link_summary(member: Mapping[str, Any]) -> str:
+    """A member's links in one cell: its typical link over its peers, then the links past the
+    bounds ('typical 0.4ms/0.1ms/0% of 49; robot-7 80ms/2.0ms/0%'); the links themselves
+    when there is no summary."""
+    summary = member.get("link_summary")
+    if not isinstance(summary, Mapping):
+        return format_links(member.get("links"))
+    typical = summary.get("typical")
+    if not isinstance(typical, Mapping):
+        return MISSING
+    text = format_link("typical", typical) + f" of {summary.get('peers', 0)}"
+    listed = summary.get("listed") or {}
+    if listed:
+        text += "; " + format_links(listed)
+        more = int(summary.get("bad") or 0) - len(listed)
+        if more > 0:
+            text += f" and {more} more"
+    return text
+
+
 def format_metrics(metrics: Mapping[str, Any]) -> str:
     """A metrics dict on one line: 'cpu 1%, mem-free 4.0GB/4.0GB, battery 30%, rssi -55.3dBm'."""
     parts = [
@@ -146,7 +166,7 @@ def member_row(member: Mapping[str, Any], *, color: bool) -> list[str]:
         human_percent(metrics.get("battery_pct")),
         human_dbm(metrics.get("rssi_dbm")),
         human_pos(metrics.get("pos")),
-        format_links(member.get("links")),
+        format_link_summary(member),
     ]
 
 

@@ -47,6 +47,12 @@ class FakeView:
                     "pos": [0.0, 0.0],
                 },
                 "links": {"robot-2": {"rtt_ms": 0.4, "jitter_ms": 0.1, "loss": 0.0}},
+                "link_summary": {
+                    "peers": 1,
+                    "typical": {"rtt_ms": 0.4, "jitter_ms": 0.1, "loss": 0.0},
+                    "bad": 0,
+                    "listed": {},
+                },
             },
             {
                 "name": "robot-2",
@@ -216,6 +222,9 @@ EXPECTED_FAMILIES = {
     "sdrpeer_robot_memory_total_bytes": "gauge",
     "sdrpeer_robot_battery_ratio": "gauge",
     "sdrpeer_robot_rssi_dbm": "gauge",
+    "sdrpeer_robot_link_rtt_seconds": "gauge",
+    "sdrpeer_robot_link_jitter_seconds": "gauge",
+    "sdrpeer_robot_link_loss_ratio": "gauge",
     "sdrpeer_link_rtt_seconds": "gauge",
     "sdrpeer_link_jitter_seconds": "gauge",
     "sdrpeer_link_loss_ratio": "gauge",
@@ -251,6 +260,8 @@ async def test_metrics_families_types_and_values(
     assert samples("sdrpeer_robot_rssi_dbm") == {(("robot", "robot-1"),): -47.0}
     rtt = samples("sdrpeer_link_rtt_seconds")
     assert rtt[(("peer", "robot-2"), ("robot", "robot-1"))] == pytest.approx(0.0004)
+    typical = samples("sdrpeer_robot_link_rtt_seconds")
+    assert typical == {(("robot", "robot-1"),): pytest.approx(0.0004)}
     assert samples("sdrpeer_gossip_messages") == {
         (("direction", "in"),): 10.0,
         (("direction", "out"),): 11.0,

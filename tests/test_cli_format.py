@@ -40,6 +40,12 @@ MEMBERS: list[dict[str, Any]] = [
             "robot-3": {"rtt_ms": 12.34, "jitter_ms": 2.0, "loss": 0.25},
             "robot-2": {"rtt_ms": 0.42, "jitter_ms": 0.1, "loss": 0.0},
         },
+        "link_summary": {
+            "peers": 2,
+            "typical": {"rtt_ms": 0.42, "jitter_ms": 0.1, "loss": 0.0},
+            "bad": 1,
+            "listed": {"robot-3": {"rtt_ms": 12.34, "jitter_ms": 2.0, "loss": 0.25}},
+        },
     },
     {
         "name": "robot-2",
@@ -62,7 +68,7 @@ MEMBERS: list[dict[str, Any]] = [
 
 PLAIN = """\
 NAME     ADDR            STATE    INC  CPU  MEM-FREE  BATTERY  RSSI      POS      LINKS
-robot-1  127.0.0.1:7946  alive    0    12%  3.2GB     87%      -47.0dBm  0.0,0.0  robot-2 0.4ms/0.1ms/0%, robot-3 12ms/2.0ms/25%
+robot-1  127.0.0.1:7946  alive    0    12%  3.2GB     87%      -47.0dBm  0.0,0.0  typical 0.4ms/0.1ms/0% of 2; robot-3 12ms/2.0ms/25%
 robot-2  127.0.0.1:7947  suspect  2    -    -         -        -         -        -
 robot-3  127.0.0.1:7948  dead     1    -    512B      -        -         3.0,4.2  -
 robot-4  127.0.0.1:7949  left     5    -    -         -        -         -        -"""  # noqa: E501

@@ -11,21 +11,20 @@ from sdrpeer.dashboard.history import METRICS, History, frame_values
 from sdrpeer.dashboard.moments import Moments, diff_status
 
 
-def member(name: str, free: float = 1e9, state: str = "alive", **links: Any) -> dict[str, Any]:
+def member(
+    name: str, free: float = 1e9, state: str = "alive", typical: dict[str, float] | None = None
+) -> dict[str, Any]:
     return {
         "name": name,
         "state": state,
         "metrics": {"mem_free": free, "cpu_pct": 5.0, "battery_pct": 90.0, "rssi_dbm": -47.5},
-        "links": links,
+        "links": {},
+        "link_summary": {"peers": 2, "typical": typical} if typical else None,
     }
 
 
-def test_frame_values_sum_up_links_and_mark_unknowns() -> None:
-    m = member(
-        "r1",
-        r2={"rtt_ms": 1.0, "jitter_ms": 0.5, "loss": 0.1},
-        r3={"rtt_ms": 3.0, "jitter_ms": 1.5, "loss": 0.3},
-    )
+def test_frame_values_take_the_typical_link_and_mark_unknowns() -> None:
+    m = member("r1", typical={"rtt_ms": 2.0, "jitter_ms": 1.0, "loss": 0.3})
     assert frame_values(m) == [1e9, 5.0, 90.0, -47.5, 2.0, 1.0, 0.3]
     silent = frame_values({"name": "r9", "metrics": None, "links": {}})
     assert all(math.isnan(x) for x in silent)  # NaN everywhere: nothing reported
@@ -65,7 +64,8 @@ def test_max_frames_bounds_the_history_whatever_the_window() -> None:
 def test_fifty_robots_for_fifteen_minutes_stay_small() -> None:
     h = History(window_s=900)
     fleet = [
-        member(f"robot-{i}", r0={"rtt_ms": 1.0, "jitter_ms": 0.1, "loss": 0.0}) for i in range(50)
+        member(f"robot-{i}", typical={"rtt_ms": 1.0, "jitter_ms": 0.1, "loss": 0.0})
+        for i in range(50)
     ]
     for t in range(1000):
         h.add(float(t), fleet)

@@ -27,7 +27,7 @@ class Source:
     def __init__(self) -> None:
         self.events = EventLog()
         self.status: dict[str, Any] | None = STATUS
-        self.fleet = [member("r1", r2={"rtt_ms": 2.0, "jitter_ms": 0.4, "loss": 0.05})]
+        self.fleet = [member("r1", typical={"rtt_ms": 2.0, "jitter_ms": 0.4, "loss": 0.05})]
         self.dashboard = Feed(self, hub=Hub(max_clients=2, queue_len=8, keepalive_s=0.2))
         self.events.listeners.append(self.dashboard.on_event)
 
@@ -102,7 +102,7 @@ async def test_a_new_page_gets_hello_history_events_and_a_sample_in_that_order(
     assert [e["kind"] for e in events] == ["member.join", "trap"]
     assert id3 == "2"  # the page resumes from here after a reconnect
     (row,) = sample["members"]
-    assert row["link"] == {"peers": 1, "rtt_ms": 2.0, "jitter_ms": 0.4, "loss": 0.05}
+    assert row["link"] == {"peers": 2, "rtt_ms": 2.0, "jitter_ms": 0.4, "loss": 0.05}
     assert sample["status"]["allocator"]["name"] == "r2"
     # then, live and in order: events as they are logged, samples as they are taken
     source.events.add(3.0, "election", "r1", epoch=2)

@@ -26,11 +26,18 @@ ROBOT_GAUGES: dict[str, tuple[str, float, str]] = {
     "sdrpeer_robot_battery_ratio": ("battery_pct", 0.01, "Battery level of the robot, 0..1."),
     "sdrpeer_robot_rssi_dbm": ("rssi_dbm", 1.0, "Wi-Fi signal strength at the robot."),
 }
-# Per-link gauges: family name -> (links key, scale, help).
+# Per-link gauges: family name -> (links key, scale, help). Every link of this robot, and the
+# links other robots' records list (those past the deployed system's bounds).
 LINK_GAUGES: dict[str, tuple[str, float, str]] = {
     "sdrpeer_link_rtt_seconds": ("rtt_ms", 0.001, "Round-trip time from robot to peer."),
     "sdrpeer_link_jitter_seconds": ("jitter_ms", 0.001, "RTT jitter from robot to peer."),
     "sdrpeer_link_loss_ratio": ("loss", 1.0, "Probe loss from robot to peer, 0..1."),
+}
+# Per-robot typical link (its record's link summary): family name -> (key, scale, help).
+TYPICAL_GAUGES: dict[str, tuple[str, float, str]] = {
+    "sdrpeer_robot_link_rtt_seconds": ("rtt_ms", 0.001, "Typical RTT of the robot's links."),
+    "sdrpeer_robot_link_jitter_seconds": ("jitter_ms", 0.001, "Typical jitter of its links."),
+    "sdrpeer_robot_link_loss_ratio": ("loss", 1.0, "Typical probe loss of its links, 0..1."),
 }
 MEMBER_STATES = ("alive", "suspect", "dead", "left")
 
@@ -75,6 +82,10 @@ class ViewCollector(Collector):
             name: GaugeMetricFamily(name, text, labels=["robot", "peer"])
             for name, (_, _, text) in LINK_GAUGES.items()
         }
+        typical = {
+            name: GaugeMetricFamily(name, text, labels=["robot"])
+            for name, (_, _, text) in TYPICAL_GAUGES.items()
+        }
         for member in members:
             name = str(member.get("name"))
             state = str(member.get("state"))
@@ -83,6 +94,11 @@ class ViewCollector(Collector):
                 value = _number((member.get("metrics") or {}).get(key))
                 if value is not None:
                     robot[family].add_metric([name], value * scale)
+            t = (member.get("link_summary") or {}).get("typical") or {}
+            for family, (key, scale, _) in TYPICAL_GAUGES.items():
+                value = _number(t.get(key))
+                if value is not None:
+                    typical[family].add_metric([name], value * scale)
             for peer, stats in sorted((member.get("links") or {}).items()):
                 for family, (key, scale, _) in LINK_GAUGES.items():
                     value = _number(stats.get(key))
@@ -90,6 +106,7 @@ class ViewCollector(Collector):
                         link[family].add_metric([name, str(peer)], value * scale)
         yield up
         yield from robot.values()
+        yield from typical.values()
         yield from link.values()
 
     def _agent_families(self, agent: dict[str, Any]) -> Iterator[Metric]:

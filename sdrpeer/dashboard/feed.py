@@ -19,10 +19,10 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from typing import Any, Protocol
 
-from sdrpeer.dashboard.history import History
+from sdrpeer.dashboard.history import History, typical_link
 from sdrpeer.dashboard.moments import Moments
 from sdrpeer.dashboard.stream import Hub, encode_event
 
@@ -55,25 +55,27 @@ class DashboardSource(Protocol):
         ...
 
 
-def _mean(values: Iterable[Any]) -> float | None:
-    known = [float(v) for v in values if isinstance(v, int | float) and not math.isnan(v)]
-    return round(sum(known) / len(known), 3) if known else None
+def _rounded(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+        return None
+    return round(float(value), 3)
 
 
 def member_summary(member: Mapping[str, Any]) -> dict[str, Any]:
-    """One robot as a live sample shows it: its links summed up, not listed pair by pair."""
-    links = [v for v in (member.get("links") or {}).values() if isinstance(v, Mapping)]
-    losses = [float(v["loss"]) for v in links if isinstance(v.get("loss"), int | float)]
+    """One robot as a live sample shows it: its links summed up (its typical link), not listed
+    pair by pair."""
+    summary = member.get("link_summary")
+    typical = typical_link(member)
     return {
         "name": member.get("name"),
         "state": member.get("state"),
         "api": member.get("api"),
         "metrics": member.get("metrics"),
         "link": {
-            "peers": len(links),
-            "rtt_ms": _mean(v.get("rtt_ms") for v in links),
-            "jitter_ms": _mean(v.get("jitter_ms") for v in links),
-            "loss": max(losses, default=None),
+            "peers": summary.get("peers", 0) if isinstance(summary, Mapping) else 0,
+            "rtt_ms": _rounded(typical.get("rtt_ms")),
+            "jitter_ms": _rounded(typical.get("jitter_ms")),
+            "loss": _rounded(typical.get("loss")),
         },
         "instances": member.get("instances") or [],
     }

@@ -1,12 +1,13 @@
 """A bounded history of every robot's metrics, so a dashboard opened late still shows the past.
 
 How it works (pure: the time is passed in): `add(ts, members)` turns the agent's members view into
-one compact frame — per robot its free memory, CPU, battery, RSSI and the mean RTT, mean jitter
-and worst loss of the links it measures (per-pair link series would grow with the square of the
-fleet) — stored as one `array('f')` per frame, so 15 minutes of a 50-robot fleet at one frame a
-second take about 1.5 MB. Frames older than `window_s` fall off; so does the oldest frame past
-`max_frames`. `series(since)` is the columnar JSON the dashboard plots: times, and per robot one
-list per metric (None where a robot did not report).
+one compact frame — per robot its free memory, CPU, battery, RSSI and the typical RTT, jitter and
+loss of the links it measures (its record's link summary: the values a strict majority of its links
+reach; per-pair link series would grow with the square of the fleet) — stored as one `array('f')`
+per frame, so 15 minutes of a 50-robot fleet at one frame a second take about 1.5 MB. Frames older
+than `window_s` fall off; so does the oldest frame past `max_frames`. `series(since)` is the
+columnar JSON the dashboard plots: times, and per robot one list per metric (None where a robot did
+not report).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
-__all__ = ["METRICS", "History", "frame_values"]
+__all__ = ["METRICS", "History", "frame_values", "typical_link"]
 
 METRICS: Final = ("mem_free", "cpu_pct", "battery_pct", "rssi_dbm", "rtt_ms", "jitter_ms", "loss")
 """The series kept per robot, in frame order."""
@@ -43,24 +44,23 @@ def _number(value: Any) -> float:
 def frame_values(member: Mapping[str, Any]) -> list[float]:
     """The METRICS of one member of the members view (NaN where unknown)."""
     metrics = member.get("metrics") or {}
-    links = [v for v in (member.get("links") or {}).values() if isinstance(v, Mapping)]
-    rtts = [_number(v.get("rtt_ms")) for v in links]
-    jitters = [_number(v.get("jitter_ms")) for v in links]
-    losses = [_number(v.get("loss")) for v in links]
+    typical = typical_link(member)
     return [
         _number(metrics.get("mem_free")),
         _number(metrics.get("cpu_pct")),
         _number(metrics.get("battery_pct")),
         _number(metrics.get("rssi_dbm")),
-        _mean(rtts),
-        _mean(jitters),
-        max((x for x in losses if not math.isnan(x)), default=_NAN),
+        _number(typical.get("rtt_ms")),
+        _number(typical.get("jitter_ms")),
+        _number(typical.get("loss")),
     ]
 
 
-def _mean(values: list[float]) -> float:
-    known = [x for x in values if not math.isnan(x)]
-    return sum(known) / len(known) if known else _NAN
+def typical_link(member: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The typical link of a member of the members view ({} when it measured none)."""
+    summary = member.get("link_summary")
+    typical = summary.get("typical") if isinstance(summary, Mapping) else None
+    return typical if isinstance(typical, Mapping) else {}
 
 
 class History:

@@ -1,6 +1,9 @@
 """The deployment side of one agent: plan sync, applying the plan, and the allocator role.
 
-How it works: `step()` runs whenever gossip changes something (and every `tick` seconds):
+How it works: `step()` runs whenever gossip changes something, at the election's, health's and
+local recovery's deadlines, and every `tick` seconds while a plan is held or this robot is the
+allocator (their duties poll: state handoff, re-allocation retries); with nothing deployed an
+idle fleet steps at most every `idle_tick` seconds:
 1. the election shell is fed this robot's view and says who the allocator is, with its epoch;
    the plan store's fence rises to every epoch seen;
 2. plan sync: if an alive robot gossips a plan newer than ours (and not fenced off), fetch it
@@ -74,6 +77,7 @@ class Coordinator:
         events: EventLog,
         on_change: Callable[[], None],
         tick: float = 0.2,
+        idle_tick: float = 2.0,
         adopt_after: float = 1.0,
         retry_every: float = 5.0,
         election: ElectionConfig | None = None,
@@ -86,6 +90,7 @@ class Coordinator:
         self.events = events
         self.on_change = on_change
         self.tick = tick
+        self.idle_tick = idle_tick
         self.local = LocalShell(
             name, manager, lambda: self.store.plan, self.request_recovery, events
         )
@@ -136,7 +141,8 @@ class Coordinator:
         loop = asyncio.get_running_loop()
         while True:
             due = min(self.election.next_timer(), self.health.next_timer(), self.local.next_timer())
-            wait = min(self.tick, max(0.0, due - loop.time()))
+            busy = self.store.plan is not None or self.election.is_allocator()
+            wait = min(self.tick if busy else self.idle_tick, max(0.0, due - loop.time()))
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(wait):  # not wait_for: on 3.11 it can swallow a
                     await self._wake.wait()  # cancel, and then stop() waited for ever

@@ -13,9 +13,9 @@
     ["cpu_pct", "CPU (%)", (v) => v],
     ["battery_pct", "battery (%)", (v) => v],
     ["rssi_dbm", "RSSI (dBm)", (v) => v],
-    ["rtt_ms", "link RTT, mean of peers (ms)", (v) => v],
-    ["jitter_ms", "link jitter, mean of peers (ms)", (v) => v],
-    ["loss", "link loss, worst peer (%)", (v) => v * 100],
+    ["rtt_ms", "link RTT, typical (ms)", (v) => v],
+    ["jitter_ms", "link jitter, typical (ms)", (v) => v],
+    ["loss", "link loss, typical (%)", (v) => v * 100],
   ];
   const STATE_COLORS = {
     active: "#1a9850", inactive: "#4575b4", error: "#d73027", failed: "#d73027",
