@@ -49,11 +49,11 @@ from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.monitor.links import LinkTable
 from sdrpeer.monitor.publish import (
     RECORD,
-    VITALS,
     Average,
     Publisher,
     boundaries,
     link_bounds,
+    publish,
 )
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
@@ -67,10 +67,7 @@ from sdrpeer.record import (
     apply_vitals,
     decode_record,
     decode_vitals,
-    encode_record,
-    encode_vitals,
     metrics_to_json,
-    vitals_of,
 )
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.supervisor import SupervisorConfig
@@ -315,15 +312,11 @@ class Agent:
             plan=None if coord is None else coord.store.info(),
         )
         self.current = record
-        decision = self.publisher.decide(now, record, force=force)
+        decision, version = publish(self.shell, self.publisher, now, record, force=force)
         self.published[decision] += 1
-        if decision == RECORD:
-            version = self.shell.set_record(encode_record(record))
-            if version >= self._versions[1]:
-                limit = agent_files.reserve_record_versions(self.config.data_dir, version)
-                self._versions = (self._versions[0], limit)
-        elif decision == VITALS:
-            self.shell.set_vitals(encode_vitals(vitals_of(record)))
+        if decision == RECORD and version >= self._versions[1]:
+            limit = agent_files.reserve_record_versions(self.config.data_dir, version)
+            self._versions = (self._versions[0], limit)
 
     def _bounds(self) -> LinkBounds:
         """The link bounds and publishing boundaries of the deployed system (kept per plan)."""

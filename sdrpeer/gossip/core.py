@@ -25,7 +25,7 @@ How it works:
 from __future__ import annotations
 
 import heapq
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 from sdrpeer.gossip import formulas
 from sdrpeer.gossip.antientropy import AntiEntropy
@@ -73,7 +73,7 @@ from sdrpeer.gossip.messages import (
     VitalsRevision,
 )
 from sdrpeer.gossip.probing import Probing
-from sdrpeer.gossip.table import Member, MemberInfo, Suspicion
+from sdrpeer.gossip.table import Member, MemberInfo, ProbeRing, Suspicion
 
 
 class Membership(Probing, AntiEntropy):
@@ -88,6 +88,28 @@ class Membership(Probing, AntiEntropy):
             self._send_state(seed, reply=True)
         if self._seeds:
             self._at(now + 1.0, JOIN, 1.0)
+
+    def preload(
+        self,
+        now: float,
+        members: Iterable[tuple[str, Addr]],
+        records: Mapping[str, tuple[int, bytes]],
+    ) -> None:
+        """Start as a member of a fleet that has already converged: every one of `members`
+        alive at incarnation 0, `records` held (ours among them, if given). Nothing is queued
+        for dissemination and no event is reported. The simulator's shortcut past a join storm
+        it cannot afford at thousands of robots; an agent always joins."""
+        self._now = now
+        for name, addr in members:
+            if name == self.name or name in self._members:
+                continue
+            self._members[name] = Member(name, addr, 0, ALIVE, now)
+            self._peers.add(name)
+            self._mark(name)
+        self._ring = ProbeRing()
+        for name, record in records.items():
+            self._records[name] = record
+            self._mark(name)
 
     def leave(self, now: float) -> None:
         """Announce a graceful leave to everyone reachable."""

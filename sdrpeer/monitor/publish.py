@@ -35,9 +35,19 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from sdrpeer.election.health import BATTERY_STEPS, LOSS_STEPS, RSSI_STEPS
-from sdrpeer.record import LinkBounds, LinkStats, LinkSummary, Metrics, RobotRecord
+from sdrpeer.record import (
+    LinkBounds,
+    LinkStats,
+    LinkSummary,
+    Metrics,
+    RobotRecord,
+    encode_record,
+    encode_vitals,
+    vitals_of,
+)
 from sdrpeer.recovery.plugins import CONDITIONS
 from sdrpeer.system.model import RecoveryDef, Thresholds
 
@@ -196,6 +206,31 @@ class Publisher:
         self.record = self.sent = new
         self._record_at = now
         return RECORD
+
+
+class RecordSink(Protocol):
+    """Where a robot's record goes: its gossip shell (the agent) or a simulated core's adapter."""
+
+    def set_record(self, payload: bytes) -> int:
+        """Publish a new record version (spread to every robot); returns the version."""
+        ...
+
+    def set_vitals(self, payload: bytes) -> int:
+        """A new vitals revision of the current record (on our pings); returns the revision."""
+        ...
+
+
+def publish(
+    sink: RecordSink, publisher: Publisher, now: float, record: RobotRecord, *, force: bool = False
+) -> tuple[str, int]:
+    """One sample through the publisher into the sink: (decision, record version or vitals
+    revision, 0 for NONE). The agent and the simulator's agents both publish through this."""
+    decision = publisher.decide(now, record, force=force)
+    if decision == RECORD:
+        return decision, sink.set_record(encode_record(record))
+    if decision == VITALS:
+        return decision, sink.set_vitals(encode_vitals(vitals_of(record)))
+    return decision, 0
 
 
 def _identity_changed(a: RobotRecord, b: RobotRecord) -> bool:

@@ -20,7 +20,7 @@ import heapq
 import itertools
 import math
 import random
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
 from sdrpeer.gossip.config import GossipConfig
@@ -89,11 +89,16 @@ class Cluster:
         count_bytes: bool = True,
         trace: bool = False,
         core_factory: CoreFactory = membership_factory,
+        names: Sequence[str] | None = None,
     ) -> None:
+        """`names`: the robots' names (default r0000, r0001, ...; a calibration against real
+        agents uses theirs, since every datagram carries names)."""
         self.config = config
         self.seed = seed
         self.now = 0.0
-        self.names = [f"r{i:04d}" for i in range(n)]
+        self.names = list(names) if names is not None else [f"r{i:04d}" for i in range(n)]
+        if len(self.names) != n or len(set(self.names)) != n:
+            raise ValueError(f"need {n} distinct names, got {len(set(self.names))}")
         self.addrs: list[Addr] = [(f"10.0.{i // 200}.{i % 200 + 10}", 7946) for i in range(n)]
         self.index = {name: i for i, name in enumerate(self.names)}
         self._by_addr = {addr: i for i, addr in enumerate(self.addrs)}
@@ -139,6 +144,27 @@ class Cluster:
             at = self.now + (rng.random() * spread if i and spread else 0.0)
             self.schedule(at, functools.partial(self._boot, i))
         self.run_until(self.now)
+
+    def start_converged(self, records: Mapping[str, bytes] | None = None) -> None:
+        """Boot every node as a member of a fleet that has already converged: each knows all
+        the others alive and holds `records` (name -> payload, version 1 of each), without the
+        join storm (at thousands of nodes the simulator could not afford it; the trace's views
+        are not filled either, so use it for what happens after the start: deaths, traffic).
+        The cores must have `preload` (`Membership` has)."""
+        members = list(zip(self.names, self.addrs, strict=True))
+        held = {name: (1, payload) for name, payload in (records or {}).items()}
+        for i, name in enumerate(self.names):
+            rng = random.Random(f"{self.seed}/{name}/{self._generation[i]}")
+            core = self._factory(name, self.addrs[i], self.config, self.now, rng)
+            preload = getattr(core, "preload", None)
+            if preload is None:
+                raise TypeError(f"{type(core).__name__} cannot start converged")
+            preload(self.now, members, held)
+            self._cores[i] = core
+            self._up[i] = True
+            self._timer_at[i] = math.inf
+            self.trace.up(i, self.now)
+            self._drive(i, core, self.now)
 
     def schedule(self, at: float, action: Callable[[], object]) -> None:
         """Run `action()` at virtual time `at` (a kill, a restart, a set_record...)."""
@@ -208,6 +234,17 @@ class Cluster:
         version = core.set_record(self.now, payload)
         self._drive(i, core, self.now)
         return version
+
+    def set_vitals(self, name: str, payload: bytes) -> int:
+        """A new vitals revision of `name`'s record now (`Membership.set_vitals`)."""
+        i = self.index[name]
+        core = self._call(i)
+        set_vitals = getattr(core, "set_vitals", None)
+        if set_vitals is None:
+            raise TypeError(f"{type(core).__name__} has no vitals")
+        revision: int = set_vitals(self.now, payload)
+        self._drive(i, core, self.now)
+        return revision
 
     def broadcast_event(self, name: str, kind: str, payload: bytes) -> None:
         """Let `name` broadcast a one-off event now."""

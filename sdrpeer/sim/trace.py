@@ -121,11 +121,16 @@ class Trace:
 
     def false_deaths(self, after: float = 0.0) -> list[tuple[float, str, str]]:
         """(time, observer, member) for every DEAD report about a member never killed by then."""
+        return self.false_reports(DEAD, after)
+
+    def false_reports(self, state: int, after: float = 0.0) -> list[tuple[float, str, str]]:
+        """(time, observer, member) for every report of `state` (SUSPECT, DEAD) about a member
+        never killed by then."""
         found = []
         for member, changes in self._changes.items():
             downs = self.downs[self.index[member]]
             for t, obs, st, _ in changes:
-                if st == DEAD and t >= after and not any(d <= t for d in downs):
+                if st == state and t >= after and not any(d <= t for d in downs):
                     found.append((t, self.names[obs], member))
         return sorted(found)
 
