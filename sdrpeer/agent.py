@@ -14,6 +14,7 @@ graceful leave; a second signal: immediate exit.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import os
 import random
@@ -28,9 +29,9 @@ from sdrpeer.api.server import serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
 from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
-from sdrpeer.deploy.coordinator import ClusterState, Coordinator
 from sdrpeer.deploy.peers import peer_token, peer_tokens
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
+from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.eventlog import EventLog, RecoveryTally
 from sdrpeer.gossip.config import preset
@@ -69,15 +70,15 @@ from sdrpeer.record import (
     decode_vitals,
     metrics_to_json,
 )
-from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.supervisor import SupervisorConfig
 from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
 
+    from sdrpeer.deploy.coordinator import Coordinator
     from sdrpeer.monitor.scenario import Scenario
     from sdrpeer.monitor.virtual import VirtualRobot
+    from sdrpeer.runtime.manager import InstanceManager
 
 log = logging.getLogger("sdrpeer.agent")
 
@@ -128,8 +129,10 @@ class Agent:
         self.keyring: Keyring | None = None
         self.peer_tokens: list[str] = []
         """Tokens the API takes from other agents (one per cluster key; updated on reload)."""
-        self.instances = self._make_instances()
+        self.instances: InstanceManager | None = None
+        """This robot's component instances (None until the deployment stack is loaded)."""
         self.coordinator: Coordinator | None = None
+        self._stack: asyncio.Task[None] | None = None
         self.dashboard = Feed(self)
         """History and live streams of the dashboard (`sdrpeer.dashboard`)."""
         self.events.listeners.append(self.dashboard.on_event)
@@ -145,8 +148,10 @@ class Agent:
         return self.config.name
 
     # ----------------------------------------------------------------- lifecycle
-    async def start(self) -> None:
-        """Load keys and robot facts, bind gossip and the API, write agent.json, join."""
+    async def start(self, *, stack_in_background: bool = False) -> None:
+        """Load keys and robot facts, bind gossip and the API, write agent.json, join; then
+        start the deployment stack (`_start_stack`): before returning, or, with
+        `stack_in_background` (the agent process), while the API already answers."""
         cfg = self.config
         loop = asyncio.get_running_loop()
         self._started = loop.time()
@@ -157,7 +162,6 @@ class Agent:
             assert cfg.key_file is not None
             self.keyring = Keyring.from_file(cfg.key_file)
         self.peer_tokens[:] = peer_tokens(self.keyring)
-        self.instances.data_keys = agent_keys.data_keys(self.keyring)
         token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
             # Only virtual robots read YAML files: real ones start without the parser.
@@ -196,17 +200,7 @@ class Agent:
             first_version=self._versions[0],
         )
         self.shell.attach(self.core)
-        self.coordinator = Coordinator(
-            cfg.name,
-            cfg.data_dir,
-            self.instances,
-            self._cluster_state,
-            token=peer_token(self.keyring),
-            events=self.events,
-            on_change=lambda: self._publish(force=True),
-        )
         await self._start_api(token)
-        await self.instances.start()
         self._publish(force=True)
         write_agent_json(cfg.data_dir, self.name, addr, self.api_url)
         self.events.add(
@@ -217,8 +211,9 @@ class Agent:
             self.shell.join(seeds)
         self._tasks.append(asyncio.create_task(self._metrics_loop()))
         self._tasks.append(asyncio.create_task(self.dashboard.run()))
-        self.coordinator.start()
-        trim_heap()
+        self._stack = asyncio.create_task(self._start_stack())
+        if not stack_in_background:
+            await self._stack
         log.info(
             "agent %s up: gossip %s:%d, api %s, preset %s",
             cfg.name,
@@ -228,16 +223,63 @@ class Agent:
             cfg.preset,
         )
 
+    async def _start_stack(self) -> None:
+        """The deployment stack: its modules load in a worker thread while the loop serves the
+        API and gossip (loading them took a third of the start-up), then the instance manager
+        and the coordinator start here. Until then instance and deployment requests get 503."""
+        cfg = self.config
+        # The import itself runs in the thread (the loop keeps serving); the names bound here
+        # are then taken from sys.modules at once.
+        await asyncio.to_thread(_load_stack)
+        from sdrpeer.deploy.coordinator import Coordinator  # noqa: PLC0415 - loaded above
+        from sdrpeer.runtime.manager import InstanceManager  # noqa: PLC0415
+        from sdrpeer.runtime.supervisor import SupervisorConfig  # noqa: PLC0415
+
+        config = SupervisorConfig(data_host=parse_hostport(cfg.bind)[0])
+        instances = InstanceManager(
+            cfg.data_dir,
+            config,
+            lambda: self._publish(force=True),
+            on_fault=self._on_fault,
+            on_instance_problem=lambda name, cause: self._on_fault(name, cause, ""),
+        )
+        instances.data_keys = agent_keys.data_keys(self.keyring)
+        self.coordinator = Coordinator(
+            cfg.name,
+            cfg.data_dir,
+            instances,
+            self._cluster_state,
+            token=peer_token(self.keyring),
+            events=self.events,
+            on_change=lambda: self._publish(force=True),
+        )
+        self.instances = instances
+        await instances.start()
+        self._publish(force=True)
+        self.coordinator.start()
+        trim_heap()
+        log.info("agent %s ready: deployment stack loaded", self.name)
+
+    @property
+    def ready(self) -> bool:
+        """Whether the deployment stack is up (`GET /healthz` says so)."""
+        return self.coordinator is not None
+
     async def stop(self, *, leave: bool = True) -> None:
         """Leave the cluster gracefully, then close the API and the socket."""
         for task in self._tasks:
             task.cancel()
+        if self._stack is not None and not self._stack.done():
+            self._stack.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._stack
         self.dashboard.close()
         if self.coordinator is not None:
             if leave:
                 self.coordinator.leave()
             await self.coordinator.stop()
-        await self.instances.stop()
+        if self.instances is not None:
+            await self.instances.stop()
         if self.shell is not None and self.core is not None and leave:
             self.shell.leave()
             await asyncio.sleep(max(0.3, 3 * self.core.config.gossip_interval))
@@ -274,7 +316,8 @@ class Agent:
                 if changes:
                     self.robot.set(now, changes)
                     self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
-            self.instances.sample()
+            if self.instances is not None:
+                self.instances.sample()
             self._publish()
             offset = self.shell.codec.clock.offset_ms if self.shell is not None else 0
             self._saved_offset = agent_files.keep_clock_offset(cfg_dir, offset, self._saved_offset)
@@ -299,7 +342,7 @@ class Agent:
                 self.shell.broadcast_event("trap", encode_trap(trap))
             self.events.add(time.time(), "trap", self.name, **_trap_json(trap))
         self._update_rates(now)
-        infos = self.instances.infos()
+        infos = () if self.instances is None else self.instances.infos()
         self._log_states(infos)
         coord = self.coordinator
         record = RobotRecord(
@@ -362,17 +405,6 @@ class Agent:
     def reload_keys(self) -> bool:
         """Read the key file again (SIGHUP): rotate keys with no restart (`agent_keys`)."""
         return agent_keys.reload_keys(self)
-
-    def _make_instances(self) -> InstanceManager:
-        """The instance manager: hosts bind data servers on this robot's gossip address."""
-        config = SupervisorConfig(data_host=parse_hostport(self.config.bind)[0])
-        return InstanceManager(
-            self.config.data_dir,
-            config,
-            lambda: self._publish(force=True),
-            on_fault=self._on_fault,
-            on_instance_problem=lambda name, cause: self._on_fault(name, cause, ""),
-        )
 
     def _on_fault(self, name: str, kind: str, detail: str) -> None:
         """A component fault, an instance in ERROR, or a host that died: to local recovery."""
@@ -522,6 +554,12 @@ class Agent:
         self._publish(force=True)
         assert self.metrics is not None
         return metrics_to_json(self.metrics)
+
+
+def _load_stack() -> None:
+    """Import the deployment stack (run in a worker thread by `Agent._start_stack`)."""
+    import sdrpeer.deploy.coordinator  # noqa: PLC0415
+    import sdrpeer.runtime.manager  # noqa: F401, PLC0415
 
 
 def _jsonable(changes: dict[str, Any]) -> dict[str, Any]:

@@ -55,7 +55,8 @@ def reload_keys(agent: Agent) -> bool:
     agent.peer_tokens[:] = peer_tokens(ring)
     if agent.coordinator is not None:
         agent.coordinator.token = agent.coordinator.handoff.token = peer_token(ring)
-    agent.instances.set_data_keys(data_keys(ring))
+    if agent.instances is not None:  # else the stack takes the new ring's keys when it starts
+        agent.instances.set_data_keys(data_keys(ring))
     ids = [k.hex() for k in ring.key_ids]
     log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
     agent.events.add(time.time(), "keys.reloaded", agent.name, key_ids=ids)

@@ -41,7 +41,7 @@ async def _serve(config: AgentConfig) -> int:
         loop.add_signal_handler(sig, on_signal)
     loop.add_signal_handler(signal.SIGHUP, agent.reload_keys)
     try:
-        await agent.start()
+        await agent.start(stack_in_background=True)  # the API answers while the rest loads
     except (ConfigError, OSError) as e:
         log.error("cannot start: %s", e)
         await agent.stop(leave=False)

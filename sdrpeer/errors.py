@@ -35,3 +35,11 @@ class ApiError(SdrpeerError):
         super().__init__(message)
         self.status = status
         """The HTTP status the agent answered with, None when it could not be reached."""
+
+
+class NotAllocator(SdrpeerError):
+    """This robot is not the allocator; `leader` is the one it believes in (or None)."""
+
+    def __init__(self, leader: str | None) -> None:
+        super().__init__(leader)
+        self.leader = leader

@@ -120,7 +120,8 @@ async def test_reads_are_open(client: TestClient[web.Request, web.Application]) 
         assert response.status == 200, path
     members = await (await client.get("/v1/members")).json()
     assert [m["name"] for m in members] == ["robot-1", "robot-2"]
-    assert (await (await client.get("/healthz")).json()) == {"status": "ok", "name": "robot-1"}
+    healthz = await (await client.get("/healthz")).json()
+    assert healthz == {"status": "ok", "name": "robot-1", "ready": True}
 
 
 async def test_post_robot_needs_the_token(

@@ -90,12 +90,13 @@ def published() -> Publisher:
         (replace(BASE, election=ElectionInfo(1, "robot-1", True)), RECORD),
         (replace(BASE, plan=PlanInfo(1, 1, "d", "robot-1")), RECORD),
         (replace(BASE, links=replace(BASE.links, bounds=LinkBounds(loss=0.01))), RECORD),
-        # Boundaries: trap levels and the election's health steps.
+        # Boundaries: the broadcast trap levels; not the election's health steps.
         (metrics(rssi_dbm=-52.5), RECORD),  # onto the trap threshold
-        (metrics(battery_pct=74.9), RECORD),  # health step 75 %
+        (metrics(battery_pct=19.9), RECORD),  # the battery trap
+        (metrics(battery_pct=74.9), VITALS),  # health step 75 %: vitals, not a record
         (metrics(cpu_pct=91.0), VITALS),  # CPU and memory: the robot's own agent decides
         (metrics(mem_free=199_000_000), VITALS),
-        (typical(loss=0.01), RECORD),  # health step 1 %
+        (typical(loss=0.06), VITALS),  # health steps 1 % and 5 %: vitals
         (metrics(battery_pct=None), RECORD),
     ],
 )
@@ -139,7 +140,7 @@ def test_boundaries_of_a_deployed_system() -> None:
         )
     )
     b = boundaries(recovery, Thresholds(battery_above_pct=40.0, loss_below=0.1))
-    assert {30.0, 35.0, 40.0, 20.0, 25.0, 50.0, 75.0} <= set(b.cuts["battery"])
+    assert set(b.cuts["battery"]) == {20.0, 25.0, 30.0, 35.0, 40.0}
     assert b.cuts["delay"] == (150.0, 200.0)
     assert 0.1 in b.cuts["loss"]
     assert "mem_free" not in b.cuts

@@ -190,3 +190,21 @@ async def test_logs_follow_streams_new_output(setup):
         while b"got deactivate" not in seen:
             seen += await resp.content.readany()
     resp.close()  # the client goes away; the handler notices and ends
+
+
+async def test_a_starting_agent_answers_503_not_404(tmp_path):
+    """An agent serves its API before its deployment stack has loaded: instance and deployment
+    requests are 'try again' (503), not 'this agent has none' (404); /healthz says not ready."""
+    from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES  # noqa: PLC0415
+
+    view = View(None)
+    view.ready = False  # type: ignore[attr-defined]
+    view.coordinator = None  # type: ignore[attr-defined]
+    app = build_app(view, token=TOKEN, extra_routes=DEPLOY_ROUTES)
+    async with TestClient(TestServer(app)) as client:
+        assert (await client.get("/v1/instances")).status == 503
+        assert (await client.get("/v1/status")).status == 503
+        assert (await (await client.get("/healthz")).json())["ready"] is False
+        view.ready = True  # type: ignore[attr-defined]
+        assert (await client.get("/v1/instances")).status == 404
+        assert (await client.get("/v1/status")).status == 404

@@ -24,8 +24,7 @@ from sdrpeer.api.view import AgentView, InstancesView
 from sdrpeer.errors import ConfigError
 from sdrpeer.runtime import logfile
 from sdrpeer.runtime.control import CommandError
-from sdrpeer.runtime.manager import ACTIONS as INSTANCE_ACTIONS
-from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec
 
 log = logging.getLogger(__name__)
 
@@ -152,8 +151,11 @@ async def get_metrics(request: web.Request) -> web.Response:
 
 
 async def get_healthz(request: web.Request) -> web.Response:
-    """GET /healthz: 200 while the agent serves requests."""
-    return web.json_response({"status": "ok", "name": view_of(request).name})
+    """GET /healthz: 200 while the agent serves requests; `ready` once everything it runs is
+    up (an agent answers before its deployment stack has loaded)."""
+    view = view_of(request)
+    ready = bool(getattr(view, "ready", True))
+    return web.json_response({"status": "ok", "name": view.name, "ready": ready})
 
 
 async def post_robot(request: web.Request) -> web.Response:
@@ -178,8 +180,12 @@ LOG_FOLLOW_MAX_S = 3600
 
 
 def instances_of(request: web.Request) -> InstancesView:
-    """The agent's instance manager; 404 on an agent that hosts no instances."""
-    manager = getattr(view_of(request), "instances", None)
+    """The agent's instance manager; 404 on an agent that hosts no instances, 503 while it is
+    starting."""
+    view = view_of(request)
+    manager = getattr(view, "instances", None)
+    if manager is None and not getattr(view, "ready", True):
+        raise web.HTTPServiceUnavailable(reason="the agent is starting: try again in a moment")
     if not isinstance(manager, InstancesView):
         raise web.HTTPNotFound(reason="this agent does not host component instances")
     return manager

@@ -23,22 +23,15 @@ from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.move import move_inputs, swap_to_standby
 from sdrpeer.deploy.placer import Infeasible, place
-from sdrpeer.errors import ApiError
+from sdrpeer.errors import ApiError, NotAllocator
 from sdrpeer.plan import Plan
 from sdrpeer.system.model import SystemDef
 
 if TYPE_CHECKING:
-    from sdrpeer.deploy.coordinator import ClusterState, Coordinator
+    from sdrpeer.deploy.coordinator import Coordinator
+    from sdrpeer.deploy.view import ClusterState
 
 log = logging.getLogger(__name__)
-
-
-class NotAllocator(Exception):
-    """This robot is not the allocator; `leader` is the one it believes in (or None)."""
-
-    def __init__(self, leader: str | None) -> None:
-        super().__init__(leader)
-        self.leader = leader
 
 
 class AllocatorRole:

@@ -25,7 +25,6 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,27 +39,17 @@ from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
+from sdrpeer.deploy.view import ClusterState
 from sdrpeer.election.config import ElectionConfig
 from sdrpeer.errors import ApiError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
-from sdrpeer.record import RobotRecord
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.system.model import SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class ClusterState:
-    """What the agent hands the coordinator on every step."""
-
-    alive: dict[str, RobotRecord]
-    """Every alive robot (this one included) with its latest record."""
-    order: list[str] = field(default_factory=list)
-    """Robot names in the order first_fit tries them after the origin."""
 
 
 class Coordinator:

@@ -12,26 +12,30 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
+from sdrpeer.alloc.result import Infeasible
 from sdrpeer.api.app import Route, json_error, require_token, view_of
 from sdrpeer.api.peer_client import call
-from sdrpeer.deploy.allocator_role import NotAllocator
-from sdrpeer.deploy.coordinator import Coordinator
 from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
 from sdrpeer.deploy.move import MoveError
-from sdrpeer.deploy.placer import Infeasible
-from sdrpeer.errors import ApiError
+from sdrpeer.errors import ApiError, NotAllocator
 from sdrpeer.plan import plan_from_json
 from sdrpeer.runtime.handoff import MAX_STATE
 from sdrpeer.system.model import SystemDef, system_from_json
 
+if TYPE_CHECKING:  # the deployment stack loads after the API is up (sdrpeer.agent)
+    from sdrpeer.deploy.coordinator import Coordinator
+
 
 def _coord(request: web.Request) -> Coordinator:
-    coord = getattr(view_of(request), "coordinator", None)
-    if not isinstance(coord, Coordinator):
+    view = view_of(request)
+    coord: Coordinator | None = getattr(view, "coordinator", None)
+    if coord is None and not getattr(view, "ready", True):
+        raise web.HTTPServiceUnavailable(reason="the agent is starting: try again in a moment")
+    if coord is None:
         raise web.HTTPNotFound(reason="this agent does not deploy systems")
     return coord
 

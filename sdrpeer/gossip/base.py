@@ -113,6 +113,7 @@ class CoreState:
         self._probing: dict[str, Probe] = {}
         self._fwd: dict[int, tuple[Addr, int, bool]] = {}
         self._gossip_armed = False
+        self._urgent_at = float("-inf")
         self._event_seq = 0
         self._seen_events: dict[tuple[str, int], None] = {}
         self._sync_replied: dict[str, float] = {}
@@ -144,6 +145,15 @@ class CoreState:
             fact = self._fact_about(target)
             return (fact, *self._take(budget - 64))
         return self._take(budget)
+
+    def _urgent_round(self) -> None:
+        """A gossip round now for news that decides life and death (a death, a new
+        suspicion): each hop then costs a network delay, not the wait for the next round, and
+        the robots' suspicion timers start and end together. At most one such round per
+        quarter gossip interval; the regular rounds carry the rest."""
+        if self._now - self._urgent_at >= self.config.gossip_interval / 4:
+            self._urgent_at = self._now
+            self._gossip_round()
 
     def _gossip_round(self) -> None:
         if self._queue:

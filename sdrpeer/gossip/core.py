@@ -359,6 +359,7 @@ class Membership(Probing, AntiEntropy):
             return
         self._set_state(m, LEFT if d.source == d.name else DEAD, d.incarnation)
         self._enqueue(("m", m.name), d)
+        self._urgent_round()
 
     def _merge_record(self, r: Record) -> None:
         if r.name == self.name:  # a record of ours from an earlier life: jump past it
@@ -439,6 +440,7 @@ class Membership(Probing, AntiEntropy):
         d = Dead(name, m.incarnation, self.name)
         self._set_state(m, DEAD, m.incarnation)
         self._enqueue(("m", name), d)
+        self._urgent_round()
 
     def _recheck(self, name: str, susp: Suspicion) -> None:
         """Every quarter minimum timeout, tell the suspect directly: it answers with its Alive if it

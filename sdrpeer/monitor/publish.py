@@ -11,7 +11,7 @@ costs the same at any fleet size. `Publisher.decide(now, record)` picks:
   address, the election belief, the plan held, the link bounds, or a measured value moved across a
   `Boundaries` cut (a threshold some decision compares it with: the deployed system's robot-wide
   recovery rules and their clear levels, the allocation thresholds that decide who may be allocator,
-  the election's health steps, the broadcast default traps). So every robot sees each robot on the
+  the broadcast default traps). So every robot sees each robot on the
   correct side of every threshold it judges by, at the same moment, whatever the fleet's size. A
   crossing less than `min_gap` after the last record goes out as vitals and makes a record at the
   next sample after the gap (a value flapping across a cut costs at most one record per gap);
@@ -37,7 +37,6 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from sdrpeer.election.health import BATTERY_STEPS, LOSS_STEPS, RSSI_STEPS
 from sdrpeer.record import (
     LinkBounds,
     LinkStats,
@@ -48,7 +47,6 @@ from sdrpeer.record import (
     encode_vitals,
     vitals_of,
 )
-from sdrpeer.recovery.plugins import CONDITIONS
 from sdrpeer.system.model import RecoveryDef, Thresholds
 
 RECORD = "record"
@@ -104,24 +102,31 @@ def _side(value: float, cut: float) -> int:
 def boundaries(
     recovery: RecoveryDef | None = None, thresholds: Thresholds | None = None
 ) -> Boundaries:
-    """The cuts for a deployed system (both None: nothing deployed): the election's health
-    steps and the broadcast default traps (battery, RSSI) always; the allocation thresholds
-    that decide eligibility; every robot-wide rule's threshold and clear level. Rules the
-    robot's own agent judges (memory shortage, CPU: Table III's local steps) cut nothing: no
-    other robot decides on them, and the allocator reads CPU and memory from the vitals."""
+    """The cuts for a deployed system (both None: nothing deployed): the broadcast default
+    traps (battery, RSSI) always; the allocation thresholds that decide who may be allocator;
+    every robot-wide rule's threshold and clear level. Rules the robot's own agent judges
+    (memory shortage, CPU: Table III's local steps) cut nothing: no other robot decides on
+    them, and the allocator reads CPU and memory from the vitals. Nor do the election's coarse
+    health steps: they only order who claims first on a vacancy, the election orders claims by
+    what they carry whatever each robot's view of health, and a step reaches every peer as vitals
+    within one probe round; as cuts they made a record per robot per step crossed, a cost that
+    grows with the fleet (a draining battery crosses three)."""
     cuts: dict[str, set[float]] = {
-        "battery": {*BATTERY_STEPS, 20.0, 25.0},
-        "rssi": {*RSSI_STEPS, -52.5, -50.0},
-        "loss": set(LOSS_STEPS),
+        "battery": {20.0, 25.0},
+        "rssi": {-52.5, -50.0},
     }
     t = thresholds
     if t is not None:
         _add(cuts, "battery", [t.battery_above_pct])
         _add(cuts, "rssi", [t.rssi_above_dbm])
         _add(cuts, "loss", [t.loss_below])
-    for rule in () if recovery is None else recovery.rules:
-        if rule.metric is not None and CONDITIONS.get(rule.cause).robot_wide:
-            _add(cuts, rule.metric, [rule.threshold, rule.clear])
+    if recovery is not None:
+        # Loaded with a deployed system only: an agent starts without the recovery package.
+        from sdrpeer.recovery.plugins import CONDITIONS  # noqa: PLC0415
+
+        for rule in recovery.rules:
+            if rule.metric is not None and CONDITIONS.get(rule.cause).robot_wide:
+                _add(cuts, rule.metric, [rule.threshold, rule.clear])
     return Boundaries({m: tuple(sorted(v)) for m, v in sorted(cuts.items())})
 
 

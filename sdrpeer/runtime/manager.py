@@ -29,11 +29,11 @@ from typing import Any
 from sdrpeer.record import InstanceInfo
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
-from sdrpeer.runtime.spec import InstanceSpec, connection_to_json
+from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec, connection_to_json
 from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
 
 log = logging.getLogger(__name__)
-ACTIONS = ("activate", "deactivate", "reset", "restart")
+ACTIONS = INSTANCE_ACTIONS
 _OBSERVED = {
     "STOPPED": "stopped",
     "STARTING": "starting",

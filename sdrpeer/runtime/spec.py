@@ -34,6 +34,10 @@ _INSTANCE_KEYS = frozenset(
 _CONN_KEYS = frozenset({"id", "out", "to", "in", "policy", "to_addr"})
 
 
+INSTANCE_ACTIONS = ("activate", "deactivate", "reset", "restart")
+"""What can be asked of a running instance (`POST /v1/instances/NAME/ACTION`)."""
+
+
 class SpecError(ConfigError):
     """An instance or connection spec is wrong; `field` is the dotted name of the culprit."""
 
