@@ -29,7 +29,9 @@ Figures per system and N:
   (psutil user + system over the window; median, max), RSS (median, max);
 - `--kills` times: SIGKILL of one agent (never robot-1) -> every other agent sees it dead
   (sdrpeer `member.dead` event times, Serf `member-failed` on the streams); then the agent is
-  started again (same data dir) -> its API answers, and -> every other agent sees it alive
+  started again (same data dir) -> its API answers, -> it is fully started (sdrpeer: /healthz
+  says `ready`, its deployment stack loaded; Serf: the same moment), and -> every other agent
+  sees it alive
   (sdrpeer `member.alive`/`member.join`, Serf `member-join`); median and max over the kills;
 - false suspicions and deaths: suspicions (sdrpeer `member.suspect` events, Serf's
   "Suspect X has failed" log lines) and deaths of agents outside their kill, over the whole run.
@@ -145,6 +147,7 @@ class Observed:
     join_api_s: float | None = None
     join_alive_s: float | None = None
     api_start_s: list[float] = field(default_factory=list)
+    ready_start_s: list[float] = field(default_factory=list)
     bytes_per_s: list[float] = field(default_factory=list)
     cpu_pct: list[float] = field(default_factory=list)
     rss_mib: list[float] = field(default_factory=list)
@@ -183,6 +186,10 @@ class Fleet:
 
     async def api_ready(self, k: int) -> bool:
         raise NotImplementedError
+
+    async def fully_ready(self, k: int) -> bool:
+        """Whether everything the agent runs is up (the API may answer before)."""
+        return await self.api_ready(k)
 
     async def alive_times(self, t0: float, within: float) -> list[float] | None:
         """When each agent saw all N alive (wall clock), or None past the timeout."""
@@ -316,6 +323,13 @@ class SdrpeerFleet(Fleet):
         except (OSError, RuntimeError, TimeoutError, ValueError):
             return False
         return True
+
+    async def fully_ready(self, k: int) -> bool:
+        try:
+            doc = await _http_get(self.api_port(k), "/healthz", within=1.0)
+        except (OSError, RuntimeError, TimeoutError, ValueError):
+            return False
+        return bool(doc.get("ready", True))
 
     async def events(self, k: int) -> list[dict[str, Any]]:
         out: list[dict[str, Any]] = []
@@ -657,6 +671,9 @@ async def run_fleet(fleet: Fleet, args: argparse.Namespace, counters: Counters |
         up = await _wait_all(fleet.api_ready, [victim], within=30, every=0.005)
         if victim in up:
             obs.api_start_s.append(up[victim] - t_restart)
+        whole = await _wait_all(fleet.fully_ready, [victim], within=30, every=0.005)
+        if victim in whole:
+            obs.ready_start_s.append(whole[victim] - t_restart)
         seen_alive = await fleet.seen(victim, "alive", t_restart, within=60)
         t_back = max(seen_alive) if seen_alive else time.time()
         fleet.killed[-1] = (victim, t_kill, t_back)
@@ -749,6 +766,7 @@ def summary(o: Observed) -> dict[str, Any]:
         "restart_alive_s": [r(x) for x in o.restart_alive_s],
         "api_start_median_s": r(median(o.api_start_s)),
         "api_start_s": [r(x) for x in o.api_start_s],
+        "ready_start_median_s": r(median(o.ready_start_s)),
         "false_suspicions": o.false_suspicions,
         "false_deaths": o.false_deaths,
         "notes": o.notes,
@@ -770,6 +788,7 @@ ROWS = (
     ("restart -> all see alive, median (s)", "restart_alive_median_s", "{:.2f}"),
     ("restart -> all see alive, max (s)", "restart_alive_max_s", "{:.2f}"),
     ("process start -> API answers, median (s)", "api_start_median_s", "{:.3f}"),
+    ("process start -> fully started, median (s)", "ready_start_median_s", "{:.3f}"),
     ("false suspicions", "false_suspicions", "{}"),
     ("false deaths", "false_deaths", "{}"),
 )
