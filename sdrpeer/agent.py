@@ -202,7 +202,6 @@ class Agent:
         self.shell.attach(self.core)
         await self._start_api(token)
         self._publish(force=True)
-        write_agent_json(cfg.data_dir, self.name, addr, self.api_url)
         self.events.add(
             time.time(), "agent.start", cfg.name, gossip=f"{addr[0]}:{addr[1]}", api=self.api_url
         )
@@ -257,8 +256,16 @@ class Agent:
         await instances.start()
         self._publish(force=True)
         self.coordinator.start()
+        assert self.core is not None
+        # Written once the agent is whole: what waits for it (a lab, a test) can use every route.
+        write_agent_json(cfg.data_dir, self.name, self.core.addr, self.api_url)
         trim_heap()
         log.info("agent %s ready: deployment stack loaded", self.name)
+
+    @property
+    def stack(self) -> asyncio.Task[None] | None:
+        """The task that starts the deployment stack (done once the agent is whole)."""
+        return self._stack
 
     @property
     def ready(self) -> bool:

@@ -2,7 +2,8 @@
 
 How it works: the token is read from `--token-file` (which must exist) or `DATA_DIR/token`,
 generated (mode 0600) when absent. `agent.json` (name, gossip and API addresses, pid) is written
-atomically once both sockets are bound, so a lab or a person can find the agent. `seq_start`
+atomically once the agent is fully started (its API answers a little before: /healthz `ready`),
+so a lab or a person can find the agent and use every route. `seq_start`
 picks the first gossip seq: wall-clock microseconds, but never below `DATA_DIR/seq.floor`, which
 it then moves `SEQ_RESERVE` past what it returns — so seqs keep rising across restarts even when
 the clock went back (receivers would refuse lower ones as replays). `record.floor` does the

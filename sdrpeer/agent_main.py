@@ -1,10 +1,11 @@
 """`sdrpeer agent`: run one robot's agent as a process until SIGINT or SIGTERM.
 
-How it works: `run_agent` sets up logging and runs `_serve`, which starts the `Agent`, waits for
-a signal and stops it gracefully (leaving the cluster); a second SIGINT/SIGTERM cancels the
-shutdown and exits at once. SIGHUP re-reads the key file (`sdrpeer.agent_keys`). Exit codes: 0
-after a clean stop, 1 after a forced one, 2 when the agent cannot start (configuration, address
-in use, key file).
+How it works: `run_agent` sets up logging and runs `_serve`, which starts the `Agent`, waits for a
+signal and stops it gracefully (leaving the cluster); a second SIGINT/SIGTERM cancels the shutdown
+and exits at once. The API answers before the deployment stack has loaded; if it cannot load, the
+agent leaves and exits with 2. SIGHUP re-reads the key file (`sdrpeer.agent_keys`). Exit codes: 0
+after a clean stop, 1 after a forced one, 2 when the agent cannot start (configuration, address in
+use, key file).
 """
 
 from __future__ import annotations
@@ -46,7 +47,20 @@ async def _serve(config: AgentConfig) -> int:
         log.error("cannot start: %s", e)
         await agent.stop(leave=False)
         return 2
+    failed: list[BaseException] = []
+
+    def stack_done(task: asyncio.Task[None]) -> None:
+        if not task.cancelled() and task.exception() is not None:
+            failed.append(task.exception())  # type: ignore[arg-type]
+            stop.set()
+
+    if agent.stack is not None:
+        agent.stack.add_done_callback(stack_done)
     await stop.wait()
+    if failed:
+        log.error("cannot start the deployment stack: %r", failed[0])
+        await agent.stop(leave=True)
+        return 2
     await agent.stop()
     return 0
 
