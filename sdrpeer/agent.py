@@ -201,7 +201,8 @@ class Agent:
         )
         self.shell.attach(self.core)
         await self._start_api(token)
-        self._publish(force=True)
+        # The first record waits for the deployment stack (its election belief and plan): one
+        # record per robot at start, not two, and each is spread to the whole fleet.
         self.events.add(
             time.time(), "agent.start", cfg.name, gossip=f"{addr[0]}:{addr[1]}", api=self.api_url
         )

@@ -98,12 +98,12 @@ class LinkBounds:
     jitter_ms: float | None = None
     loss: float | None = None
 
-    def past(self, s: LinkStats) -> bool:
-        """Whether `s` is at or past any bound."""
+    def past(self, s: LinkStats, scale: float = 1.0) -> bool:
+        """Whether `s` is at or past any bound (each bound times `scale`)."""
         return (
-            (self.rtt_ms is not None and s.rtt_ms >= self.rtt_ms)
-            or (self.jitter_ms is not None and s.jitter_ms >= self.jitter_ms)
-            or (self.loss is not None and s.loss >= self.loss)
+            (self.rtt_ms is not None and s.rtt_ms >= self.rtt_ms * scale)
+            or (self.jitter_ms is not None and s.jitter_ms >= self.jitter_ms * scale)
+            or (self.loss is not None and s.loss >= self.loss * scale)
         )
 
     def badness(self, s: LinkStats) -> float:

@@ -232,3 +232,15 @@ def test_first_record_version_comes_from_the_floor() -> None:
     assert core.set_record(0.0, b"a") == 1_000_001
     assert core.set_record(0.1, b"b") == 1_000_002
     assert isinstance(events(core)[-1], RecordChanged)
+
+
+def test_a_peer_with_a_new_incarnation_gets_our_vitals_again() -> None:
+    core = robot()
+    version = core.set_record(0.0, b"record")
+    core.set_vitals(0.0, b"v1")
+    first = pings(core, 0.2, answer=True)
+    assert first[0].vitals is not None
+    assert all(p.vitals is None for p in pings(core, 1.0, 0.2, answer=True))  # acknowledged
+    core.receive(1.0, addr(1), Gossip("r1", (Alive("r1", addr(1), 1),)))  # r1 restarted
+    again = pings(core, 1.5, 1.0, answer=True)
+    assert again[0].vitals == VitalsRevision(version, 1, b"v1")

@@ -158,3 +158,13 @@ def test_link_table_summary() -> None:
     assert s.peers == 2
     assert list(s.listed) == ["robot-3"]
     assert s.listed["robot-3"].loss == 0.5
+
+
+def test_a_listed_link_stays_until_well_inside_its_bounds() -> None:
+    bounds = LinkBounds(jitter_ms=10.0)
+    s = summarize({"a": LinkStats(1.0, 12.0, 0.0)}, bounds)
+    assert list(s.listed) == ["a"]
+    hovering = {"a": LinkStats(1.0, 9.0, 0.0)}
+    assert list(summarize(hovering, bounds, listed={"a"}).listed) == ["a"]  # 9 >= 0.8 x 10
+    assert summarize(hovering, bounds).listed == {}  # never listed: 9 < 10 is inside
+    assert summarize({"a": LinkStats(1.0, 7.9, 0.0)}, bounds, listed={"a"}).listed == {}

@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 
 from sdrpeer.monitor.publish import (
-    DEFAULT_LINK_BOUNDS,
+    NO_LINK_BOUNDS,
     NONE,
     RECORD,
     VITALS,
@@ -32,7 +32,7 @@ GB = 1 << 30
 CAM = InstanceInfo("Cam1", "Cam", "active", "active", 10.0, 100 << 20)
 BASE = RobotRecord(
     Metrics(10.0, 4 * GB, 3 * GB, 80.0, -47.0, (1.0, 2.0)),
-    LinkSummary(peers=4, typical=LinkStats(0.5, 0.1, 0.0), bounds=DEFAULT_LINK_BOUNDS),
+    LinkSummary(peers=4, typical=LinkStats(0.5, 0.1, 0.0), bounds=LinkBounds(50.0, 10.0, 0.05)),
     "http://127.0.0.1:1",
     0,
     (CAM,),
@@ -154,10 +154,11 @@ def test_boundaries_of_a_deployed_system() -> None:
     assert boundaries().crossed(BASE, typical(rtt_ms=300.0)) is None  # no rule: no cut
 
 
-def test_link_bounds_take_the_tighter_of_defaults_and_thresholds() -> None:
-    assert link_bounds(None) == DEFAULT_LINK_BOUNDS
+def test_link_bounds_are_the_deployed_systems() -> None:
+    assert link_bounds(None) == NO_LINK_BOUNDS == LinkBounds()  # nothing deployed: none listed
     t = Thresholds(jitter_below_ms=30.0, loss_below=0.01, delay_below_ms=20.0)
-    assert link_bounds(t) == LinkBounds(rtt_ms=20.0, jitter_ms=10.0, loss=0.01)
+    assert link_bounds(t) == LinkBounds(rtt_ms=20.0, jitter_ms=30.0, loss=0.01)
+    assert link_bounds(Thresholds(loss_below=0.1)) == LinkBounds(loss=0.1)
 
 
 def test_the_cpu_average_follows_the_load_not_the_noise() -> None:

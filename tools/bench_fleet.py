@@ -157,6 +157,8 @@ class Observed:
     false_suspicions: int = 0
     false_deaths: int = 0
     notes: list[str] = field(default_factory=list)
+    marks: dict[str, Any] = field(default_factory=dict)
+    """When the idle window and each kill happened (wall clock), for a post-mortem."""
 
 
 class Fleet:
@@ -640,9 +642,9 @@ async def run_fleet(fleet: Fleet, args: argparse.Namespace, counters: Counters |
     procs = [psutil.Process(p) for p in pids]
     cpu0 = [sum(p.cpu_times()[:2]) for p in procs]
     bytes0 = counters.read() if counters is not None else {}
-    t0 = time.monotonic()
+    t0, t_idle0 = time.monotonic(), time.time()
     await asyncio.sleep(args.idle)
-    dt = time.monotonic() - t0
+    dt, t_idle1 = time.monotonic() - t0, time.time()
     cpu1 = [sum(p.cpu_times()[:2]) for p in procs]
     bytes1 = counters.read() if counters is not None else {}
     obs.cpu_pct = [100 * (b - a) / dt for a, b in zip(cpu0, cpu1, strict=True)]
@@ -688,6 +690,10 @@ async def run_fleet(fleet: Fleet, args: argparse.Namespace, counters: Counters |
         )
         await asyncio.sleep(args.gap)
     obs.false_suspicions, obs.false_deaths = await fleet.false_alarms()
+    if args.keep and isinstance(fleet, SdrpeerFleet):  # each agent's event log, for a post-mortem
+        for k, evs in (await fleet._all_events()).items():
+            (fleet.workdir / fleet.name(k) / "events.json").write_text(json.dumps(evs))
+    obs.marks = {"idle": [t_idle0, t_idle1], "kills": [[v, a, b] for v, a, b in fleet.killed]}
     return obs
 
 
@@ -770,6 +776,7 @@ def summary(o: Observed) -> dict[str, Any]:
         "false_suspicions": o.false_suspicions,
         "false_deaths": o.false_deaths,
         "notes": o.notes,
+        "marks": o.marks,
     }
 
 

@@ -26,8 +26,7 @@ from typing import Any
 
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.view import ClusterView, RobotView
-from sdrpeer.monitor.publish import DEFAULT_LINK_BOUNDS
-from sdrpeer.record import LinkStats, LinkSummary, Metrics
+from sdrpeer.record import LinkBounds, LinkStats, LinkSummary, Metrics
 from sdrpeer.system.model import (
     AllocationDef,
     ComponentDef,
@@ -92,7 +91,7 @@ def make_view(rng: random.Random, n: int) -> ClusterView:
             peers=len(names) - 1,
             typical=LinkStats(rtt_ms=rng.uniform(1, 30), jitter_ms=2.0, loss=0.01),
             bad=len(bad),
-            bounds=DEFAULT_LINK_BOUNDS,
+            bounds=LinkBounds(rtt_ms=50.0, jitter_ms=10.0, loss=0.05),
             listed=bad,
         )
         robots.append(RobotView(name, metrics, links))

@@ -312,6 +312,7 @@ class Membership(Probing, AntiEntropy):
         m.addr = a.addr
         self._set_state(m, ALIVE, a.incarnation)
         self._enqueue(("m", a.name), a)
+        self._vitals_acked.pop(a.name, None)  # a new life may not hold our vitals: send again
 
     def _merge_suspect(self, s: Suspect) -> None:
         if s.name == self.name:

@@ -10,7 +10,8 @@ peer a `LinkEstimator` keeps
 Until a first ack there is no RTT, so `stats()` is None. `LinkTable` holds one estimator per
 peer, and `summary()` turns them into the O(1) `LinkSummary` a record carries: per metric the
 value a strict majority of the measured links reach or pass (the (n//2 + 1)-th worst), and the
-links at or past the given bounds, the worst `MAX_LISTED` of them exactly. Time is always passed
+links at or past the given bounds, the worst `MAX_LISTED` of them exactly (a listed link stays
+listed until well inside them: `STAY_LISTED`). Time is always passed
 in; nothing here reads a clock.
 """
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Collection
 
 from sdrpeer.record import MAX_LISTED, LinkBounds, LinkStats, LinkSummary
 
@@ -98,6 +100,7 @@ class LinkTable:
         self.window = window
         self.max_age = max_age
         self._peers: dict[str, LinkEstimator] = {}
+        self._listed: set[str] = set()
 
     def estimator(self, peer: str) -> LinkEstimator:
         """The peer's estimator, created on first use."""
@@ -123,8 +126,11 @@ class LinkTable:
         return sorted(self._peers)
 
     def summary(self, now: float | None, bounds: LinkBounds) -> LinkSummary:
-        """The O(1) summary of every measured link (see `summarize`)."""
-        return summarize(self.snapshot(now), bounds)
+        """The O(1) summary of every measured link (see `summarize`; the links it listed last
+        time stay listed until well inside the bounds)."""
+        made = summarize(self.snapshot(now), bounds, self._listed)
+        self._listed = set(made.listed)
+        return made
 
     def snapshot(self, now: float | None = None) -> dict[str, LinkStats]:
         """Peer -> stats for every peer with at least one ack, sorted by peer."""
@@ -142,8 +148,16 @@ def majority_worst(values: list[float]) -> float:
     return sorted(values, reverse=True)[len(values) // 2]
 
 
-def summarize(links: dict[str, LinkStats], bounds: LinkBounds) -> LinkSummary:
-    """The summary a record carries of `links` (see the module docstring)."""
+STAY_LISTED = 0.8
+"""A listed link leaves the list only once every metric is below this share of its bound (a link
+hovering at a bound would otherwise be listed and unlisted at every sample)."""
+
+
+def summarize(
+    links: dict[str, LinkStats], bounds: LinkBounds, listed: Collection[str] = ()
+) -> LinkSummary:
+    """The summary a record carries of `links` (see the module docstring); `listed`: the links
+    the previous summary listed (they stay until below `STAY_LISTED` of the bounds)."""
     if not links:
         return LinkSummary(bounds=bounds)
     stats = list(links.values())
@@ -152,7 +166,11 @@ def summarize(links: dict[str, LinkStats], bounds: LinkBounds) -> LinkSummary:
         jitter_ms=majority_worst([s.jitter_ms for s in stats]),
         loss=majority_worst([s.loss for s in stats]),
     )
-    past = [(bounds.badness(s), peer) for peer, s in links.items() if bounds.past(s)]
+    past = [
+        (bounds.badness(s), peer)
+        for peer, s in links.items()
+        if bounds.past(s) or (peer in listed and bounds.past(s, STAY_LISTED))
+    ]
     past.sort(key=lambda item: (-item[0], item[1]))
     listed = {peer: links[peer] for _, peer in past[:MAX_LISTED]}
     return LinkSummary(

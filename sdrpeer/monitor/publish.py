@@ -56,9 +56,9 @@ NONE = "none"
 CPU_AVERAGE_S = 10.0
 """Time constant of the published CPU average (seconds)."""
 
-DEFAULT_LINK_BOUNDS = LinkBounds(rtt_ms=50.0, jitter_ms=10.0, loss=0.05)
-"""Links at or past these are listed exactly in a record when the deployed system sets no
-tighter allocation bounds (`delay_below`, `jitter_below`, `loss_below`)."""
+NO_LINK_BOUNDS = LinkBounds()
+"""No system bounds its links: no link is listed (the typical link says how a robot's links
+are; listing more would cost every peer bytes on every revision for no decision)."""
 
 _GETTERS: dict[str, Callable[[Metrics, LinkSummary], float | None]] = {
     "cpu": lambda m, _: m.cpu_pct,
@@ -137,24 +137,14 @@ def _add(cuts: dict[str, set[float]], metric: str, values: Iterable[float | None
 
 
 def link_bounds(thresholds: Thresholds | None) -> LinkBounds:
-    """The bounds past which a record lists a link: the tighter of the defaults and the
-    deployed system's allocation bounds, so a link the allocator must refuse is always listed
-    by both its ends (unless more than `MAX_LISTED` are)."""
-    d = DEFAULT_LINK_BOUNDS
+    """The bounds past which a record lists a link: the deployed system's allocation bounds
+    (`delay_below`, `jitter_below`, `loss_below`), so a link the allocator must refuse is
+    listed by both its ends (unless more than `MAX_LISTED` are); none deployed or none set:
+    nothing is listed."""
     if thresholds is None:
-        return d
+        return NO_LINK_BOUNDS
     t = thresholds
-    return LinkBounds(
-        rtt_ms=_tighter(d.rtt_ms, t.delay_below_ms),
-        jitter_ms=_tighter(d.jitter_ms, t.jitter_below_ms),
-        loss=_tighter(d.loss, t.loss_below),
-    )
-
-
-def _tighter(a: float | None, b: float | None) -> float | None:
-    if a is None or b is None:
-        return a if b is None else b
-    return min(a, b)
+    return LinkBounds(rtt_ms=t.delay_below_ms, jitter_ms=t.jitter_below_ms, loss=t.loss_below)
 
 
 class Average:
