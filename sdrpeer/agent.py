@@ -554,12 +554,13 @@ class Agent:
         return None if self.coordinator is None else self.coordinator.status(time.time())
 
     def set_virtual(self, changes: dict[str, Any]) -> dict[str, Any]:
-        """Change this virtual robot's facts live and publish at once (see AgentView)."""
+        """Change this virtual robot's facts live and publish them at once, as the publisher
+        decides: a new record when a decision input changed, else vitals (see AgentView)."""
         if self.robot is None:
             raise ConfigError(f"{self.name} reads real hardware (no --robot-file): nothing to set")
         self.robot.set(asyncio.get_running_loop().time(), changes)
         self.events.add(time.time(), "robot.set", self.name, changes=_jsonable(changes))
-        self._publish(force=True)
+        self._publish()
         assert self.metrics is not None
         return metrics_to_json(self.metrics)
 

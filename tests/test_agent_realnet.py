@@ -190,6 +190,33 @@ def test_api_needs_the_token_and_changes_travel_by_gossip(
     )
 
 
+def test_a_change_inside_the_cuts_travels_as_vitals_not_as_a_record(
+    cluster: RealCluster, trio: list[Agent]
+) -> None:
+    """A battery at 90 % is no decision input (no rule, no trap cut between): robot-2 sees it
+    through robot-1's vitals on its pings, under the record version it already held."""
+    one, two, _ = trio
+    version = cluster.wait_until(
+        partial(two.member, "robot-1"),
+        lambda m: m["record_version"] > 0,
+        "robot-2 to hold robot-1's record",
+    )["record_version"]
+    status, body = http("POST", one.api + "/v1/robot", {"battery": "90%"}, token=one.token)
+    assert status == 200, body
+    seen = cluster.wait_until(
+        partial(two.member, "robot-1"),
+        lambda m: (m["metrics"] or {}).get("battery_pct") == pytest.approx(90.0, abs=0.2),
+        "robot-2 to see robot-1's battery at 90 %",
+        timeout=PROPAGATION_BOUND,
+    )
+    assert seen["record_version"] == version
+    assert seen["vitals_revision"] >= 1
+    info = one.agent_info()
+    assert info["published"]["vitals"] >= 1
+    assert info["messages"]["sent_by_kind"]["ping"] > 0
+    assert info["messages"]["sent_by_kind"]["vitals"] > 0
+
+
 def _battery_traps(agent: Agent) -> list[dict[str, object]]:
     return [
         e

@@ -23,44 +23,13 @@ from typing import cast
 from sdrpeer.errors import WireError
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent
-from sdrpeer.gossip.messages import (
-    Ack,
-    Addr,
-    Alive,
-    Dead,
-    Digest,
-    Event,
-    Gossip,
-    Nack,
-    Packet,
-    Ping,
-    PingReq,
-    Record,
-    Suspect,
-    Sync,
-)
+from sdrpeer.gossip.messages import Addr, Gossip, Packet
 from sdrpeer.wire import Codec
 
 log = logging.getLogger("sdrpeer.gossip")
 _LOG_EVERY = 10.0
 _NUDGE_EVERY = 5.0
 _NUDGE_MAX = 1024
-_KIND: dict[type, str] = {
-    Ping: "ping",
-    Ack: "ack",
-    PingReq: "pingreq",
-    Nack: "nack",
-    Gossip: "gossip",
-    Sync: "sync",
-    Digest: "digest",
-}
-_UPDATE_KIND: dict[type, str] = {
-    Alive: "updates.alive",
-    Suspect: "updates.suspect",
-    Dead: "updates.dead",
-    Record: "updates.record",
-    Event: "updates.event",
-}
 
 
 class GossipShell(asyncio.DatagramProtocol):
@@ -187,12 +156,12 @@ class GossipShell(asyncio.DatagramProtocol):
 
     def _tally(self, packet: Packet, size: int) -> None:
         kinds = self.sent_by_kind
-        kinds[_KIND[type(packet)]] += size
+        kinds[type(packet).__name__.lower()] += size
         vitals = getattr(packet, "vitals", None)
         if vitals is not None:
             kinds["vitals"] += len(vitals.payload)
         for u in packet.updates:
-            kinds[_UPDATE_KIND[type(u)]] += 1
+            kinds["updates." + type(u).__name__.lower()] += 1
 
     def close(self) -> None:
         """Stop the timer and close the socket."""
