@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from sdrpeer.dashboard.chromium import chromium_page
 from tests.browser import chromium_or_fail
@@ -60,7 +61,13 @@ def test_the_dashboard_in_a_real_browser(cluster: RealCluster, tmp_path: Path) -
         # a state change: SIGKILL Pub's host; its same-robot standby becomes ACTIVE
         pub = {i["name"]: i for i in one.get("/v1/instances")}["Pub"]
         os.kill(int(pub["pid"]), signal.SIGKILL)
-        page.wait_for_function(SEEN_ACTIVE, polling="raf", timeout=15_000)
+        try:
+            page.wait_for_function(SEEN_ACTIVE, polling="raf", timeout=15_000)
+        except PlaywrightTimeout:  # say whether the failover or the page is late, with the logs
+            states = {i["name"]: i.get("state") for i in one.get("/v1/instances")}
+            raise AssertionError(
+                f"Pub-s1 not shown active in 15 s; the agent says {states}\n{cluster.logs()}"
+            ) from None
         seen = float(page.evaluate("window.__seen")) / 1000
         logged = [
             e["ts"]
