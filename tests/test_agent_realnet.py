@@ -265,3 +265,29 @@ def test_cli_members_json(cluster: RealCluster, trio: list[Agent], tmp_path: Pat
     assert [m["name"] for m in members] == ["robot-1", "robot-2", "robot-3"]
     assert {m["state"] for m in members} == {"alive"}
     assert {m["addr"] for m in members} == {a.gossip for a in trio}
+
+
+def test_the_highest_priority_robot_is_elected_when_it_starts_last(tmp_path: Path) -> None:
+    """The lan preset's timings, an idle fleet: the last robot to start has the highest priority
+    and must win the first election (its election clock starts when its stack loads, not at the
+    next idle tick: a quiet fleet may not wake it for seconds)."""
+    lab = RealCluster(tmp_path / "net", preset="lan")
+    try:
+        for name in ("robot-1", "robot-2"):
+            lab.robot_file(name)
+        top = lab.robot_file("robot-3")
+        top.write_text(top.read_text() + "priority: 10\n")
+        one = lab.start("robot-1")
+        two = lab.start("robot-2", join=[one])
+        three = lab.start("robot-3", join=[one])
+        for agent in (one, two, three):
+            doc = lab.wait_until(
+                lambda a=agent: a.get("/v1/status"),
+                lambda d: d["allocator"]["name"],
+                "an allocator",
+                20,
+            )
+            assert doc["allocator"]["name"] == "robot-3", (agent.name, doc["allocator"])
+            assert doc["allocator"]["epoch"] == 1  # the first claim, not a later preemption
+    finally:
+        lab.close()

@@ -103,7 +103,9 @@ class Coordinator:
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
-        """Start the step loop."""
+        """Start the step loop; its first step runs at once (the election's clock starts there:
+        in a quiet fleet the next wake may be an idle tick away)."""
+        self._wake.set()
         self._task = asyncio.create_task(self._loop())
 
     def leave(self) -> None:
