@@ -282,7 +282,7 @@ def test_the_highest_priority_robot_is_elected_when_it_starts_last(tmp_path: Pat
         three = lab.start("robot-3", join=[one])
         for agent in (one, two, three):
             doc = lab.wait_until(
-                lambda a=agent: a.get("/v1/status"),
+                partial(agent.get, "/v1/status"),
                 lambda d: d["allocator"]["name"],
                 "an allocator",
                 20,
