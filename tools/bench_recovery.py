@@ -150,15 +150,22 @@ def _measure(lab: RunningLab, kind: str, standby: str, allocator_on: str) -> flo
         if done is None:
             raise SdrpeerError("no activation event after the kill")
         return done - t0
+    doc = two.get("/v1/status")
+    if not any(c["robot"] == "robot-1" for c in doc["components"]):
+        raise SdrpeerError(f"nothing ACTIVE on robot-1 to move: {doc['components']}")
     one.post("/v1/robot", {"rssi": "-56dBm"})
     wait_for(lambda: two.get("/v1/status"), active_off("robot-1"), "moved", 30)
     doc = wait_for(  # the election may still be settling when the components are back
         lambda: two.get("/v1/status"), lambda d: d["allocator"]["name"], "an allocator", 10
     )
     allocator = doc["allocator"]["name"]
-    t_cond = condition_time(clients, allocator)
-    if t_cond is None:
-        raise SdrpeerError(f"no recovery.condition event on the allocator {allocator}")
+    t_cond = wait_for(  # the event log may answer a moment after the move shows
+        lambda: condition_time(clients, allocator),
+        lambda t: t is not None,
+        f"a recovery.condition event on the allocator {allocator}",
+        5,
+    )
+    assert isinstance(t_cond, float)
     done = last_activation(survivors, t_cond)
     if done is None:
         raise SdrpeerError("no activation event after the condition")
