@@ -133,6 +133,8 @@ class Agent:
         """This robot's component instances (None until the deployment stack is loaded)."""
         self.coordinator: Coordinator | None = None
         self._stack: asyncio.Task[None] | None = None
+        self.stopping: str | None = None
+        """The stage `stop()` is in (None until it is called; "done" at the end)."""
         self.dashboard = Feed(self)
         """History and live streams of the dashboard (`sdrpeer.dashboard`)."""
         self.events.listeners.append(self.dashboard.on_event)
@@ -274,29 +276,47 @@ class Agent:
         return self.coordinator is not None
 
     async def stop(self, *, leave: bool = True) -> None:
-        """Leave the cluster gracefully, then close the API and the socket."""
+        """Leave the cluster gracefully, then close the API and the socket. `stopping` names
+        the stage under way (a caller that runs out of time says what hung, then `abort()`s)."""
+        self.stopping = "background tasks"
         for task in self._tasks:
             task.cancel()
         if self._stack is not None and not self._stack.done():
+            self.stopping = "the deployment stack's start"
             self._stack.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._stack
         self.dashboard.close()
         if self.coordinator is not None:
+            self.stopping = "the coordinator"
             if leave:
                 self.coordinator.leave()
             await self.coordinator.stop()
         if self.instances is not None:
+            self.stopping = "the component hosts"
             await self.instances.stop()
         if self.shell is not None and self.core is not None and leave:
+            self.stopping = "the leave message"
             self.shell.leave()
             await asyncio.sleep(max(0.3, 3 * self.core.config.gossip_interval))
         if self._runner is not None:
+            self.stopping = "the API server"
             await self._runner.cleanup()
+        self.stopping = "done"
+        self._close_now()
+        log.info("agent %s stopped", self.name)
+
+    def abort(self) -> None:
+        """Stop at once, whatever `stop()` was waiting for: SIGKILL every component host (none
+        outlives the agent), close the gossip socket, remove agent.json."""
+        if self.instances is not None:
+            self.instances.kill_all()
+        self._close_now()
+
+    def _close_now(self) -> None:
         if self.shell is not None:
             self.shell.close()
         (self.config.data_dir / "agent.json").unlink(missing_ok=True)
-        log.info("agent %s stopped", self.name)
 
     async def _start_api(self, token: str) -> None:
         host, port = parse_hostport(self.config.api)

@@ -1,11 +1,12 @@
 """`sdrpeer agent`: run one robot's agent as a process until SIGINT or SIGTERM.
 
 How it works: `run_agent` sets up logging and runs `_serve`, which starts the `Agent`, waits for a
-signal and stops it gracefully (leaving the cluster); a second SIGINT/SIGTERM cancels the shutdown
-and exits at once. The API answers before the deployment stack has loaded; if it cannot load, the
-agent leaves and exits with 2. SIGHUP re-reads the key file (`sdrpeer.agent_keys`). Exit codes: 0
-after a clean stop, 1 after a forced one, 2 when the agent cannot start (configuration, address in
-use, key file).
+signal and stops it gracefully (leaving the cluster) within `STOP_DEADLINE`; past it, the agent
+SIGKILLs its component hosts and exits anyway, logging what it was waiting for. A second
+SIGINT/SIGTERM does the same at once. The API answers before the deployment stack has loaded; if it
+cannot load, the agent leaves and exits with 2. SIGHUP re-reads the key file
+(`sdrpeer.agent_keys`). Exit codes: 0 after a clean stop, 1 after a forced or overdue one, 2 when
+the agent cannot start (configuration, address in use, key file).
 """
 
 from __future__ import annotations
@@ -20,6 +21,10 @@ from sdrpeer.errors import ConfigError
 from sdrpeer.logs import setup_logging
 
 log = logging.getLogger("sdrpeer.agent")
+
+STOP_DEADLINE = 2.5
+"""Seconds a graceful stop may take (leave, component hosts' on_finalize, API close); past it the
+agent SIGKILLs its hosts and exits with 1, saying what it was waiting for."""
 
 
 async def _serve(config: AgentConfig) -> int:
@@ -36,6 +41,7 @@ async def _serve(config: AgentConfig) -> int:
             log.info("shutting down (again to force)")
             stop.set()
         elif main_task is not None:
+            agent.abort()  # no host outlives a forced exit
             main_task.cancel()
 
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -59,9 +65,24 @@ async def _serve(config: AgentConfig) -> int:
     await stop.wait()
     if failed:
         log.error("cannot start the deployment stack: %r", failed[0])
-        await agent.stop(leave=True)
+        await _stop_within(agent, STOP_DEADLINE)
         return 2
-    await agent.stop()
+    return await _stop_within(agent, STOP_DEADLINE)
+
+
+async def _stop_within(agent: Agent, deadline: float, *, leave: bool = True) -> int:
+    """A graceful stop bounded by `deadline` seconds; past it, say what hung and abort (exit 1)."""
+    try:
+        async with asyncio.timeout(deadline):
+            await agent.stop(leave=leave)
+    except TimeoutError:
+        log.error(
+            "stop still waiting for %s after %gs: killing the component hosts and exiting",
+            agent.stopping,
+            deadline,
+        )
+        agent.abort()
+        return 1
     return 0
 
 

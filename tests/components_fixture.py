@@ -178,3 +178,23 @@ class Fragile(Component):
             with open(self.trigger) as f:
                 if self.instance_name in f.read().split():
                     raise RuntimeError(f"{self.instance_name} was told to fail")
+
+
+class Stubborn(Component):
+    """Will not stop: its on_finalize never returns, and it ignores SIGTERM."""
+
+    execution = Periodic(hz=10.0)
+
+    def on_initialize(self) -> None:
+        """Ignore SIGTERM (only SIGKILL ends this host)."""
+        import signal  # noqa: PLC0415 - only this fixture needs it
+
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+    def on_execute(self) -> None:
+        """Nothing."""
+
+    def on_finalize(self) -> None:
+        """Hang."""
+        while True:
+            time.sleep(1.0)

@@ -154,6 +154,11 @@ class InstanceManager:
         await asyncio.gather(*self._actions, return_exceptions=True)
         await asyncio.gather(*(s.stop() for s in self._sups.values()), return_exceptions=True)
 
+    def kill_all(self) -> None:
+        """SIGKILL every host at once (an agent out of time to stop: no host outlives it)."""
+        for sup in self._sups.values():
+            sup.kill_now()
+
     async def _loop(self) -> None:
         while True:
             self._wake.clear()

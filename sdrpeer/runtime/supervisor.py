@@ -207,6 +207,14 @@ class Supervisor:
             await life
         self._remove_run_dir()
 
+    def kill_now(self) -> None:
+        """SIGKILL the host at once, without a word to it (an agent out of time to stop)."""
+        self._stopping = True
+        proc = self._proc
+        if proc is not None and proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+
     async def restart(self) -> None:
         """Stop, forget past failures, start again."""
         await self.stop()
