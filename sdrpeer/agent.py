@@ -243,7 +243,7 @@ class Agent:
             config,
             lambda: self._publish(force=True),
             on_fault=self._on_fault,
-            on_instance_problem=lambda name, cause: self._on_fault(name, cause, ""),
+            on_instance_problem=self._on_fault,
         )
         instances.data_keys = agent_keys.data_keys(self.keyring)
         self.coordinator = Coordinator(
@@ -436,7 +436,9 @@ class Agent:
 
     def _on_fault(self, name: str, kind: str, detail: str) -> None:
         """A component fault, an instance in ERROR, or a host that died: to local recovery."""
-        self.events.add(time.time(), "instance.fault", self.name, instance=name, fault=kind)
+        self.events.add(
+            time.time(), "instance.fault", self.name, instance=name, fault=kind, detail=detail
+        )
         if self.coordinator is not None:
             self.coordinator.local.fault(name, kind, detail)
 

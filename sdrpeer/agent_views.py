@@ -27,7 +27,9 @@ def _wall_of(t: float) -> float:
 def members_view(self: Agent) -> list[dict[str, Any]]:
     """Every known member with its metrics and links (see AgentView): this robot's own links
     are all listed, another robot's only those its record lists (past the bounds); every
-    member's `link_summary` sums up all of its links."""
+    member's `link_summary` sums up all of its links. A dead or departed member's instances are
+    shown `lost` (with their `last_state`) from the moment it is declared so: its last record
+    still lists them until it is reaped."""
     if self.core is None:
         return []
     out = []
@@ -48,11 +50,15 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
         for peer, link in doc["links"].items():
             d = distance(positions.get(m.name), positions.get(peer))
             link["distance_m"] = None if d is None else round(d, 2)
+        state = STATE_NAMES.get(m.state, str(m.state))
+        instances = doc.get("instances", [])
+        if state in ("dead", "left"):  # its last record still lists them: they are gone
+            instances = [{**i, "state": "lost", "last_state": i.get("state")} for i in instances]
         out.append(
             {
                 "name": m.name,
                 "addr": f"{m.addr[0]}:{m.addr[1]}",
-                "state": STATE_NAMES.get(m.state, str(m.state)),
+                "state": state,
                 "incarnation": m.incarnation,
                 "since": _wall_of(m.since),
                 "api": rec.api if rec is not None else None,
@@ -61,7 +67,7 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
                 "metrics": doc["metrics"],
                 "links": doc["links"],
                 "link_summary": doc.get("link_summary"),
-                "instances": doc.get("instances", []),
+                "instances": instances,
             }
         )
     return out

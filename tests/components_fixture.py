@@ -198,3 +198,26 @@ class Stubborn(Component):
         """Hang."""
         while True:
             time.sleep(1.0)
+
+
+class Sleeper(Component):
+    """Counts on `out` at 20 Hz; blocks for good inside `on_execute` once the file `trigger`
+    names this instance (a component stuck in a call that never returns)."""
+
+    execution = Periodic(hz=20.0)
+    trigger = Param(str, "", "a file; an instance named in it blocks")
+    out = OutPort("the count")
+
+    def on_initialize(self) -> None:
+        """Start from zero."""
+        self.n = 0
+
+    def on_execute(self) -> None:
+        """Publish, or block when named."""
+        if self.trigger and os.path.exists(self.trigger):
+            with open(self.trigger) as f:
+                if self.instance_name in f.read().split():
+                    while True:
+                        time.sleep(1.0)
+        self.n += 1
+        self.out.write(self.n)

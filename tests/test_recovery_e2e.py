@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import signal
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -98,7 +99,16 @@ def test_a_killed_robots_components_come_up_elsewhere(cluster: RealCluster, tmp_
     one, two, _ = agents
     doc = deploy(cluster, one, fast_system(tmp_path))
     assert {c["robot"] for c in doc["components"]} == {"robot-1"}
+    listed = {i["name"] for i in two.member("robot-1")["instances"]}
+    assert listed  # robot-1's record lists the actives it runs
     cluster.kill(one)
+    # from the moment a survivor declares robot-1 dead, its view shows robot-1's instances lost
+    for agent in agents[1:]:
+        dead = cluster.wait_until(
+            partial(agent.member, "robot-1"), lambda m: m["state"] == "dead", "robot-1 dead"
+        )
+        assert {i["name"] for i in dead["instances"]} == listed
+        assert {i["state"] for i in dead["instances"]} == {"lost"}
     after = cluster.wait_until(lambda: status(two), all_active_off("robot-1"), "moved", 20)
     standby_robots = {s["robot"] for c in doc["components"] for s in c["standbys"]}
     assert {c["robot"] for c in after["components"]} <= standby_robots  # hot standbys took over
@@ -159,3 +169,59 @@ def test_a_crashed_host_is_replaced_by_its_same_robot_standby(
 
     n = received()
     cluster.wait_until(received, lambda v: v > n, "frames from the new Pub")
+
+
+HANGS = """\
+name: hangs
+components:
+  - name: Pub
+    target: tests.components_fixture:Sleeper
+    params: {{trigger: "{trigger}"}}
+    standby: {{same_robot: 1, mode: hot}}
+    watchdog: 1s
+recovery:
+  rules:
+    - cause: component_error
+      actions: [standby_same_robot, restart, standby_other_robot, launch_other_robot]
+"""
+
+
+@pytest.mark.parametrize("how", ["sigstop", "blocked_on_execute"])
+def test_a_hung_host_is_killed_by_its_watchdog_and_its_standby_takes_over(
+    cluster: RealCluster, tmp_path: Path, how: str
+) -> None:
+    """A host that stops answering (SIGSTOP, or a component stuck inside on_execute) is killed
+    once its watchdog (1 s here) runs out and treated like a crash: the same-robot standby
+    becomes ACTIVE; the agent's event says the host was hung."""
+    one = cluster.start_many(1)[0]
+    trigger = tmp_path / "block"
+    path = tmp_path / "hangs.yaml"
+    path.write_text(HANGS.format(trigger=trigger))
+    deploy(cluster, one, path)
+
+    def ready(d: dict[str, Any]) -> bool:
+        c = d["components"][0]
+        return c["state"] == "active" and [s["state"] for s in c["standbys"]] == ["inactive"]
+
+    cluster.wait_until(lambda: status(one), ready, "standby ready")
+    pid = {i["name"]: i for i in one.get("/v1/instances")}["Pub"]["pid"]
+    if how == "sigstop":
+        os.kill(pid, signal.SIGSTOP)
+    else:
+        trigger.write_text("Pub\n")
+
+    def replaced(d: dict[str, Any]) -> bool:
+        c = d["components"][0]
+        return bool(c["instance"] == "Pub-s1" and c["state"] == "active")
+
+    cluster.wait_until(lambda: status(one), replaced, "the standby active")
+    faults = [e["detail"] for e in one.events() if e["kind"] == "instance.fault"]
+    assert any(f["instance"] == "Pub" and f["detail"].startswith("hung: ") for f in faults), faults
+    cluster.wait_until(lambda: _gone(pid), bool, "the hung host gone, not left stopped")
+
+
+def _gone(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"  # killed, not yet reaped
+    except OSError:
+        return True

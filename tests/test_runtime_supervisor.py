@@ -238,3 +238,53 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
         await until("the host process reaped", gone)
     finally:
         await manager.stop()
+
+
+async def test_a_stopped_host_is_killed_by_the_watchdog_as_hung_and_restarted(sups):
+    """SIGSTOP: the host goes silent; after its heartbeat deadline it is killed, counted as a
+    crash (its last error says hung), and restarted."""
+    seen: list[str] = []
+    sup = sups(fake(), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.6))
+    sup.on_problem = lambda s, cause: seen.append(cause)
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until("a heartbeat", lambda: sup.ports)
+    old = sup.pid
+    loop = asyncio.get_running_loop()
+    stopped = loop.time()
+    os.kill(old, signal.SIGSTOP)
+    await until("the watchdog's kill", lambda: sup.exit_noticed is not None, wait=5.0)
+    took = sup.exit_noticed - stopped
+    assert took >= 0.6 - 0.5  # silent since its last heartbeat, at most 0.5 s before the stop
+    assert sup.last_error.startswith("hung: no heartbeat for "), sup.last_error
+    assert "killed by SIGKILL" in sup.last_error
+    assert seen == ["crashed"]
+    await until("the restart", lambda: sup.state == "INACTIVE" and sup.pid != old)
+
+
+async def test_a_watchdog_of_zero_never_fires_and_an_instance_value_wins(sups):
+    spec = replace(fake("Off"), watchdog_s=0.0)
+    sup = sups(spec, replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.5))
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    assert sup.silence_limit() == 0
+    pid = sup.pid
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        await asyncio.sleep(1.5)  # three deadlines of the default: still not killed
+        assert sup.pid == pid
+        assert sup.exit_noticed is None
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    long = sups(replace(fake("Long"), watchdog_s=30.0))
+    long.start()
+    await until("INACTIVE", lambda: long.state == "INACTIVE")
+    assert long.silence_limit() == 30.0
+
+
+async def test_a_host_still_initializing_has_the_hello_timeout_not_the_heartbeat_deadline(sups):
+    sup = sups(fake(), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.5))
+    assert sup.silence_limit() == sup.config.hello_timeout  # not yet initialized
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    assert sup.silence_limit() == 0.5

@@ -267,7 +267,7 @@ class Seen:
     def fault(self, name: str, kind: str, detail: str) -> None:
         self.faults.append((name, kind, detail))
 
-    def problem(self, name: str, cause: str) -> None:
+    def problem(self, name: str, cause: str, detail: str = "") -> None:
         self.problems.append((name, cause))
 
 

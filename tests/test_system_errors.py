@@ -134,6 +134,12 @@ CASES: list[tuple[str, str, str]] = [
         "sys.yaml:5: field 'components[2].standby.sync': '2h' is out of range (0s to 3600s)",
     ),
     (
+        "watchdog too short",
+        HEAD + f"  - {{name: E, target: {CAM}, watchdog: 100ms}}\n",
+        "sys.yaml:5: field 'components[2].watchdog': '100ms' is out of range (0 for none, or 0.5s"
+        " to 600s)",
+    ),
+    (
         "pin not a robot name",
         HEAD + f"  - {{name: E, target: {CAM}, pin: 'robot 2'}}\n",
         "sys.yaml:5: field 'components[2].pin': expected a robot name",

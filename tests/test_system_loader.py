@@ -106,6 +106,7 @@ def test_units_are_converted_to_base_units(tmp_path: Path) -> None:
             pin: robot-2
             prefer: [robot-1, robot-3]
             standby: {same_robot: 1, other_robots: 2, mode: cold, sync: 500ms}
+            watchdog: 1500ms
         allocation:
           strategy: objective
           constraints:
@@ -131,6 +132,7 @@ def test_units_are_converted_to_base_units(tmp_path: Path) -> None:
     assert cam.pin == "robot-2"
     assert cam.prefer == ("robot-1", "robot-3")
     assert cam.standby == StandbySpec(1, 2, "cold", sync_s=0.5)
+    assert cam.watchdog_s == 1.5
     a = s.allocation
     assert a.strategy == "objective"
     assert a.thresholds == Thresholds(

@@ -10,6 +10,8 @@ cold), then breaks robot-1:
 - crash: a two-component system (Camera -> AnomalyDetection); the camera's host on robot-1 is
   SIGKILLed; measured to the next camera instance ACTIVE: its same-robot hot standby (Table III's
   first step), or its restart when it has no standby;
+- hang: the same system; the camera's host is SIGSTOPped (a hung host: no heartbeat); measured
+  from the stop to its same-robot standby ACTIVE: its watchdog (1 s here) plus the failover;
 - death: SIGKILL of robot-1's agent (its hosts die with it); measured from the kill to the
   last moved component's ACTIVE report (its agent's `instance.state` event, wall clock);
 - comm: robot-1's RSSI set to -56 dBm through its API (Table VI's rule, held 1 s here); measured
@@ -17,7 +19,8 @@ cold), then breaks robot-1:
   last moved component ACTIVE. `alloc_on_failing` gives robot-1 the highest election priority,
   so the allocator sits on the robot that loses its signal (the paper's 11 s case).
 Every figure is the median (and p90) over `--runs` runs. Targets (issue): robot death <= 2 s;
-comm failure <= 0.3 s hot, <= 1.0 s cold, the same with the allocator on the failing robot.
+comm failure <= 0.3 s hot, <= 1.0 s cold, the same with the allocator on the failing robot; a
+hung host replaced within its watchdog + 0.5 s.
 """
 
 from __future__ import annotations
@@ -40,8 +43,11 @@ from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 REPO = Path(__file__).resolve().parent.parent
+WATCHDOG = 1.0
+"""The Cam component's watchdog in the crash and hang variants (seconds)."""
 TARGETS = {
     "crash_standby_same_robot": 0.2,
+    "hang_standby_same_robot": WATCHDOG + 0.5,
     "death_hot": 2.0,
     "comm_hot": 0.3,
     "comm_cold": 1.0,
@@ -129,7 +135,7 @@ def _measure(lab: RunningLab, kind: str, standby: str, allocator_on: str) -> flo
         f"{allocator_on} elected",
         15,
     )
-    system = crash_system(standby) if kind == "crash" else system_json(standby)
+    system = crash_system(standby) if kind in ("crash", "hang") else system_json(standby)
     post_when_elected(one, "/v1/deploy", {"system": system}, 15.0)
     wait_for(lambda: two.get("/v1/status"), active_off("none"), "all ACTIVE", 30)
     if standby in ("hot", "same"):  # hot standbys INACTIVE and ready
@@ -139,8 +145,8 @@ def _measure(lab: RunningLab, kind: str, standby: str, allocator_on: str) -> flo
             "standbys ready",
             30,
         )
-    if kind == "crash":
-        return _crash(clients, standby)
+    if kind in ("crash", "hang"):
+        return _crash(clients, standby, signal.SIGKILL if kind == "crash" else signal.SIGSTOP)
     survivors = {n: c for n, c in clients.items() if n != "robot-1"}
     if kind == "death":
         t0 = time.time()
@@ -178,6 +184,7 @@ components:
   - name: Cam
     target: components.camera:Camera
     params: {{reserve_mb: 0, rate: 10}}
+    watchdog: {watchdog}
 {standby}  - name: Det
     target: components.anomaly_detection:AnomalyDetection
 connections:
@@ -195,20 +202,24 @@ def crash_system(standby: str) -> dict[str, Any]:
         text = CRASH_SYSTEM.format(
             standby="    standby: {same_robot: 1, mode: hot}\n",
             actions="standby_same_robot, restart, standby_other_robot, launch_other_robot",
+            watchdog=f"{WATCHDOG:g}s",
         )
     else:
         text = CRASH_SYSTEM.format(
-            standby="", actions="restart, standby_other_robot, launch_other_robot"
+            standby="",
+            actions="restart, standby_other_robot, launch_other_robot",
+            watchdog=f"{WATCHDOG:g}s",
         )
     return parse_system(text, str(REPO / "crash-bench.yaml")).to_json()
 
 
-def _crash(clients: dict[str, AgentClient], standby: str) -> float:
-    """SIGKILL the active Cam host on robot-1; seconds until a Cam instance is ACTIVE again."""
+def _crash(clients: dict[str, AgentClient], standby: str, how: signal.Signals) -> float:
+    """SIGKILL (a crash) or SIGSTOP (a hang: its watchdog must notice) the active Cam host on
+    robot-1; seconds until a Cam instance is ACTIVE again."""
     one = clients["robot-1"]
     rows = {i["name"]: i for i in one.get("/v1/instances")}
     t0 = time.time()
-    os.kill(int(rows["Cam"]["pid"]), signal.SIGKILL)
+    os.kill(int(rows["Cam"]["pid"]), how)
 
     done = wait_for(
         lambda: last_activation({"robot-1": one}, t0),
@@ -223,6 +234,7 @@ def _crash(clients: dict[str, AgentClient], standby: str) -> float:
 VARIANTS = {
     "crash_standby_same_robot": ("crash", "same", "robot-3"),
     "crash_restart": ("crash", "none", "robot-3"),
+    "hang_standby_same_robot": ("hang", "same", "robot-3"),
     "death_hot": ("death", "hot", "robot-3"),
     "death_hot_alloc_on_failing": ("death", "hot", "robot-1"),
     "comm_hot": ("comm", "hot", "robot-3"),

@@ -91,6 +91,7 @@ def specs_for_robot(
                 desired=desired,
                 role=p.role,
                 connections=tuple(conns),
+                watchdog_s=comp.watchdog_s,
             )
         )
     return specs

@@ -8,7 +8,7 @@ as control commands). When an action finishes the reconciler hears `done`; a fai
 after `retry_after` seconds, so a refusing host is not hammered. `status()` and `infos()` are what
 the API and the gossip record show; `on_change` tells the agent to publish at once. Trouble goes
 to the agent's recovery at once, by instance name: `on_fault(name, kind, detail)` for every fault
-a component reports, `on_instance_problem(name, cause)` for `component_error` (ERROR) and
+a component reports, `on_instance_problem(name, cause, detail)` for `component_error` (ERROR) and
 `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
 `restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when
 set, runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands
@@ -56,7 +56,7 @@ class InstanceManager:
         interval: float = 0.5,
         retry_after: float = 1.0,
         on_fault: Callable[[str, str, str], None] = lambda name, kind, detail: None,
-        on_instance_problem: Callable[[str, str], None] = lambda name, cause: None,
+        on_instance_problem: Callable[[str, str, str], None] = lambda name, cause, detail: None,
     ) -> None:
         self.data_dir = data_dir
         self.config = config
@@ -64,7 +64,8 @@ class InstanceManager:
         self.on_fault = on_fault
         """Called at once with (instance name, kind, detail) for every fault reported."""
         self.on_instance_problem = on_instance_problem
-        """Called at once with (instance name, cause): component_error or crashed."""
+        """Called at once with (instance name, cause, detail): component_error or crashed, and
+        the supervisor's last error (an exit code, or why it killed the host: "hung: ...")."""
         self.interval = interval
         self.retry_after = retry_after
         self.before_stop: Callable[[str], Awaitable[None]] | None = None
@@ -224,7 +225,9 @@ class InstanceManager:
                     self.config,
                     self._changed,
                     on_fault=lambda s, kind, detail: self.on_fault(s.name, kind, detail),
-                    on_problem=lambda s, cause: self.on_instance_problem(s.name, cause),
+                    on_problem=lambda s, cause: self.on_instance_problem(
+                        s.name, cause, s.last_error or ""
+                    ),
                     data_keys=lambda: self.data_keys,
                 )
                 self._sups[a.instance] = sup

@@ -29,7 +29,17 @@ _PORT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")
 _PY_TARGET = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 _ADDR = re.compile(r"^(tcp://[^/\s:]+:\d{1,5}|unix:///\S+)$")
 _INSTANCE_KEYS = frozenset(
-    {"name", "component", "launcher", "target", "params", "desired", "role", "connections"}
+    {
+        "name",
+        "component",
+        "launcher",
+        "target",
+        "params",
+        "desired",
+        "role",
+        "connections",
+        "watchdog_s",
+    }
 )
 _CONN_KEYS = frozenset({"id", "out", "to", "in", "policy", "to_addr"})
 
@@ -92,6 +102,9 @@ class InstanceSpec:
     """active, or standby: a standby is started and kept INACTIVE (warm) whatever `desired` is."""
     connections: tuple[ConnectionSpec, ...] = field(default=())
     """Data streams leaving this instance."""
+    watchdog_s: float | None = None
+    """Seconds the host may go without a heartbeat before it is killed as hung (None: the
+    supervisor's default, 0: none)."""
 
     def params_map(self) -> dict[str, Any]:
         """The parameters as a dict."""
@@ -144,6 +157,7 @@ class InstanceSpec:
             desired=_choice(doc.get("desired", "active"), DESIRED, f"{where}.desired"),
             role=_choice(doc.get("role", "active"), ROLES, f"{where}.role"),
             connections=connections,
+            watchdog_s=_watchdog(doc.get("watchdog_s"), f"{where}.watchdog_s"),
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -157,6 +171,7 @@ class InstanceSpec:
             "desired": self.desired,
             "role": self.role,
             "connections": [connection_to_json(c) for c in self.connections],
+            "watchdog_s": self.watchdog_s,
         }
 
 
@@ -247,6 +262,16 @@ def _launcher(value: Any, where: str) -> str:
     if value not in known:
         raise SpecError(where, f"expected one of {', '.join(known)}, got {value!r}")
     return str(value)
+
+
+def _watchdog(value: Any, where: str) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SpecError(where, "expected a number of seconds or null")
+    if value != 0 and not 0.5 <= value <= 600:
+        raise SpecError(where, f"{value!r} is out of range (0 for none, or 0.5 to 600)")
+    return float(value)
 
 
 def _choice(value: Any, choices: tuple[str, ...], where: str) -> str:

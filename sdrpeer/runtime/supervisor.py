@@ -6,7 +6,9 @@ and then *awaits the process*, so an exit is noticed the moment the kernel repor
 nobody asked for goes to the `RestartPolicy`: wait the backoff delay (state BACKOFF) and spawn
 again, or give up (state FAILED). `stop()` is graceful: the `exit` command, then SIGTERM after
 `exit_timeout`, then SIGKILL after `term_timeout`. A host that sends no hello within
-`hello_timeout`, or breaks the control protocol, is killed and counts as a failure.
+`hello_timeout`, or breaks the control protocol, is killed and counts as a failure; so is one
+silent for `heartbeat_timeout` (or its instance's `watchdog_s`) once initialized (the watchdog:
+a hung host is a crash to Table III, and its `last_error` says "hung").
 States: STOPPED, STARTING (spawned, no INACTIVE yet), the host's own lifecycle states (CREATED,
 INACTIVE, ACTIVE, ERROR, FINALIZED), STOPPING, BACKOFF, FAILED; every change is timestamped.
 Trouble is passed on at once (sdrpeer.runtime.problems): each `fault` report is kept (the last
@@ -82,6 +84,10 @@ class SupervisorConfig:
     """Bytes a state may take in snapshot/restore (msgpack); bigger ones are refused."""
     max_faults: int = 16
     """How many of the last faults an instance keeps (shown in its status)."""
+    heartbeat_timeout: float = 2.0
+    """A host silent this long once initialized (no heartbeat: stopped, deadlocked, stuck in
+    on_execute or in C code) is killed as hung; an instance's `watchdog_s` overrides it (0: off).
+    Hosts send a heartbeat every 0.5 s."""
 
     @classmethod
     def fast_test(cls) -> SupervisorConfig:
@@ -141,6 +147,7 @@ class Supervisor:
         self._spawned = 0.0
         self._run_dir: Path | None = None
         self._watchdog: asyncio.TimerHandle | None = None
+        self._heard = 0.0  # loop time of the host's last message
         self._kill_reason: str | None = None
 
     @property
@@ -329,6 +336,7 @@ class Supervisor:
         await self._channel.open()
         loop = asyncio.get_running_loop()
         self._watchdog = loop.call_later(self.config.hello_timeout, self._hello_overdue, proc)
+        self._heard = loop.time()
         log.info("%s: started pid %d: %s", self.name, proc.pid, " ".join(argv))
         return proc
 
@@ -391,12 +399,45 @@ class Supervisor:
     # ----------------------------------------------------------------- reports
     def _on_hello(self, msg: Report) -> None:
         self.hello = msg
+        self._heard = asyncio.get_running_loop().time()
         self.on_change(self)
+
+    def silence_limit(self) -> float:
+        """Seconds the host may stay silent now before the watchdog kills it (0: never): the
+        hello timeout until it is initialized, then its heartbeat deadline."""
+        if self.start_latency is None:
+            return self.config.hello_timeout
+        w = self.spec.watchdog_s
+        return self.config.heartbeat_timeout if w is None else w
+
+    def _arm_watchdog(self, proc: asyncio.subprocess.Process) -> None:
+        """(Re)schedule the check for the moment the host's silence would run out."""
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
+        limit = self.silence_limit()
+        if limit > 0 and proc is self._proc and proc.returncode is None:
+            loop = asyncio.get_running_loop()
+            self._watchdog = loop.call_at(self._heard + limit, self._silence_check, proc)
+
+    def _silence_check(self, proc: asyncio.subprocess.Process) -> None:
+        self._watchdog = None
+        limit = self.silence_limit()
+        if limit <= 0 or proc is not self._proc or self.state == STOPPING:
+            return
+        silent = asyncio.get_running_loop().time() - self._heard
+        if silent >= limit:
+            self._kill(proc, f"hung: no heartbeat for {silent:.1f}s (watchdog {limit:g}s)")
+        else:
+            self._arm_watchdog(proc)
 
     def _on_state(self, msg: Report) -> None:
         state = str(msg["state"])
+        self._heard = asyncio.get_running_loop().time()
         if state == "INACTIVE" and self.start_latency is None:
-            self.start_latency = asyncio.get_running_loop().time() - self._spawned
+            self.start_latency = self._heard - self._spawned
+            if self._proc is not None:  # initialized: from now on the heartbeat deadline
+                self._arm_watchdog(self._proc)
         if msg.get("error"):
             self.last_error = str(msg["error"])
         problem = problems.problem_of_state(self.state, msg, self._stopping)
@@ -405,6 +446,7 @@ class Supervisor:
         self._problem(problem)
 
     def _on_heartbeat(self, msg: Report) -> None:
+        self._heard = asyncio.get_running_loop().time()
         ports = msg.get("ports")
         if isinstance(ports, dict):
             self.ports = ports

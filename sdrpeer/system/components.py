@@ -44,6 +44,7 @@ COMPONENT_KEYS = (
     "standby",
     "pin",
     "prefer",
+    "watchdog",
 )
 REQUIRES_KEYS = ("cpu", "memory", "traffic")
 STANDBY_KEYS = ("same_robot", "other_robots", "mode", "sync")
@@ -109,6 +110,7 @@ def _component(
     standby = _standby(p, fields, where)
     pin = p.get(fields, "pin", where, robot_name, None)
     prefer = p.get(fields, "prefer", where, robot_names, ())
+    watchdog = p.get(fields, "watchdog", where, _watchdog, None)
     definition = None
     if len(p.items) == errors_before:
         definition = ComponentDef(
@@ -120,11 +122,20 @@ def _component(
             standby=standby,
             pin=pin,
             prefer=prefer,
+            watchdog_s=watchdog,
         )
     if not name and "name" in fields:  # a bad name still names it for the connections
         raw = p.f.value(fields["name"])
         name = raw if isinstance(raw, str) else MISSING
     return name, ComponentEntry(node, where, info, definition)
+
+
+def _watchdog(value: object) -> float:
+    """0 (off), or 0.5s to 600s: how long a host may go without a heartbeat."""
+    seconds = parse_duration(value)
+    if seconds != 0 and not 0.5 <= seconds <= 600:
+        raise ValueError(f"{value!r} is out of range (0 for none, or 0.5s to 600s)")
+    return seconds
 
 
 def _spec_field(

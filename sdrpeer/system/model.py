@@ -72,6 +72,9 @@ class ComponentDef:
     """Robot this component must run on (its active instance)."""
     prefer: tuple[str, ...] = ()
     """Robots tried first, in this order, when they satisfy the constraints."""
+    watchdog_s: float | None = None
+    """Seconds its host may go without a heartbeat before it is killed as hung (None: the
+    agent's default, 0: no watchdog)."""
 
     def params_map(self) -> dict[str, Any]:
         """The parameters as a dict."""
@@ -236,6 +239,7 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
                 standby=StandbySpec(**c["standby"]),
                 pin=c.get("pin"),
                 prefer=tuple(c.get("prefer", ())),
+                watchdog_s=c.get("watchdog_s"),
             )
         )
     conns = tuple(

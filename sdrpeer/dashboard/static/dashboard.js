@@ -20,7 +20,7 @@
   const STATE_COLORS = {
     active: "#1a9850", inactive: "#4575b4", error: "#d73027", failed: "#d73027",
     pending: "#fdae61", starting: "#fdae61", updating: "#fdae61", cold: "#e5e7eb",
-    "robot down": "#7f7f7f", gone: "#ffffff", stopped: "#bdbdbd",
+    "robot down": "#7f7f7f", lost: "#7f7f7f", gone: "#ffffff", stopped: "#bdbdbd",
   };
   const MARKERS = { allocation: "#f28e2b", move: "#8a3ffc", election: "#9ca3af" };
   const MAX_EVENTS = 5000, MAX_ROWS = 200, MAX_PERF = 4000, MAX_POINTS = 300;
@@ -438,7 +438,7 @@
   }
 
   function renderLegend() {
-    $("state-legend").innerHTML = ["active", "inactive", "error", "pending", "robot down"].map((s) =>
+    $("state-legend").innerHTML = ["active", "inactive", "error", "pending", "robot down", "lost"].map((s) =>
       `<span style="--c:${STATE_COLORS[s]}">${s}</span>`).join("") +
       Object.entries(MARKERS).map(([k, c]) => `<span style="--c:${c}">${k}</span>`).join("");
   }
