@@ -39,7 +39,7 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--preset", choices=sorted(PRESETS), help="gossip tuning (default lan)")
     p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")
     p.add_argument("--metrics-interval", type=float, metavar="SECONDS", help="metrics period")
-    p.add_argument("--priority", type=int, metavar="N", help="election priority (default 0)")
+    p.add_argument("--priority", type=_priority, metavar="N", help="election priority (default 0)")
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default info")
     p.add_argument("--log-format", choices=LOG_FORMATS, help="default text")
 
@@ -70,3 +70,17 @@ def main(argv: Sequence[str]) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+
+
+def _priority(text: str) -> int:
+    """--priority: an integer within the record's range."""
+    from sdrpeer.limits import LIMITS  # noqa: PLC0415 - the fast path imports little
+
+    limit = LIMITS["priority"]
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if not limit.low <= n <= limit.high:
+        raise argparse.ArgumentTypeError(f"{n} is out of range ({limit.shown})")
+    return n

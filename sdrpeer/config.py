@@ -17,6 +17,7 @@ from typing import Any
 
 from sdrpeer.errors import ConfigError
 from sdrpeer.gossip.config import PRESETS
+from sdrpeer.limits import LIMITS
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
 LOG_LEVELS = ("debug", "info", "warning", "error")
@@ -134,6 +135,14 @@ def _as_int(value: Any) -> int:
     return value
 
 
+def _as_priority(value: Any) -> int:
+    n = _as_int(value)
+    limit = LIMITS["priority"]
+    if not limit.low <= n <= limit.high:
+        raise TypeError(f"expected an integer from {limit.shown}")
+    return n
+
+
 def _as_float(value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise TypeError("expected a number")
@@ -161,7 +170,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "preset": _as_str,
     "data_dir": _as_path,
     "metrics_interval": _as_float,
-    "priority": _as_int,
+    "priority": _as_priority,
     "log_level": _as_str,
     "log_format": _as_str,
 }

@@ -53,6 +53,7 @@ from typing import Any
 import msgpack
 
 from sdrpeer.errors import WireError
+from sdrpeer.limits import LIMITS, MAX_COORD_M
 
 FORMAT = 2
 """Version of the wire layout above; a decoder refuses any other."""
@@ -277,14 +278,22 @@ def _common_prefix(a: str, b: str) -> int:
     return n
 
 
+def _clamped(name: str, x: float, scale: float) -> int:
+    """`x` inside `sdrpeer.limits.LIMITS[name]`, on its grid: whatever a robot file, the API or
+    a measurement said, the record encodes (and decodes on every peer)."""
+    return _fix(LIMITS[name].clamp(x), scale)
+
+
 def _wire_metrics(m: Metrics) -> list[Any]:
     return [
-        _fix(m.cpu_pct, 10),
-        _kib(m.mem_total),
-        _kib(m.mem_free),
-        None if m.battery_pct is None else _fix(m.battery_pct, 10),
-        None if m.rssi_dbm is None else _fix(m.rssi_dbm, 10),
-        None if m.pos is None else [_fix(m.pos[0], 100), _fix(m.pos[1], 100)],
+        _clamped("cpu_pct", m.cpu_pct, 10),
+        min(_kib(max(0, m.mem_total)), _MAX_KIB),
+        min(_kib(max(0, m.mem_free)), _MAX_KIB),
+        None if m.battery_pct is None else _clamped("battery", m.battery_pct, 10),
+        None if m.rssi_dbm is None else _clamped("rssi", m.rssi_dbm, 10),
+        None
+        if m.pos is None
+        else [_clamped("coord", m.pos[0], 100), _clamped("coord", m.pos[1], 100)],
     ]
 
 
@@ -336,7 +345,7 @@ def encode_record(r: RobotRecord) -> bytes:
         _wire_metrics(r.metrics),
         _wire_links(r.links),
         r.api,
-        r.priority,
+        round(LIMITS["priority"].clamp(r.priority)),
         components,
         instances,
         None if e is None else [e.epoch, e.leader, e.claiming],
@@ -393,8 +402,10 @@ def _named(x: object, table: tuple[str, ...], what: str) -> str:
     return _str(x, what)
 
 
-_MAX_COORD = 10**9
+_MAX_COORD = round(MAX_COORD_M * 100)
 """Largest position coordinate on the wire, in cm (10,000 km)."""
+_MAX_KIB = 1 << 50
+"""Largest memory figure on the wire, in KiB."""
 _MAX_MS = 10**9
 """Largest RTT or jitter on the wire, in 0.01 ms (about 115 days)."""
 
@@ -411,8 +422,8 @@ def _metrics(x: object) -> Metrics:
         )
     return Metrics(
         cpu_pct=_int(cpu, "cpu_pct", 0, 100_000) / 10,
-        mem_total=_int(total, "mem_total", 0, 1 << 50) * 1024,
-        mem_free=_int(free, "mem_free", 0, 1 << 50) * 1024,
+        mem_total=_int(total, "mem_total", 0, _MAX_KIB) * 1024,
+        mem_free=_int(free, "mem_free", 0, _MAX_KIB) * 1024,
         battery_pct=None if battery is None else _int(battery, "battery_pct", 0, 1000) / 10,
         rssi_dbm=None if rssi is None else _int(rssi, "rssi_dbm", -2000, 1000) / 10,
         pos=xy,

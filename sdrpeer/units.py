@@ -77,6 +77,8 @@ def _parse(
     if isinstance(value, bool):
         raise wrong
     if isinstance(value, int | float):
+        if isinstance(value, int) and abs(value) > 2**1000:
+            raise wrong  # float() of it would overflow
         number, factor = float(value), 1.0
     elif isinstance(value, str):
         match = _QUANTITY.match(value)
@@ -88,7 +90,10 @@ def _parse(
         number, factor = float(match.group(1)), float(units[unit])
     else:
         raise wrong
-    result = number * factor
+    try:
+        result = number * factor
+    except OverflowError:  # an int too big for a float
+        raise wrong from None
     if not math.isfinite(result) or (not signed and result < 0):
         raise wrong
     return result

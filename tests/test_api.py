@@ -146,8 +146,11 @@ async def test_post_robot_needs_the_token(
     ("body", "message"),
     [
         (b"{not json", "body is not JSON"),
-        (b"[1, 2]", "body must be a non-empty JSON object"),
+        (b"[1, 2]", "body must be a JSON object"),
+        (b"{}", "body must be a non-empty JSON object"),
         (b'{"warp": 9}', "warp: unknown robot field"),
+        (b'{"rssi": "-80dBm\xff"}', "body is not UTF-8 text"),
+        (b"[" * 100_000 + b"]" * 100_000, "body is not JSON"),
     ],
 )
 async def test_post_robot_bad_body_is_400(

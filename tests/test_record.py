@@ -299,3 +299,43 @@ def test_malformed_election_refused(election: list[object]) -> None:
     wire[7] = election
     with pytest.raises(WireError, match="malformed"):
         decode_record(msgpack.packb(wire, use_bin_type=True))
+
+
+_EXTREME = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([-1e308, 1e308, -1000.0, 50.0, 1e18]),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    cpu=_EXTREME,
+    battery=st.none() | _EXTREME,
+    rssi=st.none() | _EXTREME,
+    x=_EXTREME,
+    y=_EXTREME,
+    mem=st.integers(-(2**70), 2**70),
+    priority=st.integers(-(2**80), 2**80),
+)
+def test_any_metrics_encode_and_decode_on_every_peer(
+    cpu: float,
+    battery: float | None,
+    rssi: float | None,
+    x: float,
+    y: float,
+    mem: int,
+    priority: int,
+) -> None:
+    """Whatever a robot file, the API or a measurement said, the record encodes, and every
+    peer decodes it, inside sdrpeer.limits' ranges (the live-API bug: rssi=-1000dBm made
+    robot-2's record unencodable and its /v1/members answer 500)."""
+    m = Metrics(cpu, mem, mem, battery, rssi, (x, y))
+    r = decode_record(encode_record(replace(big_record(), metrics=m, priority=priority)))
+    assert 0 <= r.metrics.cpu_pct <= 10_000
+    assert r.metrics.battery_pct is None or 0 <= r.metrics.battery_pct <= 100
+    assert r.metrics.rssi_dbm is None or -150 <= r.metrics.rssi_dbm <= 0
+    assert r.metrics.pos is not None
+    assert all(abs(c) <= 10_000_000 for c in r.metrics.pos)
+    assert -(2**31) <= r.priority < 2**31
+    v = decode_vitals(encode_vitals(vitals_of(replace(big_record(), metrics=m))))
+    assert v.metrics.rssi_dbm is None or -150 <= v.metrics.rssi_dbm <= 0

@@ -225,3 +225,50 @@ def _gone(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"  # killed, not yet reaped
     except OSError:
         return True
+
+
+def test_hostile_bodies_are_refused_and_change_nothing(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    """The issue's hostile inputs on a real agent: each a 400 (or 404) naming the field, the plan
+    and the robot's record untouched, every view still answering."""
+    one = cluster.start_many(1)[0]
+    path = tmp_path / "crashy.yaml"
+    path.write_text(CRASHY)
+    before = deploy(cluster, one, path)["plan"]
+    cases: list[tuple[str, Any, int, str]] = [
+        (
+            "/v1/recovery",
+            {"robot": [], "component": {}, "instance": 1, "action": None},
+            400,
+            "field 'robot': expected a name",
+        ),
+        (
+            "/v1/recovery",
+            {"robot": "robot-1", "component": "Pub", "instance": "Pub", "action": "explode"},
+            400,
+            "field 'action': expected one of",
+        ),
+        (
+            "/v1/recovery",
+            {
+                "robot": "robot-1",
+                "component": "Nope",
+                "instance": "x",
+                "action": "standby_same_robot",
+            },
+            404,
+            "no component 'Nope'",
+        ),
+        ("/v1/robot", {"rssi": "-1000dBm"}, 400, "'-1000dBm' is out of range (-150dBm to 0dBm)"),
+        ("/v1/robot", {"pos": ["1e308", "-1e308"]}, 400, "is out of range"),
+        ("/v1/robot", {"memory": "1000000TB"}, 400, "is out of range (1MB to 1PiB)"),
+    ]
+    for route, body, code, message in cases:
+        status_code, answer = http("POST", one.api + route, body, one.token)
+        assert status_code == code, (route, body, answer)
+        assert message in answer["error"], (route, answer)
+        assert "Error" not in answer["error"], answer  # the project's words, not Python's
+    assert status(one)["plan"] == before
+    me = one.member("robot-1")  # still encodes and answers
+    assert me["metrics"]["rssi_dbm"] == -45.0

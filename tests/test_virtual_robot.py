@@ -72,8 +72,7 @@ def test_example_robot_files_load() -> None:
         ("name: r1\ncpus: 2\n", "robots/r1.yaml:1: field 'memory': missing (required)"),
         (
             "name: r1\nmemory: 4GB\nbattery: 120%\n",
-            "robots/r1.yaml:3: field 'battery': "
-            "expected a battery level from 0% to 100%, got '120%'",
+            "robots/r1.yaml:3: field 'battery': '120%' is out of range (0% to 100%)",
         ),
         (
             "name: r1\nmemory: 4GB\nposition: [1]\n",
@@ -89,7 +88,7 @@ def test_example_robot_files_load() -> None:
         ),
         (
             "name: r1\nmemory: 4GB\ncpus: 0\n",
-            "robots/r1.yaml:3: field 'cpus': expected a cpu count such as 4, got 0",
+            "robots/r1.yaml:3: field 'cpus': 0 is out of range (1 to 4096)",
         ),
         (
             "name: r 1\nmemory: 4GB\n",
@@ -98,6 +97,26 @@ def test_example_robot_files_load() -> None:
         (
             "name: r1\nmemory: 4GB\nmemory: 2GB\n",
             "robots/r1.yaml:3: field 'memory': given twice (first at line 2)",
+        ),
+        (  # the hostile values: each refused, naming the field and the range
+            "name: r1\nmemory: 4GB\nposition: [1e308, -1e308]\n",
+            "robots/r1.yaml:3: field 'position': '1e308' is out of range (-10000km to 10000km)",
+        ),
+        (
+            "name: r1\nmemory: 4GB\npriority: -99999999999999999999\n",
+            "robots/r1.yaml:3: field 'priority': -99999999999999999999 is out of range",
+        ),
+        (
+            "name: r1\nmemory: 4GB\nrssi: +50dBm\n",
+            "robots/r1.yaml:3: field 'rssi': '+50dBm' is out of range (-150dBm to 0dBm)",
+        ),
+        (
+            "name: r1\nmemory: 1000000TB\n",
+            "robots/r1.yaml:2: field 'memory': '1000000TB' is out of range (1MB to 1PiB)",
+        ),
+        (
+            "name: r1\nmemory: 4GB\ndrain: -600%/min\n",
+            "robots/r1.yaml:3: field 'drain': '-600%/min' is out of range (-100%/min to 100%/min",
         ),
         ("- r1\n", "robots/r1.yaml:1: expected a mapping with name, memory"),
         ("", "robots/r1.yaml: expected a mapping"),

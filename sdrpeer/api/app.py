@@ -61,6 +61,29 @@ def json_error(status: int, message: str) -> web.Response:
     return web.json_response({"error": message}, status=status)
 
 
+async def json_object(request: web.Request, example: str = "{...}") -> dict[str, Any]:
+    """The request body as a JSON object; 400 in the project's words when it is not UTF-8, not
+    JSON or not an object (never a 500: `request.json()` let a non-UTF-8 body through)."""
+    raw = await request.read()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise _bad(f"body is not UTF-8 text (byte {exc.start})") from None
+    try:
+        body = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise _bad(f"body is not JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    except RecursionError:
+        raise _bad("body is not JSON: nested too deeply") from None
+    if not isinstance(body, dict):
+        raise _bad(f"body must be a JSON object, e.g. {example}")
+    return body
+
+
+def _bad(message: str) -> web.HTTPBadRequest:
+    return web.HTTPBadRequest(reason=message)  # error_middleware answers {"error": reason}
+
+
 def view_of(request: web.Request) -> AgentView:
     """The AgentView the app was built with."""
     return request.app[VIEW_KEY]
@@ -160,11 +183,8 @@ async def get_healthz(request: web.Request) -> web.Response:
 
 async def post_robot(request: web.Request) -> web.Response:
     """POST /v1/robot: change this virtual robot's facts (JSON object of changes)."""
-    try:
-        changes = await request.json()
-    except json.JSONDecodeError as exc:
-        return json_error(400, f"body is not JSON: {exc}")
-    if not isinstance(changes, dict) or not changes:
+    changes = await json_object(request, '{"battery": "30%"}')
+    if not changes:
         return json_error(400, 'body must be a non-empty JSON object, e.g. {"battery": "30%"}')
     view = view_of(request)
     try:
@@ -206,11 +226,8 @@ async def get_instances(request: web.Request) -> web.Response:
 async def post_instances(request: web.Request) -> web.Response:
     """POST /v1/instances {"instances": [...], "replace": bool}: merge or set the desired set."""
     manager = instances_of(request)
-    try:
-        body = await request.json()
-    except json.JSONDecodeError as exc:
-        return json_error(400, f"body is not JSON: {exc}")
-    if not isinstance(body, dict) or not isinstance(body.get("instances"), list):
+    body = await json_object(request, '{"instances": [...], "replace": false}')
+    if not isinstance(body.get("instances"), list):
         return json_error(400, 'body must be {"instances": [...], "replace": false}')
     replace_all = body.get("replace", False)
     if not isinstance(replace_all, bool):

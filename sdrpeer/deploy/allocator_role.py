@@ -174,13 +174,16 @@ class AllocatorRole:
         """A robot's recovery step that changes who is active (allocator only):
         `standby_same_robot` activates the component's standby on that robot in place of the
         faulty instance; `standby_other_robot` / `launch_other_robot` move the component off
-        that robot (to a running standby first). Missing standbys are re-created."""
+        that robot (to a running standby first). Missing standbys are re-created. LookupError
+        for a component the deployed system does not have."""
         if not self.c.election.is_allocator():
             raise NotAllocator(self.c.election.info().leader)
         async with self._lock:
             plan = self.c.store.plan
             if plan is None or plan.system is None:
                 return Infeasible(component, (), 0)
+            if all(c.name != component for c in plan.system.components):
+                raise LookupError(f"no component {component!r} in the deployed system")
             state = self.c.cluster()
             epoch = self.c.election.info().epoch
             version = plan.version + 1 if plan.epoch == epoch else 1

@@ -303,7 +303,12 @@ class Coordinator:
             "action": d.action,
         }
         if self.election.is_allocator():
-            result = await self.role.recover_component(self.name, d.component, d.instance, d.action)
+            try:
+                result = await self.role.recover_component(
+                    self.name, d.component, d.instance, d.action
+                )
+            except LookupError:  # a plan changed under the decision: nothing to recover
+                return False
             return not isinstance(result, Infeasible)
         leader = self.election.info().leader
         rec = self.cluster().alive.get(leader or "")

@@ -10,15 +10,15 @@ answer is the plan (200), an infeasible report (409: which constraint ruled out 
 
 from __future__ import annotations
 
-import json
 import time
 from typing import TYPE_CHECKING, Any
 
 from aiohttp import web
 
 from sdrpeer.alloc.result import Infeasible
-from sdrpeer.api.app import Route, json_error, require_token, view_of
+from sdrpeer.api.app import Route, json_error, json_object, require_token, view_of
 from sdrpeer.api.peer_client import call
+from sdrpeer.config import NAME_RE
 from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
 from sdrpeer.deploy.move import MoveError
 from sdrpeer.errors import ApiError, NotAllocator
@@ -40,14 +40,12 @@ def _coord(request: web.Request) -> Coordinator:
     return coord
 
 
+RECOVERY_STEPS = ("standby_same_robot", "standby_other_robot", "launch_other_robot")
+"""The recovery steps that change the plan (`restart` is done where the fault is)."""
+
+
 async def _body(request: web.Request) -> dict[str, Any]:
-    try:
-        body = await request.json()
-    except json.JSONDecodeError as exc:
-        raise web.HTTPBadRequest(reason=f"body is not JSON: {exc}") from None
-    if not isinstance(body, dict):
-        raise web.HTTPBadRequest(reason="body must be a JSON object")
-    return body
+    return await json_object(request)
 
 
 async def _allocate(
@@ -129,14 +127,21 @@ async def post_recovery(request: web.Request) -> web.Response:
     that changes who is active; the allocator issues the new plan (others forward it there)."""
     body = await _body(request)
     coord = _coord(request)
-    try:
-        fields = [str(body[k]) for k in ("robot", "component", "instance", "action")]
-    except KeyError as e:
-        return json_error(400, f"field {e.args[0]!r}: missing")
+    fields = []
+    for key in ("robot", "component", "instance", "action"):
+        value = body.get(key)
+        if not isinstance(value, str) or not NAME_RE.fullmatch(value):
+            return json_error(400, f"field {key!r}: expected a name, got {value!r}")
+        fields.append(value)
+    if fields[3] not in RECOVERY_STEPS:
+        steps = ", ".join(RECOVERY_STEPS)
+        return json_error(400, f"field 'action': expected one of {steps}, got {fields[3]!r}")
     try:
         result = await coord.recover_component(*fields)
     except NotAllocator as e:
         return await _forward(request, e.leader, body)
+    except LookupError as e:
+        return json_error(404, str(e.args[0]))
     if isinstance(result, Infeasible):
         return json_error(409, f"cannot recover {fields[1]}:\n{result}")
     return web.json_response({"plan": [result.epoch, result.version], "allocator": coord.name})

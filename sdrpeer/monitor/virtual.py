@@ -26,6 +26,7 @@ from typing import Any
 
 from sdrpeer import units
 from sdrpeer.errors import ConfigError
+from sdrpeer.limits import check
 from sdrpeer.monitor.yamlfile import YamlFile
 from sdrpeer.record import Metrics
 
@@ -40,82 +41,83 @@ def parse_name(value: object) -> str:
 
 
 def parse_memory(value: object) -> int:
-    """A memory capacity: a positive size."""
-    size = units.parse_size(value)
-    if size <= 0:
-        raise ValueError(f"expected a size such as 4GB, got {value!r}")
-    return size
+    """A memory capacity: a size from 1MB to 1PiB."""
+    return round(check("memory", units.parse_size(value), value))
 
 
 def parse_battery(value: object) -> float:
     """A battery level, 0..100 %."""
-    level = units.parse_percent(value)
-    if not 0.0 <= level <= 100.0:
-        raise ValueError(f"expected a battery level from 0% to 100%, got {value!r}")
-    return level
+    return check("battery", units.parse_percent(value), value)
+
+
+def parse_rssi(value: object) -> float:
+    """A signal level, -150..0 dBm."""
+    return check("rssi", units.parse_power(value), value)
+
+
+def parse_drain(value: object) -> float:
+    """A battery drain in %/s (negative: charging), at most 100 %/min either way."""
+    return check("drain", units.parse_rate(value), value)
 
 
 def _coord(c: object) -> float:
-    """One coordinate in metres: a number or a distance such as -2.5m."""
-    if isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c):
-        return float(c)
-    if isinstance(c, str) and c.strip().startswith("-"):
-        return -units.parse_distance(c.strip()[1:])
-    return units.parse_distance(c)
+    """One coordinate in metres: a number or a distance such as -2.5m, within 10,000 km."""
+    if isinstance(c, int | float) and not isinstance(c, bool):
+        out = float(c)
+    elif isinstance(c, str) and c.strip().startswith("-"):
+        out = -units.parse_distance(c.strip()[1:])
+    else:
+        out = units.parse_distance(c)
+    return check("coord", out, c)
 
 
 def parse_position(value: object) -> tuple[float, float]:
     """[x, y] in metres (numbers or distances such as 3m; negative coordinates allowed)."""
-    try:
-        if not isinstance(value, list | tuple) or len(value) != 2:
-            raise ValueError
-        return (_coord(value[0]), _coord(value[1]))
-    except ValueError:
-        raise ValueError(f"expected a position such as [3, 4.5], got {value!r}") from None
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        raise ValueError(f"expected a position such as [3, 4.5], got {value!r}")
+    return (_coord(value[0]), _coord(value[1]))
 
 
-def _cpus(value: object) -> int:
-    """A positive cpu count."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"expected a cpu count such as 4, got {value!r}")
-    return value
+def _integer(name: str, example: str) -> Callable[[object], int]:
+    def parse(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"expected an integer such as {example}, got {value!r}")
+        check(name, float(value) if abs(value) < 2**63 else math.inf, value)
+        return value
+
+    return parse
 
 
 def _noise(value: object) -> float:
-    """A non-negative noise level in dB."""
-    level = units.parse_db(value)
-    if level < 0:
-        raise ValueError(f"expected a level in dB such as 1dB, got {value!r}")
-    return level
+    """A noise level in dB, 0..30."""
+    return check("rssi_noise", units.parse_db(value), value)
 
 
-def _priority(value: object) -> int:
-    """An integer election priority."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"expected an integer such as 0, got {value!r}")
-    return value
+def _skew(value: object) -> float:
+    """A clock error within a day either way."""
+    return check("clock_skew", units.parse_offset(value), value)
 
 
 SETTABLE: dict[str, Callable[[object], Any]] = {
     "battery": parse_battery,
-    "drain": units.parse_rate,
+    "drain": parse_drain,
     "memory": parse_memory,
     "pos": parse_position,
-    "rssi": units.parse_power,
+    "rssi": parse_rssi,
 }
 """What `VirtualRobot.set` (and a scenario's `set`) may change, and how each value is parsed."""
 
 _FILE_FIELDS: dict[str, Callable[[object], Any]] = {
     "name": parse_name,
     "memory": parse_memory,
-    "cpus": _cpus,
+    "cpus": _integer("cpus", "4"),
     "battery": parse_battery,
-    "drain": units.parse_rate,
+    "drain": parse_drain,
     "position": parse_position,
-    "rssi": units.parse_power,
+    "rssi": parse_rssi,
     "rssi_noise": _noise,
-    "priority": _priority,
-    "clock_skew": units.parse_offset,
+    "priority": _integer("priority", "0"),
+    "clock_skew": _skew,
 }
 
 
