@@ -181,14 +181,11 @@ def load_agent_config(path: Path | str) -> ConfigValues:
     """Read an agent config file into typed field values; relative paths are file-relative."""
     import yaml  # noqa: PLC0415 - only --config FILE needs it (keeps the agent's start light)
 
+    from sdrpeer.monitor.yamlfile import compose, read_text  # noqa: PLC0415 - the same
+
     path = Path(path)
+    loader, root = compose(read_text(path), str(path))
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read agent config: {exc.strerror or exc}") from None
-    loader = yaml.SafeLoader(text)
-    try:
-        root = loader.get_single_node()
         values = ConfigValues()
         if root is None:
             return values
@@ -217,7 +214,7 @@ def load_agent_config(path: Path | str) -> ConfigValues:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = f":{mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}{line}: invalid YAML: {exc.problem or exc}") from None
+        raise ConfigError(f"{path}{line}: not valid YAML: {exc.problem or exc}") from None
     finally:
         loader.dispose()
 
