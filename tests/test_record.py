@@ -317,7 +317,7 @@ _EXTREME = st.one_of(
     mem=st.integers(-(2**70), 2**70),
     priority=st.integers(-(2**80), 2**80),
 )
-def test_any_metrics_encode_and_decode_on_every_peer(
+def test_any_metrics_encode_and_decode_on_every_peer(  # noqa: PLR0917 - hypothesis' arguments
     cpu: float,
     battery: float | None,
     rssi: float | None,

@@ -1,8 +1,8 @@
-"""Fuzz the three surfaces a peer or a host can reach: gossip datagrams, the control channel
-(both directions) and port streams.
+"""Fuzz the surfaces a peer, a host or a file can reach: gossip datagrams, the control channel
+(both directions), port streams, and the system, robot and scenario YAML loaders.
 
-Usage: python tools/fuzz.py [--inputs 100000] [--seed 1] [--only gossip,control,stream]
-                            [--json out.json]
+Usage: python tools/fuzz.py [--inputs 100000] [--seed 1]
+                            [--only gossip,control,stream,system,robot,scenario] [--json out.json]
 
 How it works: each surface gets `--inputs` inputs, a third each of
 - random bytes (any length up to a few kB);
@@ -15,8 +15,11 @@ they get past authentication and reach the parser, the replay guard, the members
 processes them, with its timers run every 64 inputs) and the record decoder. Control inputs go
 to the agent's report decoder and to the host's command decoder; stream inputs to the receiver's
 hello (with acknowledgement and authentication fields) and frame decoder, and replies to the
-sender's reply parser. An input may be refused only with the surface's own error
-(WireError, ControlProtocolError, FrameError), which is counted by reason; any other exception
+sender's reply parser. YAML inputs start from the example files: a hostile snippet spliced in
+(aliases, tags, deep nesting, control characters, unrepresentable numbers), byte mutations, or
+the document loaded, one node replaced by a hostile value and dumped again; they go to the
+loader's parser. An input may be refused only with the surface's own error (WireError,
+ControlProtocolError, FrameError, ConfigError), which is counted by reason; any other exception
 is a crash (reported with the input). Also reported: the slowest input (a hang would show) and
 the peak RSS of this process.
 """
@@ -37,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
+import yaml
 
 from sdrpeer.control_stream import ControlProtocolError, encode
 from sdrpeer.dataplane.frames import (
@@ -51,7 +55,7 @@ from sdrpeer.dataplane.frames import (
     parse_reply,
     reply_auth,
 )
-from sdrpeer.errors import WireError
+from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import RecordChanged
@@ -69,11 +73,15 @@ from sdrpeer.gossip.messages import (
 )
 from sdrpeer.host.control import ControlDecoder as HostDecoder
 from sdrpeer.keyring import Keyring
+from sdrpeer.monitor.scenario import Scenario
+from sdrpeer.monitor.virtual import RobotFile
 from sdrpeer.record import decode_record, encode_record, reference_record
 from sdrpeer.runtime.control import ControlDecoder as AgentDecoder
+from sdrpeer.system.loader import parse_system
 from sdrpeer.wire import MAGIC, PROTOCOL_VERSION, Codec, packet_body
 
 NOW = 1_800_000_000.0
+REPO = Path(__file__).resolve().parent.parent
 
 
 # -- hostile values and mutations ---------------------------------------------------------------
@@ -363,10 +371,105 @@ class StreamSurface:
             raise
 
 
+YAML_SNIPPETS = (
+    "&a [*a]",
+    "!!python/object/apply:os.system [true]",
+    "!custom x",
+    "[" * 200 + "]" * 200,
+    "{a: " * 80 + "1" + "}" * 80,
+    "\x00",
+    "\x07",
+    "*undefined",
+    "&x [1, 2]",
+    "? [a, b]\n: 1",
+    "{[a]: 1}",
+    "1e400",
+    "-99999999999999999999999999",
+    ".nan",
+    "-.inf",
+    "'" + "x" * 5000 + "'",
+    "2001-12-14t21:59:43.10-05:00",
+    "!!binary aGVsbG8=",
+    "|\n  block\n  text",
+    "- - - -",
+    ": :",
+    "%YAML 1.1\n---",
+    "--- a\n--- b",
+)
+"""Pieces of hostile YAML spliced into valid files (aliases, tags, nesting, control
+characters, numbers no type holds, several documents)."""
+
+
+class YamlSurface:
+    """YAML text -> one of the project's loaders (system, robot or scenario file)."""
+
+    errors = (ConfigError,)
+
+    def __init__(self, rng: random.Random, seeds: list[Path], parse: Callable[[str], Any]) -> None:
+        self.rng = rng
+        self.seeds = [p.read_text() for p in seeds]
+        self.trees = [yaml.safe_load(t) for t in self.seeds]
+        self.parse = parse
+        self.reasons: Counter[str] = Counter()
+
+    def input(self, kind: int) -> bytes:
+        rng = self.rng
+        if kind == 0:  # a hostile snippet spliced in at a random line, as a value or a line
+            lines = rng.choice(self.seeds).splitlines()
+            i = rng.randrange(len(lines) + 1)
+            piece = rng.choice(YAML_SNIPPETS)
+            if i < len(lines) and ":" in lines[i] and rng.random() < 0.7:
+                key = lines[i].split(":", 1)[0]
+                lines[i] = f"{key}: {piece}"
+            else:
+                lines.insert(i, piece)
+            return "\n".join(lines).encode("utf-8", "surrogatepass")
+        if kind == 1:
+            return mutate_bytes(rng, rng.choice(self.seeds).encode())
+        tree = mutate_tree(rng, rng.choice(self.trees))
+        try:
+            return yaml.safe_dump(tree, allow_unicode=True).encode("utf-8", "surrogatepass")
+        except (yaml.YAMLError, TypeError, ValueError, RecursionError):
+            return b""
+
+    def feed(self, data: bytes) -> None:
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            self.reasons["not utf-8"] += 1
+            raise ConfigError("not UTF-8") from None
+        try:
+            self.parse(text)
+        except ConfigError as exc:
+            message = str(exc)
+            key = message.split(": ", 2)[1] if message.count(": ") >= 2 else message
+            self.reasons[key.split("'")[0][:40]] += 1
+            raise
+
+
+def _system_surface(rng: random.Random) -> YamlSurface:
+    seeds = sorted((REPO / "examples/paper").glob("*.yaml"))
+    return YamlSurface(rng, seeds, lambda t: parse_system(t, str(REPO / "examples/paper/x.yaml")))
+
+
+def _robot_surface(rng: random.Random) -> YamlSurface:
+    return YamlSurface(
+        rng, sorted((REPO / "examples/robots").glob("*.yaml")), lambda t: RobotFile.parse(t, "r")
+    )
+
+
+def _scenario_surface(rng: random.Random) -> YamlSurface:
+    seeds = sorted((REPO / "examples/scenarios").glob("*.yaml"))
+    return YamlSurface(rng, seeds, lambda t: Scenario.parse(t, "s"))
+
+
 SURFACES: dict[str, Callable[[random.Random], Any]] = {
     "gossip": GossipSurface,
     "control": ControlSurface,
     "stream": StreamSurface,
+    "system": _system_surface,
+    "robot": _robot_surface,
+    "scenario": _scenario_surface,
 }
 
 

@@ -35,10 +35,10 @@ def read_connections(
     seen: dict[str, int] = {}
     for i, item in enumerate(p.sequence(node, "connections")):
         where = f"connections[{i}]"
+        before = len(p.items)  # a missing end is recorded by `mapping`: count it too
         fields = p.mapping(item, where, CONNECTION_KEYS, ("from", "to"))
         if fields is None:
             continue
-        before = len(p.items)
         sender = _end(p, fields, "from", where, components)
         receiver = _end(p, fields, "to", where, components)
         policy: Any = ()

@@ -37,8 +37,12 @@ class ProfileFigures:
 
 def read_profile(path: Path, shown: str) -> ProfileFigures:
     """The figures of the profile at `path` (`shown` is how messages name it)."""
-    if not path.is_file():
-        raise ProfileError(f"no such profile file {shown!r}")
+    try:
+        is_file = path.is_file()
+    except OSError as e:  # a name too long, a path through a file, ...
+        raise ProfileError(f"cannot read profile file {shown[:200]!r}: {e.strerror}") from None
+    if not is_file:
+        raise ProfileError(f"no such profile file {shown[:200]!r}")
     try:
         f = YamlFile.read(path)
         f.name = shown
