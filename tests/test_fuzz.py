@@ -15,7 +15,7 @@ def test_every_surface_survives_random_and_mutated_inputs(tmp_path: Path) -> Non
     out = tmp_path / "fuzz.json"
     done = subprocess.run(
         [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", "3000", "--seed", "7",
-         "--json", str(out)],
+         "--only", "gossip,control,stream", "--json", str(out)],
         capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
@@ -29,3 +29,20 @@ def test_every_surface_survives_random_and_mutated_inputs(tmp_path: Path) -> Non
         assert sum(r["refused_by_reason"].values()) >= r["refused"] > 0, name
     assert results["gossip"]["refused_by_reason"]["malformed"] > 0
     assert results["stream"]["refused_by_reason"]["malformed"] > 0
+
+
+def test_the_yaml_loaders_survive_hostile_and_mutated_files(tmp_path: Path) -> None:
+    out = tmp_path / "fuzz.json"
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", "600", "--seed", "7",
+         "--only", "system,robot,scenario", "--json", str(out)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    results = {r["surface"]: r for r in json.loads(out.read_text())}
+    assert set(results) == {"system", "robot", "scenario"}
+    for name, r in results.items():
+        assert r["crashes"] == 0, (name, r["crash_samples"])
+        assert r["accepted"] + r["refused"] == r["inputs"] == 600
+        assert r["accepted"] > 0, name  # tree mutations that stay valid load
+        assert r["refused_by_reason"]["not valid YAML"] > 0, name  # the snippets are refused
