@@ -46,3 +46,17 @@ def test_the_yaml_loaders_survive_hostile_and_mutated_files(tmp_path: Path) -> N
         assert r["accepted"] + r["refused"] == r["inputs"] == 600
         assert r["accepted"] > 0, name  # tree mutations that stay valid load
         assert r["refused_by_reason"]["not valid YAML"] > 0, name  # the snippets are refused
+
+
+def test_the_http_routes_never_answer_5xx(tmp_path: Path) -> None:
+    out = tmp_path / "fuzz.json"
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", "600", "--seed", "7",
+         "--only", "http", "--json", str(out)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    (r,) = json.loads(out.read_text())
+    assert r["crashes"] == 0, r["crash_samples"]
+    assert r["accepted"] > 0  # valid bodies change the robot
+    assert {"400", "404"} <= set(r["refused_by_reason"])

@@ -1,8 +1,10 @@
-"""Fuzz the surfaces a peer, a host or a file can reach: gossip datagrams, the control channel
-(both directions), port streams, and the system, robot and scenario YAML loaders.
+"""Fuzz the surfaces a peer, a host, a file or a client can reach: gossip datagrams, the control
+channel (both directions), port streams, the system, robot and scenario YAML loaders, and the
+HTTP API.
 
 Usage: python tools/fuzz.py [--inputs 100000] [--seed 1]
-                            [--only gossip,control,stream,system,robot,scenario] [--json out.json]
+                            [--only gossip,control,stream,system,robot,scenario,http]
+                            [--json out.json]
 
 How it works: each surface gets `--inputs` inputs, a third each of
 - random bytes (any length up to a few kB);
@@ -18,10 +20,12 @@ hello (with acknowledgement and authentication fields) and frame decoder, and re
 sender's reply parser. YAML inputs start from the example files: a hostile snippet spliced in
 (aliases, tags, deep nesting, control characters, unrepresentable numbers), byte mutations, or
 the document loaded, one node replaced by a hostile value and dumped again; they go to the
-loader's parser. An input may be refused only with the surface's own error (WireError,
-ControlProtocolError, FrameError, ConfigError), which is counted by reason; any other exception
-is a crash (reported with the input). Also reported: the slowest input (a hang would show) and
-the peak RSS of this process.
+loader's parser. HTTP inputs (random bytes, byte and tree mutations of valid bodies, hostile
+names and queries) go to a real agent's routes in this process (see `HTTP_ROUTES`); a 4xx is a
+refusal, a 5xx other than 503 or no answer within 5 s a crash. An input may be refused only
+with the surface's own error (WireError, ControlProtocolError, FrameError, ConfigError,
+HttpRefused), which is counted by reason; any other exception is a crash (reported with the
+input). Also reported: the slowest input (a hang would show) and the peak RSS of this process.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import random
 import resource
 import sys
@@ -78,7 +83,7 @@ from sdrpeer.monitor.virtual import RobotFile
 from sdrpeer.record import decode_record, encode_record, reference_record
 from sdrpeer.runtime.control import ControlDecoder as AgentDecoder
 from sdrpeer.system.loader import parse_system
-from sdrpeer.wire import MAGIC, PROTOCOL_VERSION, Codec, packet_body
+from sdrpeer.wire import MAGIC, PROTOCOL_VERSION, Codec, format_key, packet_body
 
 NOW = 1_800_000_000.0
 REPO = Path(__file__).resolve().parent.parent
@@ -463,6 +468,142 @@ def _scenario_surface(rng: random.Random) -> YamlSurface:
     return YamlSurface(rng, seeds, lambda t: Scenario.parse(t, "s"))
 
 
+class HttpRefused(Exception):
+    """A 4xx answer: the route refused the request (the status is the reason)."""
+
+
+HTTP_ROUTES: list[tuple[str, str, Any]] = [
+    # (method, path with {q} for a fuzzed query or {n} for a fuzzed name, seed JSON body)
+    ("POST", "/v1/robot", {"battery": "30%", "rssi": "-60dBm", "pos": [1, 2]}),
+    ("POST", "/v1/robot", {"memory": "2GB", "drain": "1%/min"}),
+    ("POST", "/v1/recovery", {"robot": "robot-1", "component": "Cam", "instance": "Cam",
+                              "action": "standby_other_robot"}),
+    ("POST", "/v1/move", {"component": "Cam", "to": "robot-2"}),
+    ("POST", "/v1/plan", {"plan": {"epoch": 0, "version": 0}}),
+    ("POST", "/v1/deploy", {"system": {"name": "x", "components": []}}),
+    ("POST", "/v1/undeploy", {}),
+    ("POST", "/v1/instances/{n}/activate", None),
+    ("DELETE", "/v1/instances/{n}", None),
+    ("GET", "/v1/events?{q}", None),
+    ("GET", "/v1/instances/{n}/logs?{q}", None),
+    ("GET", "/v1/members", None),
+    ("GET", "/v1/status", None),
+    ("GET", "/metrics", None),
+]  # fmt: skip
+"""What the HTTP surface sends: every state-changing route whose valid inputs start nothing
+(POST /v1/instances and a deployable system would launch hosts: their bodies are left to the
+route tests) and the reads."""
+
+
+class HttpSurface:
+    """Bodies, names and queries -> a real agent's API in this process (alone in its cluster, a
+    virtual robot, the token given): every answer below 500, within 5 s."""
+
+    errors = (HttpRefused,)
+
+    def __init__(self, rng: random.Random) -> None:
+        import asyncio  # noqa: PLC0415 - only this surface runs a loop
+        import tempfile  # noqa: PLC0415
+
+        from sdrpeer.agent import Agent  # noqa: PLC0415 - the agent is heavy to import
+        from sdrpeer.config import AgentConfig  # noqa: PLC0415
+
+        self.rng = rng
+        self.reasons: Counter[str] = Counter()
+        self.dir = Path(tempfile.mkdtemp(prefix="sdrpeer-fuzz-http-"))
+        (self.dir / "robot.yaml").write_text("name: robot-1\nmemory: 4GB\nbattery: 80%\n")
+        (self.dir / "cluster.key").write_text(format_key(Keyring.generate()) + "\n")
+        os.chmod(self.dir / "cluster.key", 0o600)
+        config = AgentConfig(
+            name="robot-1",
+            bind="127.0.0.1:0",
+            api="127.0.0.1:0",
+            robot_file=self.dir / "robot.yaml",
+            key_file=self.dir / "cluster.key",
+            preset="fast_test",
+            data_dir=self.dir / "data",
+        )
+        self.loop = asyncio.new_event_loop()
+        self.agent = Agent(config)
+        self.loop.run_until_complete(self.agent.start())
+        self.token = (self.dir / "data" / "token").read_text().strip()
+        assert self.agent.api_url is not None
+        self.base = self.agent.api_url.rstrip("/")
+        self.session = self.loop.run_until_complete(self._session())
+        self.loop.run_until_complete(self._elected())
+
+    async def _elected(self) -> None:
+        """Wait (10 s at most) until the agent holds the allocator role: before, the deployment
+        routes rightly answer 503."""
+        import asyncio  # noqa: PLC0415
+
+        def elected() -> bool:
+            c = self.agent.coordinator
+            return c is not None and c.election.is_allocator()
+
+        async with asyncio.timeout(10):
+            while not elected():  # noqa: ASYNC110 - polls a plain attribute
+                await asyncio.sleep(0.05)
+
+    async def _session(self) -> Any:
+        import aiohttp  # noqa: PLC0415
+
+        return aiohttp.ClientSession(timeout=aiohttp.ClientTimeout(total=5))
+
+    def input(self, kind: int) -> bytes:
+        rng = self.rng
+        route = rng.randrange(len(HTTP_ROUTES))
+        seed = HTTP_ROUTES[route][2]
+        if kind == 0 or seed is None:
+            body = rng.randbytes(rng.randrange(0, 300))
+        elif kind == 1:
+            body = mutate_bytes(rng, json.dumps(seed).encode())
+        else:
+            try:
+                body = json.dumps(mutate_tree(rng, seed), default=repr).encode()
+            except (TypeError, ValueError, RecursionError):  # not JSON-able: send the seed cut
+                body = json.dumps(seed).encode()[: rng.randrange(1, 40)]
+        name = rng.choice(["Cam", "x" * 300, "..", "%00", "a/b", "ü", ""])
+        query = rng.choice(["since=-1", "limit=0", "limit=abc&since=9e99", "follow=1&lines=-5",
+                            "since=1&limit=10", "x=" + "y" * 3000, "%ff%fe"])  # fmt: skip
+        return bytes([route]) + name.encode() + b"\x00" + query.encode() + b"\x00" + body
+
+    def feed(self, data: bytes) -> None:
+        route = data[0] % len(HTTP_ROUTES)
+        name, query, body = data[1:].split(b"\x00", 2)
+        method, path, _ = HTTP_ROUTES[route]
+        path = path.replace("{n}", name.decode()).replace("{q}", query.decode())
+        status = self.loop.run_until_complete(self._call(method, path, body))
+        if status >= 500 and status != 503:  # 503: "try again later", a designed answer
+            raise RuntimeError(f"{method} {path}: {status}")
+        if status >= 400:
+            self.reasons[f"{status}"] += 1
+            raise HttpRefused(status)
+
+    async def _call(self, method: str, path: str, body: bytes) -> int:
+        import aiohttp  # noqa: PLC0415
+
+        headers = {"Authorization": f"Bearer {self.token}"}
+        try:
+            async with self.session.request(
+                method, self.base + path, data=body, headers=headers
+            ) as response:
+                await response.read()
+                return int(response.status)
+        except (aiohttp.InvalidURL, ValueError):
+            return 400  # the client refused to send it: nothing reached the agent
+        except TimeoutError:
+            return 599  # a hang: counted as a crash
+
+    def close(self) -> None:
+        import shutil  # noqa: PLC0415
+
+        self.loop.run_until_complete(self.session.close())
+        self.loop.run_until_complete(self.agent.stop(leave=False))
+        self.loop.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
 SURFACES: dict[str, Callable[[random.Random], Any]] = {
     "gossip": GossipSurface,
     "control": ControlSurface,
@@ -470,6 +611,7 @@ SURFACES: dict[str, Callable[[random.Random], Any]] = {
     "system": _system_surface,
     "robot": _robot_surface,
     "scenario": _scenario_surface,
+    "http": HttpSurface,
 }
 
 
@@ -496,6 +638,8 @@ def fuzz(name: str, inputs: int, seed: int) -> dict[str, Any]:
                 crashes.append({})
         slowest = max(slowest, time.perf_counter() - start)
     elapsed = time.perf_counter() - t0
+    if hasattr(surface, "close"):
+        surface.close()
     reasons = surface.reasons() if callable(surface.reasons) else surface.reasons
     return {
         "surface": name,
