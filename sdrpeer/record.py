@@ -404,6 +404,8 @@ def _named(x: object, table: tuple[str, ...], what: str) -> str:
 
 _MAX_COORD = round(MAX_COORD_M * 100)
 """Largest position coordinate on the wire, in cm (10,000 km)."""
+_RSSI_DDBM = (round(LIMITS["rssi"].low * 10), round(LIMITS["rssi"].high * 10))
+"""RSSI range on the wire, in 0.1 dBm (what the encoder clamps to)."""
 _MAX_KIB = 1 << 50
 """Largest memory figure on the wire, in KiB."""
 _MAX_MS = 10**9
@@ -425,7 +427,7 @@ def _metrics(x: object) -> Metrics:
         mem_total=_int(total, "mem_total", 0, _MAX_KIB) * 1024,
         mem_free=_int(free, "mem_free", 0, _MAX_KIB) * 1024,
         battery_pct=None if battery is None else _int(battery, "battery_pct", 0, 1000) / 10,
-        rssi_dbm=None if rssi is None else _int(rssi, "rssi_dbm", -2000, 1000) / 10,
+        rssi_dbm=None if rssi is None else _int(rssi, "rssi_dbm", *_RSSI_DDBM) / 10,
         pos=xy,
     )
 
