@@ -7,19 +7,25 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_every_surface_survives_random_and_mutated_inputs(tmp_path: Path) -> None:
+def fuzz(tmp_path: Path, inputs: int, surfaces: str) -> dict[str, dict[str, Any]]:
+    """Run tools/fuzz.py on `surfaces` (comma-separated); its figures by surface."""
     out = tmp_path / "fuzz.json"
     done = subprocess.run(
-        [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", "3000", "--seed", "7",
-         "--only", "gossip,control,stream", "--json", str(out)],
+        [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", str(inputs), "--seed", "7",
+         "--only", surfaces, "--json", str(out)],
         capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
-    results = {r["surface"]: r for r in json.loads(out.read_text())}
+    return {r["surface"]: r for r in json.loads(out.read_text())}
+
+
+def test_every_surface_survives_random_and_mutated_inputs(tmp_path: Path) -> None:
+    results = fuzz(tmp_path, 3000, "gossip,control,stream")
     assert set(results) == {"gossip", "control", "stream"}
     for name, r in results.items():
         assert r["crashes"] == 0, (name, r["crash_samples"])
@@ -32,14 +38,7 @@ def test_every_surface_survives_random_and_mutated_inputs(tmp_path: Path) -> Non
 
 
 def test_the_yaml_loaders_survive_hostile_and_mutated_files(tmp_path: Path) -> None:
-    out = tmp_path / "fuzz.json"
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", "600", "--seed", "7",
-         "--only", "system,robot,scenario", "--json", str(out)],
-        capture_output=True, text=True, timeout=300, check=False,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stdout + done.stderr
-    results = {r["surface"]: r for r in json.loads(out.read_text())}
+    results = fuzz(tmp_path, 600, "system,robot,scenario")
     assert set(results) == {"system", "robot", "scenario"}
     for name, r in results.items():
         assert r["crashes"] == 0, (name, r["crash_samples"])
@@ -49,14 +48,7 @@ def test_the_yaml_loaders_survive_hostile_and_mutated_files(tmp_path: Path) -> N
 
 
 def test_the_http_routes_never_answer_5xx(tmp_path: Path) -> None:
-    out = tmp_path / "fuzz.json"
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--inputs", "600", "--seed", "7",
-         "--only", "http", "--json", str(out)],
-        capture_output=True, text=True, timeout=300, check=False,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stdout + done.stderr
-    (r,) = json.loads(out.read_text())
+    r = fuzz(tmp_path, 600, "http")["http"]
     assert r["crashes"] == 0, r["crash_samples"]
     assert r["accepted"] > 0  # valid bodies change the robot
     assert {"400", "404"} <= set(r["refused_by_reason"])
