@@ -260,6 +260,8 @@ def test_hostile_bodies_are_refused_and_change_nothing(
             404,
             "no component 'Nope'",
         ),
+        ("/v1/deploy", {"system": {"name": "x"}}, 400, "not a system document: no field"),
+        ("/v1/deploy", {"system": 5}, 400, "field 'system': missing, or not an object"),
         ("/v1/robot", {"rssi": "-1000dBm"}, 400, "'-1000dBm' is out of range (-150dBm to 0dBm)"),
         ("/v1/robot", {"pos": ["1e308", "-1e308"]}, 400, "is out of range"),
         ("/v1/robot", {"memory": "1000000TB"}, 400, "is out of range (1MB to 1PiB)"),

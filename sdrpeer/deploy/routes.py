@@ -87,10 +87,16 @@ async def _forward(request: web.Request, leader: str | None, body: dict[str, Any
 async def post_deploy(request: web.Request) -> web.Response:
     """POST /v1/deploy {"system": {...}, "origin": robot?}: allocate and publish a plan."""
     body = await _body(request)
+    if not isinstance(body.get("system"), dict):
+        return json_error(400, "field 'system': missing, or not an object (a loaded system file)")
     try:
         system = system_from_json(body["system"])
-    except (KeyError, TypeError, ValueError, AttributeError) as e:
-        return json_error(400, f"field 'system': not a system document ({type(e).__name__}: {e})")
+    except KeyError as e:
+        return json_error(400, f"field 'system': not a system document: no field {e.args[0]!r}")
+    except (TypeError, ValueError, AttributeError, IndexError):
+        return json_error(
+            400, "field 'system': not a system document: a field has the wrong type or value"
+        )
     return await _allocate(request, system, body)
 
 
