@@ -95,8 +95,15 @@ def test_a_file_that_is_not_utf8_names_itself(tmp_path: Path) -> None:
         RobotFile.load(path)
 
 
-def test_a_plain_file_with_anchors_still_loads(tmp_path: Path) -> None:
+def test_a_plain_file_with_anchors_and_merge_keys_still_loads(tmp_path: Path) -> None:
     path = tmp_path / "r1.yaml"
     path.write_text("name: &n r1\nmemory: 4GB\nposition: &p [1, 2]\n")
     robot = RobotFile.load(path)
     assert (robot.name, robot.position) == ("r1", (1.0, 2.0))
+    system = tmp_path / "s.yaml"
+    system.write_text(
+        "name: s\ncomponents:\n"
+        "  - &cam {name: Cam, target: 'components.camera:Camera', params: {reserve_mb: 0}}\n"
+        "  - {<<: *cam, name: Cam2}\n"
+    )
+    assert [c.name for c in load_system(system).components] == ["Cam", "Cam2"]

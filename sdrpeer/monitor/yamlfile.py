@@ -34,9 +34,12 @@ MAX_NODES = 200_000
 """Most nodes a document may hold with every alias expanded."""
 PLAIN_TAGS = frozenset(
     f"tag:yaml.org,2002:{t}"
-    for t in ("null", "bool", "int", "float", "str", "seq", "map", "timestamp", "binary")
+    for t in ("null", "bool", "int", "float", "str", "seq", "map", "timestamp", "binary", "merge")
 )
 """The tags a file may carry (what a plain YAML value resolves to)."""
+
+
+MERGE_TAG = "tag:yaml.org,2002:merge"
 
 
 def line_of(node: yaml.Node) -> int:
@@ -164,6 +167,27 @@ class YamlFile:
         except (ValueError, TypeError) as e:
             self.fail(node, field, str(e))
 
+    def pairs(self, node: yaml.MappingNode, field: str | None) -> list[tuple[Any, Any]]:
+        """The (key node, value node) pairs of a mapping with its merge keys (`<<: *base`)
+        merged in as YAML says: the mapping's own keys win, then the first merged one."""
+        own = [(k, v) for k, v in node.value if k.tag != MERGE_TAG]
+        if len(own) == len(node.value):
+            return list(node.value)
+        try:
+            self._loader.flatten_mapping(node)  # node.value: the merged pairs, then its own
+        except yaml.MarkedYAMLError as e:
+            self.fail(node, field, f"not valid YAML: {e.problem or e.context}")
+        merged = node.value[: len(node.value) - len(own)]
+        taken = {k.value for k, _ in own if isinstance(k, yaml.ScalarNode)}
+        out = []
+        for k, v in merged:
+            key = k.value if isinstance(k, yaml.ScalarNode) else None
+            if key is None or key not in taken:
+                out.append((k, v))
+                taken.add(key)
+        node.value = out + own
+        return list(node.value)
+
     def mapping(
         self,
         node: yaml.Node | None,
@@ -176,7 +200,7 @@ class YamlFile:
             self.fail(node, field, f"expected a mapping with {', '.join(allowed)}")
         prefix = "" if field is None else f"{field}."
         out: dict[str, yaml.Node] = {}
-        for key_node, value_node in node.value:
+        for key_node, value_node in self.pairs(node, field):
             key = self.value(key_node)
             if not isinstance(key, str):
                 self.fail(key_node, f"{prefix}{key}", "field names are strings")

@@ -118,7 +118,10 @@ class Problems:
             return None
         prefix = "" if field is None else f"{field}."
         out: dict[str, yaml.Node] = {}
-        for key_node, value_node in node.value:
+        pairs: list[tuple[Any, Any]] = []
+        with self.guard():  # a bad merge key is recorded
+            pairs = self.f.pairs(node, field)
+        for key_node, value_node in pairs:
             key = self.f.value(key_node)
             if not isinstance(key, str):
                 self.add(key_node, f"{prefix}{key}", "field names are strings")
