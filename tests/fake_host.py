@@ -87,6 +87,8 @@ def main() -> int:
                 continue
             if t == "activate" and "crash_on_activate" in modes:
                 os._exit(3)
+            if t == "activate" and "slow_activate" in modes:
+                time.sleep(1.5)  # a long on_activated: no heartbeat meanwhile
             ok = "refuse" not in modes and t in {*TRANSITIONS, "exit", "set_params", "connect",
                                                   "disconnect", "repoint"}  # fmt: skip
             if ok and t == "connect":

@@ -288,3 +288,21 @@ async def test_a_host_still_initializing_has_the_hello_timeout_not_the_heartbeat
     sup.start()
     await until("INACTIVE", lambda: sup.state == "INACTIVE")
     assert sup.silence_limit() == 0.5
+
+
+async def test_a_long_lifecycle_call_is_not_hung(sups):
+    """The host is silent while it activates (on_activated touching a memory reserve): the
+    watchdog waits for the command (its own timeout applies), then counts again."""
+    sup = sups(
+        fake(mode="slow_activate"), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.5)
+    )
+    sup.start()
+    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    pid = sup.pid
+    await sup.command("activate")  # 1.5 s without a heartbeat, three deadlines
+    await until("ACTIVE", lambda: sup.state == "ACTIVE")
+    assert sup.pid == pid
+    assert sup.exit_noticed is None
+    os.kill(pid, signal.SIGSTOP)  # silent outside a command: the watchdog fires
+    await until("the watchdog's kill", lambda: sup.exit_noticed is not None, wait=5.0)
+    assert sup.last_error.startswith("hung: ")

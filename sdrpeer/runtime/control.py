@@ -20,7 +20,7 @@ import asyncio
 import contextlib
 import logging
 import socket
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 from sdrpeer.control_parts import PartAssembler, PartError, check_part, parts
@@ -125,12 +125,19 @@ class ControlChannel:
         self._on_close = on_close
         self._decoder = ControlDecoder()
         self._pending: dict[int, asyncio.Future[Report]] = {}
+        self._sent: dict[int, tuple[str, float]] = {}  # command id -> (its type, loop time sent)
         self._accept: dict[int, int] = {}  # command id -> bytes of parts its reply may bring
         self._parts = PartAssembler()
         self._next_id = 1
         self._writer: asyncio.StreamWriter | None = None
         self._reader_task: asyncio.Task[None] | None = None
         self.closed = False
+
+    def pending_since(self, kinds: Collection[str]) -> float | None:
+        """Loop time the oldest command of one of `kinds` still awaiting its reply was sent
+        (None: none is)."""
+        times = [t for kind, t in self._sent.values() if kind in kinds]
+        return min(times, default=None)
 
     async def open(self) -> None:
         """Start reading reports."""
@@ -157,6 +164,7 @@ class ControlChannel:
         self._next_id += 1
         future: asyncio.Future[Report] = asyncio.get_running_loop().create_future()
         self._pending[cid] = future
+        self._sent[cid] = (t, asyncio.get_running_loop().time())
         if accept > 0:
             self._accept[cid] = accept
         msg = {"t": t, "id": cid, **fields}
@@ -179,6 +187,7 @@ class ControlChannel:
             raise CommandError(t, "closed", str(e)) from None
         finally:
             self._pending.pop(cid, None)
+            self._sent.pop(cid, None)
             self._accept.pop(cid, None)
         if not reply.get("ok"):
             raise CommandError(t, "refused", str(reply.get("error") or ""))

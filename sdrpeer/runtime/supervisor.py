@@ -7,8 +7,9 @@ nobody asked for goes to the `RestartPolicy`: wait the backoff delay (state BACK
 again, or give up (state FAILED). `stop()` is graceful: the `exit` command, then SIGTERM after
 `exit_timeout`, then SIGKILL after `term_timeout`. A host that sends no hello within
 `hello_timeout`, or breaks the control protocol, is killed and counts as a failure; so is one
-silent for `heartbeat_timeout` (or its instance's `watchdog_s`) once initialized (the watchdog:
-a hung host is a crash to Table III, and its `last_error` says "hung").
+silent for `heartbeat_timeout` (or its instance's `watchdog_s`) once initialized, outside a
+command (the watchdog: a hung host is a crash to Table III, and its `last_error` says "hung"; a
+command such as `activate` running a long on_activated has its own timeout instead).
 States: STOPPED, STARTING (spawned, no INACTIVE yet), the host's own lifecycle states (CREATED,
 INACTIVE, ACTIVE, ERROR, FINALIZED), STOPPING, BACKOFF, FAILED; every change is timestamped.
 Trouble is passed on at once (sdrpeer.runtime.problems): each `fault` report is kept (the last
@@ -54,6 +55,9 @@ from sdrpeer.runtime.launch import (
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
 
 log = logging.getLogger(__name__)
+LIFECYCLE = ("activate", "deactivate", "reset", "exit", "restore")
+"""Commands whose callbacks may hold the host's loop for a while (the watchdog waits for them,
+up to the command timeout)."""
 _EOF_GRACE = 1.0  # seconds a host may live on after closing its control channel
 STOPPED, STARTING, STOPPING, BACKOFF, FAILED = (
     "STOPPED",
@@ -425,7 +429,13 @@ class Supervisor:
         limit = self.silence_limit()
         if limit <= 0 or proc is not self._proc or self.state == STOPPING:
             return
-        silent = asyncio.get_running_loop().time() - self._heard
+        now = asyncio.get_running_loop().time()
+        since = None if self._channel is None else self._channel.pending_since(LIFECYCLE)
+        if since is not None and now - since < self.config.command_timeout:
+            # inside a lifecycle call (on_activated touching its memory reserve...): the
+            # command's own timeout applies; the silence counts again from its end
+            self._heard = now
+        silent = now - self._heard
         if silent >= limit:
             self._kill(proc, f"hung: no heartbeat for {silent:.1f}s (watchdog {limit:g}s)")
         else:
