@@ -70,11 +70,11 @@ async def _serve(config: AgentConfig) -> int:
     return await _stop_within(agent, STOP_DEADLINE)
 
 
-async def _stop_within(agent: Agent, deadline: float, *, leave: bool = True) -> int:
+async def _stop_within(agent: Agent, deadline: float) -> int:
     """A graceful stop bounded by `deadline` seconds; past it, say what hung and abort (exit 1)."""
     try:
         async with asyncio.timeout(deadline):
-            await agent.stop(leave=leave)
+            await agent.stop()
     except TimeoutError:
         log.error(
             "stop still waiting for %s after %gs: killing the component hosts and exiting",
