@@ -137,11 +137,11 @@ async def post_recovery(request: web.Request) -> web.Response:
     for key in ("robot", "component", "instance", "action"):
         value = body.get(key)
         if not isinstance(value, str) or not NAME_RE.fullmatch(value):
-            return json_error(400, f"field {key!r}: expected a name, got {value!r}")
+            return json_error(400, f"field {key!r}: expected a name, got {value!r:.80}")
         fields.append(value)
     if fields[3] not in RECOVERY_STEPS:
         steps = ", ".join(RECOVERY_STEPS)
-        return json_error(400, f"field 'action': expected one of {steps}, got {fields[3]!r}")
+        return json_error(400, f"field 'action': expected one of {steps}, got {fields[3]!r:.80}")
     try:
         result = await coord.recover_component(*fields)
     except NotAllocator as e:
