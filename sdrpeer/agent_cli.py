@@ -74,13 +74,13 @@ def main(argv: Sequence[str]) -> int:
 
 def _priority(text: str) -> int:
     """--priority: an integer within the record's range."""
-    from sdrpeer.limits import LIMITS  # noqa: PLC0415 - the fast path imports little
+    from sdrpeer.limits import check_int  # noqa: PLC0415 - the fast path imports little
 
-    limit = LIMITS["priority"]
     try:
         n = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if not limit.low <= n <= limit.high:
-        raise argparse.ArgumentTypeError(f"{n} is out of range ({limit.shown})")
-    return n
+    try:
+        return check_int("priority", n)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None

@@ -17,7 +17,7 @@ from typing import Any
 
 from sdrpeer.errors import ConfigError
 from sdrpeer.gossip.config import PRESETS
-from sdrpeer.limits import LIMITS
+from sdrpeer.limits import check_int
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
 LOG_LEVELS = ("debug", "info", "warning", "error")
@@ -136,11 +136,7 @@ def _as_int(value: Any) -> int:
 
 
 def _as_priority(value: Any) -> int:
-    n = _as_int(value)
-    limit = LIMITS["priority"]
-    if not limit.low <= n <= limit.high:
-        raise TypeError(f"expected an integer from {limit.shown}")
-    return n
+    return check_int("priority", _as_int(value))
 
 
 def _as_float(value: Any) -> float:
@@ -181,7 +177,7 @@ def load_agent_config(path: Path | str) -> ConfigValues:
     """Read an agent config file into typed field values; relative paths are file-relative."""
     import yaml  # noqa: PLC0415 - only --config FILE needs it (keeps the agent's start light)
 
-    from sdrpeer.monitor.yamlfile import compose, read_text  # noqa: PLC0415 - the same
+    from sdrpeer.monitor.yamlfile import compose, read_text, yaml_problem  # noqa: PLC0415
 
     path = Path(path)
     loader, root = compose(read_text(path), str(path))
@@ -206,15 +202,15 @@ def load_agent_config(path: Path | str) -> ConfigValues:
                 value = _CONVERT[field](raw)
             except TypeError as exc:
                 raise ConfigError(f"{where}: {key}: {exc}, got {raw!r}") from None
+            except ValueError as exc:  # a range: the message quotes the value
+                raise ConfigError(f"{where}: {key}: {exc}") from None
             if field in _PATH_FIELDS and not value.is_absolute():
                 value = path.parent / value
             values[field] = value
             values.origin[field] = where
         return values
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = f":{mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}{line}: not valid YAML: {exc.problem or exc}") from None
+    except yaml.MarkedYAMLError as exc:  # constructing a value (an unhashable key...)
+        raise ConfigError(yaml_problem(str(path), exc)) from None
     finally:
         loader.dispose()
 

@@ -47,6 +47,17 @@ LIMITS: dict[str, Limit] = {
 """Every bounded robot fact, by the name its inputs use."""
 
 
+def check_int(name: str, value: object, example: str = "0") -> int:
+    """`value` if it is an integer inside `LIMITS[name]` (compared exactly, however big), else
+    ValueError naming the range."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"expected an integer such as {example}, got {value!r}")
+    limit = LIMITS[name]
+    if not limit.low <= value <= limit.high:
+        raise ValueError(f"{value!r} is out of range ({limit.shown})")
+    return value
+
+
 def check(name: str, value: float, written: object = None) -> float:
     """`value` if inside `LIMITS[name]`, else ValueError naming the range (`written`: the value
     as the user wrote it, for the message)."""

@@ -90,10 +90,7 @@ def _parse(
         number, factor = float(match.group(1)), float(units[unit])
     else:
         raise wrong
-    try:
-        result = number * factor
-    except OverflowError:  # an int too big for a float
-        raise wrong from None
+    result = number * factor  # floats: an overflow is inf, refused below
     if not math.isfinite(result) or (not signed and result < 0):
         raise wrong
     return result

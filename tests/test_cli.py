@@ -39,6 +39,22 @@ def test_agent_flags_parse_onto_fields(tmp_path: Path) -> None:
     assert values["bind"] is None  # not given: the file or the default decides
 
 
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("2147483648", "2147483648 is out of range (-2147483648 to 2147483647)"),
+        ("high", "expected an integer, got 'high'"),
+    ],
+)
+def test_agent_priority_flag_is_refused_outside_the_records_range(
+    value: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as info:
+        build_parser().parse_args(["agent", "--name", "r1", "--priority", value])
+    assert info.value.code == 2
+    assert message in capsys.readouterr().err
+
+
 def test_agent_config_error_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["agent", "--name", "robot-1"]) == 2
     assert capsys.readouterr().err == (

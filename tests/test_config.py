@@ -107,6 +107,10 @@ def test_empty_file_is_no_values(tmp_path: Path) -> None:
     [
         ("name: r\nbogus: 1\n", ":2: unknown field 'bogus' (known: name, bind, join,"),
         ("name: r\npriority: high\n", ":2: priority: expected an integer, got 'high'"),
+        (
+            "name: r\npriority: -99999999999999999999\n",
+            ":2: priority: -99999999999999999999 is out of range (-2147483648 to 2147483647)",
+        ),
         ("name: r\n\ninsecure: yes please\n", ":3: insecure: expected true or false"),
         ("name: 5\n", ":1: name: expected a string, got 5"),
         ("join: [1, 2]\n", ":1: join: expected a list of HOST:PORT strings"),
@@ -122,6 +126,7 @@ def test_file_errors_name_file_line_and_field(tmp_path: Path, text: str, message
     with pytest.raises(ConfigError) as info:
         load_agent_config(path)
     assert str(info.value).startswith(str(path))
+    assert message in str(info.value)
 
 
 def test_missing_file(tmp_path: Path) -> None:

@@ -25,6 +25,7 @@ from sdrpeer.errors import ApiError, NotAllocator
 from sdrpeer.plan import plan_from_json
 from sdrpeer.runtime.handoff import MAX_STATE
 from sdrpeer.system.model import SystemDef, system_from_json
+from sdrpeer.system.recovery_defaults import ACTIONS
 
 if TYPE_CHECKING:  # the deployment stack loads after the API is up (sdrpeer.agent)
     from sdrpeer.deploy.coordinator import Coordinator
@@ -40,7 +41,7 @@ def _coord(request: web.Request) -> Coordinator:
     return coord
 
 
-RECOVERY_STEPS = ("standby_same_robot", "standby_other_robot", "launch_other_robot")
+RECOVERY_STEPS = tuple(a for a in ACTIONS if a != "restart")
 """The recovery steps that change the plan (`restart` is done where the fault is)."""
 
 

@@ -15,7 +15,6 @@ rssi_noise (0dB: standard deviation of a gaussian clipped at 3 sigma), priority 
 
 from __future__ import annotations
 
-import math
 import random
 import re
 import time
@@ -26,7 +25,7 @@ from typing import Any
 
 from sdrpeer import units
 from sdrpeer.errors import ConfigError
-from sdrpeer.limits import check
+from sdrpeer.limits import check, check_int
 from sdrpeer.monitor.yamlfile import YamlFile
 from sdrpeer.record import Metrics
 
@@ -79,13 +78,7 @@ def parse_position(value: object) -> tuple[float, float]:
 
 
 def _integer(name: str, example: str) -> Callable[[object], int]:
-    def parse(value: object) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"expected an integer such as {example}, got {value!r}")
-        check(name, float(value) if abs(value) < 2**63 else math.inf, value)
-        return value
-
-    return parse
+    return lambda value: check_int(name, value, example)
 
 
 def _noise(value: object) -> float:

@@ -32,14 +32,12 @@ MAX_DEPTH = 64
 """Deepest nesting of lists and mappings."""
 MAX_NODES = 200_000
 """Most nodes a document may hold with every alias expanded."""
+MERGE_TAG = "tag:yaml.org,2002:merge"
 PLAIN_TAGS = frozenset(
     f"tag:yaml.org,2002:{t}"
     for t in ("null", "bool", "int", "float", "str", "seq", "map", "timestamp", "binary", "merge")
 )
-"""The tags a file may carry (what a plain YAML value resolves to)."""
-
-
-MERGE_TAG = "tag:yaml.org,2002:merge"
+"""The tags a file may carry (what a plain YAML value resolves to, and merge keys)."""
 
 
 def line_of(node: yaml.Node) -> int:
@@ -96,6 +94,13 @@ class _Composer(yaml.SafeLoader):
             raise _Refused(None, None, f"more than {MAX_NODES} values once aliases expand", mark)
 
 
+def yaml_problem(name: str, e: yaml.MarkedYAMLError) -> str:
+    """`name:line: not valid YAML: what` for a composer's or constructor's error."""
+    mark = e.problem_mark or e.context_mark
+    line = f":{mark.line + 1}" if mark is not None else ""
+    return f"{name}{line}: not valid YAML: {e.problem or e.context}"
+
+
 def compose(text: str, name: str, error: type[ConfigError] = ConfigError) -> tuple[Any, Any]:
     """(loader, root node or None) of one YAML document, under the module's limits; every
     problem is `error("name:line: not valid YAML: ...")`. Construct values with
@@ -106,9 +111,7 @@ def compose(text: str, name: str, error: type[ConfigError] = ConfigError) -> tup
         loader = _Composer(text)
         return loader, loader.get_single_node()
     except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        line = f":{mark.line + 1}" if mark is not None else ""
-        raise error(f"{name}{line}: not valid YAML: {e.problem or e.context}") from None
+        raise error(yaml_problem(name, e)) from None
     except yaml.reader.ReaderError as e:
         at = text.count("\n", 0, max(0, e.position)) + 1
         raise error(
