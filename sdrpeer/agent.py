@@ -454,15 +454,25 @@ class Agent:
         if state is not None and state[0] is self.current:
             return state[1]
         alive: dict[str, RobotRecord] = {}
+        members = {self.name}
+        heard = {self.name}
+        others = False
         if self.core is not None:
             for m in self.core.members():
-                if m.name != self.name and STATE_NAMES.get(m.state) in ("alive", "suspect"):
+                if m.name == self.name:
+                    continue
+                others = True
+                what = STATE_NAMES.get(m.state)
+                if what != "left":
+                    members.add(m.name)
+                if what in ("alive", "suspect"):
+                    heard.add(m.name)
                     rec = self.records.get(m.name)
                     if rec is not None:
                         alive[m.name] = rec[1]
         if self.current is not None:
             alive[self.name] = self.current
-        made = ClusterState(alive, sorted(alive))
+        made = ClusterState(alive, sorted(alive), frozenset(members), frozenset(heard), others)
         self._state = (self.current, made)
         return made
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -26,12 +27,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+import pytest
+
 from sdrpeer.wire import Keyring, format_key
 
 REPO = Path(__file__).resolve().parents[1]
 POLL = 0.1
 WAIT = 15.0
 START_WAIT = 10.0
+NETNS_ONLY = pytest.mark.skipif(
+    os.geteuid() != 0 or not all(shutil.which(t) for t in ("ip", "iptables", "tc")),
+    reason="NAMESPACE LAB NOT TESTED: needs root with ip, iptables and tc "
+    "(tools/check installs iptables as root)",
+)
+"""Marks a test of the namespace lab (sdrpeer.netlab): it needs root and the tools."""
 LOG_TAIL = 15
 T = TypeVar("T")
 

@@ -83,6 +83,26 @@ def test_recoveries_convergence_plans_and_memory() -> None:
     assert report["agent_rss_growth_mib"] == 0.0  # 100 bytes: rounds to nothing
 
 
+def test_recoveries_are_reported_isolated_or_overlapping() -> None:
+    judge = Judge(["A"])
+    judge.observe(look(0.0, {"A": {"r1"}}))
+    judge.fault(1.0, "kill_host")  # alone: isolated
+    judge.observe(look(1.5, {"A": {"r2"}}))
+    judge.fault(2.0, "partition", until=9.0)  # recovered at 3, before the next fault: isolated
+    judge.observe(look(3.0, {"A": {"r2"}}))
+    judge.fault(5.0, "kill_host")  # while the partition is on: overlapping
+    judge.observe(look(6.0, {"A": {"r3"}}))
+    judge.fault(10.0, "loss", until=12.0)  # after the partition ended: isolated
+    judge.observe(look(13.0, {"A": {"r3"}}))
+    report = judge.report()
+    assert report["recovery_s"]["n"] == 4
+    assert report["recovery_isolated_s"] == {"n": 3, "p50": 1.0, "p99": 3.0, "max": 3.0,
+                                             "mean": 1.5}  # fmt: skip
+    assert report["recovery_overlapping_s"] == {"n": 1, "p50": 1.0, "p99": 1.0, "max": 1.0,
+                                                "mean": 1.0}  # fmt: skip
+    assert Judge(["A"]).fence_window_s == 1.0  # the window is the default
+
+
 def test_the_chaos_system_pairs_cameras_and_detectors_with_standbys() -> None:
     system = chaos_system(5)
     assert [c["name"] for c in system["components"]] == ["Cam0", "Det0", "Cam1", "Det1", "Cam2"]

@@ -62,7 +62,7 @@ def tally_on(robot: str) -> Any:
 def test_a_standby_goes_on_from_the_last_synced_state_when_the_robot_dies(
     cluster: RealCluster, tmp_path: Path
 ) -> None:
-    one, two = cluster.start_many(2)
+    one, two, _ = cluster.start_many(3)  # two of three go on as the fleet (a majority)
     doc = deploy(cluster, one, write(tmp_path, TALLY.format(name="synced", sync=", sync: 300ms")))
     tally = doc["components"][0]
     assert (tally["robot"], tally["standbys"][0]["instance"]) == ("robot-1", "Tally-s1")
@@ -79,6 +79,27 @@ def test_a_standby_goes_on_from_the_last_synced_state_when_the_robot_dies(
     last = counts(two, "Tally-s1", "restored")[-1]
     assert started == [last]  # it counts on from the last state it received, not from 0
     assert last >= synced[-1] >= 3
+
+
+@pytest.mark.parametrize("quorum", ["majority", "any"])
+def test_of_two_robots_the_survivor_goes_on_only_with_quorum_any(
+    cluster: RealCluster, tmp_path: Path, quorum: str
+) -> None:
+    """A fleet of two cannot tell robot-1's death from a cut: by default (majority) robot-2 alone
+    is cut off and runs nothing; with `quorum: any` its standby takes over."""
+    one, two = cluster.start_many(2)
+    text = TALLY.format(name="two", sync="").replace(
+        "components:", f"allocation: {{quorum: {quorum}}}\ncomponents:"
+    )
+    deploy(cluster, one, write(tmp_path, text))
+    cluster.kill(one)
+    if quorum == "any":
+        cluster.wait_until(lambda: status(two), tally_on("robot-2"), "the standby active", 20)
+        return
+    doc = cluster.wait_until(lambda: status(two), lambda d: d["cut_off"], "robot-2 cut off", 20)
+    assert doc["allocator"]["name"] is None
+    rows = two.get("/v1/instances")
+    assert [r["state"] for r in rows if r["name"] == "Tally-s1"] == ["INACTIVE"]
 
 
 def test_a_planned_move_hands_over_the_final_state(cluster: RealCluster, tmp_path: Path) -> None:

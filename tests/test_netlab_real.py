@@ -4,8 +4,6 @@ leaving nothing behind — also when the lab process itself died."""
 
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
@@ -17,15 +15,9 @@ import pytest
 from sdrpeer.client import AgentClient, wait_for
 from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
+from tests.realnet import NETNS_ONLY
 
-pytestmark = [
-    pytest.mark.realnet,
-    pytest.mark.skipif(
-        os.geteuid() != 0 or not all(shutil.which(t) for t in ("ip", "iptables", "tc")),
-        reason="NAMESPACE LAB NOT TESTED: needs root with ip, iptables and tc "
-        "(tools/check installs iptables as root)",
-    ),
-]
+pytestmark = [pytest.mark.realnet, NETNS_ONLY]
 T = TypeVar("T")
 
 

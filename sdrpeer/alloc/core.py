@@ -24,6 +24,9 @@ How it works (pure: no I/O, no clock; `allocate` is the whole API):
    constraints with `cold = True` apply (battery, links, plugins), not CPU or memory.
 6. Any instance without a robot makes the result `Infeasible` (never a partial plan), listing
    for every robot the constraint that ruled it out.
+7. `held` components keep the previous plan's placements as they are, also on robots not in the
+   view (the disconnect policy: the fleet does not replace them yet); what they hold on robots in
+   the view still counts against those robots.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ def allocate(
     previous: Plan | None = None,
     avoid: Mapping[str, Collection[str]] | None = None,
     standbys_optional: bool = False,
+    held: Collection[str] = (),
 ) -> AllocationResult:
     """Place every instance of `system` on the robots in `view` (see the module docstring).
 
@@ -60,9 +64,11 @@ def allocate(
     component off a robot where it failed, while its other components stay).
     `standbys_optional`: a standby that finds no robot is left out instead of making the result
     infeasible (recovery: the actives must run even when too few robots are left for standbys;
-    `Plan.standbys_short` tells what is missing)."""
+    `Plan.standbys_short` tells what is missing).
+    `held`: components whose previous placements are kept as they are (point 7)."""
     allocation = _Allocation(system, view, previous, avoid)
     allocation.standbys_optional = standbys_optional
+    allocation.held = frozenset(held)
     return allocation.run(epoch, version, allocator)
 
 
@@ -90,6 +96,8 @@ class _Allocation:
         self.check = Feasibility(self.robots, self.loads, system.allocation, avoid)
         self.standbys_optional = False
         """Leave out standbys that find no robot (see `allocate`)."""
+        self.held: frozenset[str] = frozenset()
+        """Components whose previous placements are kept as they are (see `allocate`)."""
         self.running_standbys: dict[str, list[tuple[int, InstanceInfo]]] = {}
         for i, inst in self.check.running.items():
             if inst.role == "standby":
@@ -198,6 +206,8 @@ class _Allocation:
         """Place every active instance (module docstring, point 2)."""
         names: dict[str, str] = {}
         for comp in self.order:
+            if comp.name in self.held:
+                continue
             prev = [p for p in self.previous.get(comp.name, ()) if p.role == "active"]
             names[comp.name] = prev[0].instance if prev else comp.name
             peers = self._peers(comp)
@@ -208,7 +218,7 @@ class _Allocation:
                     self._place(comp, names[comp.name], "active", False, i)
                     self.kept += 1
                     break
-        rest = [c for c in self.order if c.name not in self.active_at]
+        rest = [c for c in self.order if c.name not in self.active_at and c.name not in self.held]
         for comp in sorted(rest, key=lambda c: c.pin is None):
             name = names[comp.name]
             if comp.pin is not None:
@@ -242,7 +252,7 @@ class _Allocation:
         for comp in self.order:
             at = self.active_at.get(comp.name)
             spec = comp.standby
-            if at is None or spec.same_robot + spec.other_robots == 0:
+            if at is None or spec.same_robot + spec.other_robots == 0 or comp.name in self.held:
                 continue
             cold = spec.mode == "cold"
             peers = self._peers(comp)
@@ -294,8 +304,23 @@ class _Allocation:
         used = self.names[comp.name]
         return [(name, i) for name, i in pool.items() if name not in used]
 
+    def _hold(self) -> None:
+        """Keep the previous placements of every held component (module docstring, point 7)."""
+        for comp in self.order:
+            if comp.name not in self.held:
+                continue
+            for p in self.previous.get(comp.name, ()):
+                i = self.index.get(p.robot)
+                if i is None:
+                    self.placements.append(p)
+                    self.names[comp.name].add(p.instance)
+                else:
+                    self._place(comp, p.instance, p.role, p.mode == "cold", i)
+                    self.kept += 1
+
     def run(self, epoch: int, version: int, allocator: str) -> AllocationResult:
         """Place everything; a Plan, or an Infeasible report."""
+        self._hold()
         self._actives()
         self._standbys()
         if self.unplaced:

@@ -5,18 +5,21 @@ How it works: the runner looks at every robot about twice a second and hands `Ju
 robot's own word, from its instance manager), each robot's plan key, each agent's RSS, and
 whether a partition is on. The judge keeps:
 - **one active**: a component ACTIVE on two robots at once, while the network is whole, for longer
-  than `fence_window_s` is a violation (during a partition each side may run its own copy by
-  design; the clock starts at the heal). The window is what fencing can promise after a heal:
-  the two sides must first hear of each other (anti-entropy contacts a dead member's address
-  about every third push-pull, 5 s apart in the `lan` preset) and the losing side then stops its
-  copy gracefully (the host's exit, up to 5 s). 10 s by default; every episode's length is kept
-  (`double_active_s`) so the report shows how close the fleet came;
+  than `fence_window_s` (1 s) is a violation. During a partition the judge lets it pass (the side
+  cut off may keep its copy by policy; the clock starts at the heal), but with the default
+  disconnect policy (`sdrpeer.deploy.disconnect`) the side cut off has stood its actives down
+  before the heal, so a heal finds one copy. The window covers a handover: the new copy is
+  activated as the plan reaches its robot, the old one deactivated as it reaches its own. Every
+  episode's length is kept (`double_active_s`) so the report shows how close the fleet came;
 - **no plan lost**: a robot's plan key never goes backwards (plans are fenced and persisted, also
   across an agent restart), and at the end the plan still places every component;
 - **memory bounded**: each agent's RSS stays below `rss_limit` bytes;
 - **recovery**: a look where every component is ACTIVE on exactly one robot is *whole*; every
   fault started since the last whole look is recovered at this look (its recovery time is the
   difference); after the last fault ends, the first whole look must come within `converge_s`.
+  A recovery is *isolated* when no other fault was on (from its start to its end, a kill_host
+  being an instant) between the fault's start and its recovery, else *overlapping*; the report
+  gives both apart.
 `report()` is the soak's result: faults, recovery times, violations.
 """
 
@@ -54,6 +57,16 @@ def _pct(values: list[float], q: float) -> float | None:
     return round(ordered[min(len(ordered) - 1, int(q * len(ordered)))], 3)
 
 
+def _figures(values: list[float]) -> dict[str, Any]:
+    return {
+        "n": len(values),
+        "p50": _pct(values, 0.5),
+        "p99": _pct(values, 0.99),
+        "max": round(max(values), 3) if values else None,
+        "mean": round(statistics.fmean(values), 3) if values else None,
+    }
+
+
 class Judge:
     """Checks the soak's invariants look by look."""
 
@@ -61,7 +74,7 @@ class Judge:
         self,
         components: list[str],
         *,
-        fence_window_s: float = 10.0,
+        fence_window_s: float = 1.0,
         converge_s: float = 3.0,
         rss_limit: int = 200 * 1024 * 1024,
     ) -> None:
@@ -72,22 +85,28 @@ class Judge:
         self.violations: list[dict[str, Any]] = []
         self.faults: Counter[str] = Counter()
         self.recoveries: list[float] = []
+        self.isolated: list[float] = []
+        """Recovery times of faults with no other fault on meanwhile."""
+        self._spans: list[tuple[float, float]] = []
+        """(start, end) of every fault so far."""
         self.peak_rss: dict[str, int] = {}
         self.first_rss: dict[str, int] = {}
         self.converged_after: float | None = None
         self.double_active_s: list[float] = []
         """How long each episode of two actives lasted once the network was whole."""
-        self._pending: list[float] = []
+        self._pending: list[tuple[float, int]] = []
+        """(start, index in _spans) of the faults not recovered yet."""
         self._double: dict[str, float] = {}
         self._reported_double: set[str] = set()
         self._plans: dict[str, PlanKey] = {}
         self._faults_over: float | None = None
         self._looks = 0
 
-    def fault(self, t: float, kind: str) -> None:
-        """A fault was injected at `t`."""
+    def fault(self, t: float, kind: str, until: float | None = None) -> None:
+        """A fault was injected at `t`, on until `until` (None: an instant, like a kill)."""
         self.faults[kind] += 1
-        self._pending.append(t)
+        self._pending.append((t, len(self._spans)))
+        self._spans.append((t, t if until is None else max(t, until)))
 
     def faults_over(self, t: float) -> None:
         """The last fault ended at `t`: the fleet must converge within `converge_s`."""
@@ -126,7 +145,11 @@ class Judge:
                 self._violate(look.t, "memory", robot, rss=rss)
         whole = all(len(look.actives.get(c, ())) == 1 for c in self.components)
         if whole:
-            self.recoveries += [look.t - t for t in self._pending]
+            for t, k in self._pending:
+                self.recoveries.append(look.t - t)
+                others = (s for j, s in enumerate(self._spans) if j != k)
+                if not any(start <= look.t and end >= t for start, end in others):
+                    self.isolated.append(look.t - t)
             self._pending.clear()
             if self._faults_over is not None and self.converged_after is None:
                 self.converged_after = round(max(0.0, look.t - self._faults_over), 3)
@@ -151,16 +174,14 @@ class Judge:
     def report(self) -> dict[str, Any]:
         """The soak's figures."""
         growth = {r: self.peak_rss[r] - self.first_rss.get(r, 0) for r in self.peak_rss}
+        overlapping = list((Counter(self.recoveries) - Counter(self.isolated)).elements())
         return {
             "faults": dict(sorted(self.faults.items())),
             "faults_total": sum(self.faults.values()),
             "recoveries": len(self.recoveries),
-            "recovery_s": {
-                "p50": _pct(self.recoveries, 0.5),
-                "p99": _pct(self.recoveries, 0.99),
-                "max": round(max(self.recoveries), 3) if self.recoveries else None,
-                "mean": round(statistics.fmean(self.recoveries), 3) if self.recoveries else None,
-            },
+            "recovery_s": _figures(self.recoveries),
+            "recovery_isolated_s": _figures(self.isolated),
+            "recovery_overlapping_s": _figures(overlapping),
             "converged_after_s": self.converged_after,
             "double_active_episodes": len(self.double_active_s),
             "double_active_max_s": max(self.double_active_s, default=None),

@@ -130,7 +130,9 @@ class Soak:
             assert self.lab.net is not None
             net.run(self.lab.net.loss(robot, fault.amount))
         if what != "skipped":
-            self.judge.fault(t, fault.kind)
+            self.judge.fault(
+                t, fault.kind, None if fault.until is None else t + fault.until - fault.at
+            )
         self.done.append({"t": round(t, 2), "kind": fault.kind, "robots": list(fault.robots),
                           "note": what})  # fmt: skip
 
@@ -310,6 +312,13 @@ def format_report(r: dict[str, Any]) -> str:
         + ", ".join(f"{k} {v}" for k, v in r["faults"].items()),
         f"recoveries: {r['recoveries']}  time to whole again: p50 {rec['p50']} s, "
         f"p99 {rec['p99']} s, max {rec['max']} s",
+        *(
+            f"  {label}: {f['n']}, p50 {f['p50']} s, p99 {f['p99']} s, max {f['max']} s"
+            for label, f in (
+                ("isolated (no other fault on)", r["recovery_isolated_s"]),
+                ("overlapping", r["recovery_overlapping_s"]),
+            )
+        ),
         f"after the last fault: whole again in {r['converged_after_s']} s (target <= 3 s)",
         f"two actives once the network was whole: {r['double_active_episodes']} episodes, longest "
         f"{r['double_active_max_s']} s (window {r['fence_window_s']:g} s)",

@@ -9,18 +9,24 @@ moves only need to stay out of a memory shortage, and place the actives even whe
 are left for every standby: the missing standbys are placed later, when robots allow).
 `deploy` and `recover_component` (a robot's recovery step that changes who is active) run here
 too; every new plan is accepted locally, gossiped, and pushed to every alive robot.
+The disconnect policy (`deploy.disconnect`) says when a lost robot's actives are replaced: a
+component whose policy waits keeps its placements until then (`held`). One replaced off a robot
+with `reconcile: keep_original` is moved back (a planned move, state handed over) when that robot
+is alive again.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy import peers
+from sdrpeer.deploy.disconnect import held_components
 from sdrpeer.deploy.move import move_inputs, swap_to_standby
 from sdrpeer.deploy.placer import Infeasible, place
 from sdrpeer.errors import ApiError, NotAllocator
@@ -43,15 +49,40 @@ class AllocatorRole:
         self.retry_every = retry_every
         self._elected_at: float | None = None
         self._adopted_epoch = 0
-        self._last_attempt: tuple[tuple[int, str, int], frozenset[str], frozenset[str]] | None = (
-            None
-        )
+        self._last_attempt: (
+            tuple[tuple[int, str, int], frozenset[str], frozenset[str], frozenset[str]] | None
+        ) = None
         self._last_attempt_at = 0.0
         self._lock = asyncio.Lock()
+        self._lost_since: dict[str, float] = {}
+        """Robot -> when this allocator first saw it gone while the plan placed something there."""
+        self._due = math.inf
+        self._origin: dict[str, str] = {}
+        """Component (reconcile: keep_original) -> the lost robot its active was replaced off."""
+
+    def next_timer(self) -> float:
+        """When a held component may be replaced (inf: none waits)."""
+        return self._due
 
     def off_duty(self) -> None:
         """This robot does not hold the role (any more)."""
         self._elected_at = None
+        self._lost_since.clear()
+        self._origin.clear()
+        self._due = math.inf
+
+    def held(self, now: float, plan: Plan | None, state: ClusterState) -> frozenset[str]:
+        """Components on lost robots the disconnect policy does not let us replace yet."""
+        if plan is None:
+            return frozenset()
+        placed_on = {p.robot for p in plan.placements}
+        for robot in placed_on - set(state.alive):
+            self._lost_since.setdefault(robot, now)
+        for robot in list(self._lost_since):
+            if robot in state.alive or robot not in placed_on:
+                del self._lost_since[robot]
+        held, self._due = held_components(plan, state.alive, self._lost_since, now)
+        return held
 
     def view(
         self, state: ClusterState, origin: str | None, exclude: frozenset[str] = frozenset()
@@ -81,13 +112,15 @@ class AllocatorRole:
                 return
         if plan is None or plan.system is None:
             return
+        held = self.held(now, plan, state)
+        self._reconcile(plan, state)
+        lost = {p.robot for p in plan.placements if p.component not in held} - set(state.alive)
         placed_on = {p.robot for p in plan.placements}
-        lost = placed_on - set(state.alive)
         sick = frozenset(self.c.health.degraded(now))
         short = plan.standbys_short()
         if not (lost or placed_on & sick or short) or self._lock.locked():
             return
-        attempt = (plan.key, frozenset(state.alive), sick)
+        attempt = (plan.key, frozenset(state.alive), sick, held)
         if attempt == self._last_attempt and now - self._last_attempt_at < self.retry_every:
             return  # the same plan and robots failed to place already: wait or for a change
         self._last_attempt, self._last_attempt_at = attempt, now
@@ -99,7 +132,7 @@ class AllocatorRole:
                 f"standbys missing: {', '.join(f'{c} {n}' for c, n in sorted(short.items()))}"
             )
         exclude = frozenset(self.c.health.excluded(now))
-        self._reissue(plan, epoch, state, reason="; ".join(why), exclude=exclude, recovery=True)
+        self._reissue(plan, epoch, state, "; ".join(why), exclude=exclude, recovery=True, held=held)
 
     def _must_move(self, now: float, plan: Plan, state: ClusterState) -> bool:
         """Whether some placement sits on a robot that is gone or degraded."""
@@ -115,6 +148,7 @@ class AllocatorRole:
         *,
         exclude: frozenset[str] = frozenset(),
         recovery: bool = False,
+        held: frozenset[str] = frozenset(),
     ) -> None:
         """Re-allocate `plan` (smallest change) under our epoch; when that is infeasible keep the
         placements as they are (re-issued only when the epoch is new: adopting a plan).
@@ -134,6 +168,7 @@ class AllocatorRole:
                 allocator=self.c.name,
                 previous=plan,
                 recovery=recovery,
+                held=held,
             )
             if isinstance(result, Infeasible):
                 self.c.events.add(
@@ -149,11 +184,48 @@ class AllocatorRole:
         self.c.events.add(time.time(), "allocation", self.c.name, reason=reason, epoch=epoch)
         if recovery:
             moved = moved_components(plan, new)
+            self._remember_origins(plan, moved, state)
             if moved:
                 self.c.events.add(
                     time.time(), "recovery.move", self.c.name, reason=reason, moved=moved
                 )
         self._publish_plan(new, state)
+
+    def _remember_origins(
+        self, plan: Plan, moved: dict[str, list[str]], state: ClusterState
+    ) -> None:
+        """Note where `keep_original` components were replaced off a lost robot."""
+        assert plan.system is not None
+        for comp, (src, _) in moved.items():
+            if src not in state.alive and plan.system.component(comp).disconnect.reconcile == (
+                "keep_original"
+            ):
+                self._origin.setdefault(comp, src)
+
+    def _reconcile(self, plan: Plan, state: ClusterState) -> None:
+        """Move a `keep_original` component back to its robot once that robot is alive again
+        (one at a time; a move that cannot be made is given up, logged)."""
+        back = [c for c, robot in sorted(self._origin.items()) if robot in state.alive]
+        if not back or self._lock.locked():
+            return
+        comp = back[0]
+        robot = self._origin.pop(comp)
+        active = plan.active_of(comp)
+        if active is None or active.robot == robot:
+            return
+        self.c.events.add(
+            time.time(), "reconcile", self.c.name, component=comp, to=robot, policy="keep_original"
+        )
+        self.c._spawn(self._move_back(comp, robot))
+
+    async def _move_back(self, component: str, robot: str) -> None:
+        try:
+            result = await self.move_component(component, robot)
+        except (NotAllocator, LookupError, ValueError) as e:
+            log.info("cannot move %s back to %s: %s", component, robot, e)
+            return
+        if isinstance(result, Infeasible):
+            log.info("cannot move %s back to %s: %s", component, robot, result)
 
     def _publish_plan(self, plan: Plan, state: ClusterState) -> None:
         if not self.c.accept(plan, source=self.c.name):
@@ -193,19 +265,17 @@ class AllocatorRole:
                 previous = swap_to_standby(plan, component, robot)
             else:
                 avoid = {component: {robot}}
+            now = asyncio.get_running_loop().time()
             result = place(
                 plan.system,
-                self.view(
-                    state,
-                    None,
-                    frozenset(self.c.health.excluded(asyncio.get_running_loop().time())),
-                ),
+                self.view(state, None, frozenset(self.c.health.excluded(now))),
                 epoch=epoch,
                 version=version,
                 allocator=self.c.name,
                 previous=previous,
                 avoid=avoid,
                 recovery=True,
+                held=self.held(now, plan, state) - {component},
             )
             if isinstance(result, Infeasible):
                 self.c.events.add(
@@ -244,6 +314,7 @@ class AllocatorRole:
                 allocator=self.c.name,
                 previous=inputs.previous,
                 avoid=inputs.avoid,
+                held=self.held(now, plan, state) - {component},
             )
             if isinstance(result, Infeasible):
                 self.c.events.add(

@@ -5,11 +5,14 @@ local recovery's deadlines, and every `tick` seconds while a plan is held or thi
 allocator (their duties poll: state handoff, re-allocation retries); with nothing deployed an
 idle fleet steps at most every `idle_tick` seconds:
 1. the election shell is fed this robot's view and says who the allocator is, with its epoch;
-   the plan store's fence rises to every epoch seen;
+   the plan store's fence rises to every epoch seen. A robot that does not hear a majority of
+   the fleet (`deploy.disconnect`) is not eligible: the side of a cut that is cut off elects no
+   allocator and issues no plan;
 2. plan sync: if an alive robot gossips a plan newer than ours (and not fenced off), fetch it
    from that robot's API (one fetch in flight); plans pushed to `POST /v1/plan` go the same way;
 3. apply: the plan's placements on this robot become the instance manager's desired set (only
-   the names the plan owns; instances added by hand through the API are left alone);
+   the names the plan owns; instances added by hand through the API are left alone), except the
+   actives a robot cut off holds INACTIVE by their components' disconnect policy (`CutOff`);
 4. if this robot is the allocator: once it has caught up with the newest plan it can hear of
    (`adopt_after` seconds after winning, or at once when no robot gossips a newer one), it
    re-issues that plan under its own epoch — losing the allocator loses nothing — and from then
@@ -25,6 +28,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +36,7 @@ from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.allocator_role import AllocatorRole
 from sdrpeer.deploy.derive import Remote, specs_for_robot
+from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
@@ -47,7 +52,7 @@ from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.system.model import SystemDef, Thresholds
+from sdrpeer.system.model import DisconnectSpec, SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +104,13 @@ class Coordinator:
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
         self._since = SinceTracker()
+        self.cutoff = CutOff()
+        """Whether this robot is cut off from the fleet, and the actives it holds down."""
+        self._confirmed = False
+        """Back in touch, a robot of the fleet has told us its plan (gossip alone could still
+        show us the records it had before the cut)."""
+        self._confirming = False
+        self._confirm_after = 0.0
         self.role = AllocatorRole(self, adopt_after, retry_every)
 
     # ----------------------------------------------------------------- loop
@@ -131,7 +143,13 @@ class Coordinator:
     async def _loop(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            due = min(self.election.next_timer(), self.health.next_timer(), self.local.next_timer())
+            due = min(
+                self.election.next_timer(),
+                self.health.next_timer(),
+                self.local.next_timer(),
+                self.role.next_timer(),
+                self.cutoff.next_timer(self._policies_here()),
+            )
             busy = self.store.plan is not None or self.election.is_allocator()
             wait = min(self.tick if busy else self.idle_tick, max(0.0, due - loop.time()))
             with contextlib.suppress(TimeoutError):
@@ -158,8 +176,15 @@ class Coordinator:
         self.health.update(now, recovery, state.alive)
         self.local.tick()
         self._log_health()
+        fleet = fleet_of(self.name, state.members, plan, state.heard_of_others)
+        quorum = has_quorum(self.name, state.heard | state.alive.keys(), fleet) or (
+            plan is not None and plan.system is not None and plan.system.allocation.quorum == "any"
+        )
+        degraded = set(self.health.degraded(now))
+        if not quorum:  # a robot cut off from the fleet neither claims nor keeps the role
+            degraded.add(self.name)
         before = self.election.info()
-        self.election.update(now, state.alive, self._thresholds(), self.health.degraded(now))
+        self.election.update(now, state.alive, self._thresholds(), degraded)
         info = self.election.info()
         for rec in state.alive.values():
             e = rec.election
@@ -171,6 +196,12 @@ class Coordinator:
             )
             self.on_change()
         self._sync(state)
+        if self.cutoff.update(now, quorum, self.caught_up(state) and self._confirmed):
+            self._log_cutoff(len(state.heard | state.alive.keys()), len(fleet))
+        if not quorum:
+            self._confirmed = False
+        elif self.cutoff.rejoining and not self._confirming and now >= self._confirm_after:
+            self._confirm(state)
         self._apply(state)
         self.handoff.tick()
         if self.election.is_allocator():
@@ -191,6 +222,23 @@ class Coordinator:
                 value=event.value,
             )
 
+    def _log_cutoff(self, heard: int, fleet: int) -> None:
+        c = self.cutoff
+        kind = "fleet.cut_off" if c.cut else "fleet.rejoined" if c.rejoining else "fleet.in_touch"
+        log.info("%s: hears %d of %d robots", kind, heard, fleet)
+        self.events.add(time.time(), kind, self.name, heard=heard, fleet=fleet)
+
+    def _policies_here(self) -> list[DisconnectSpec]:
+        """The disconnect policies of the components active on this robot under our plan."""
+        plan = self.store.plan
+        if plan is None or plan.system is None:
+            return []
+        return [
+            plan.system.component(p.component).disconnect
+            for p in plan.on_robot(self.name)
+            if p.role == "active"
+        ]
+
     def _api_of(self, robot: str) -> str | None:
         rec = self.cluster().alive.get(robot)
         return None if rec is None else rec.api
@@ -208,6 +256,39 @@ class Coordinator:
             if self.store.accepts(p.key) and (best is None or p.key > best[1]):
                 best = (robot, p.key)
         return best
+
+    def _confirm(self, state: ClusterState) -> None:
+        """Ask one robot of the fleet (the allocator first, else the one gossiping the newest
+        plan) for its plan: a robot back from a cut resumes only on the fleet's own word."""
+        asked = {n: r for n, r in state.alive.items() if n != self.name and r.api is not None}
+        if not asked:
+            self._confirmed = True  # nobody to ask: the quorum is this robot's half alone
+            return
+
+        def newest(name: str) -> tuple[tuple[int, str, int], str]:
+            p = asked[name].plan
+            return (p.key if p is not None else (-1, "", -1), name)
+
+        leader = self.election.info().leader
+        robot = leader if leader is not None and leader in asked else max(asked, key=newest)
+        api = state.alive[robot].api
+        assert api is not None
+        self._confirming = True
+        self._spawn(self._confirm_from(robot, api))
+
+    async def _confirm_from(self, robot: str, api: str) -> None:
+        try:
+            plan = await peers.peer_plan(api, self.token)
+        except ApiError as e:
+            log.info("cannot ask %s for its plan after a cut: %s", robot, e)
+            self._confirm_after = asyncio.get_running_loop().time() + 0.5
+        else:
+            if plan is not None:
+                self.accept(plan, source=robot)
+            self._confirmed = True
+        finally:
+            self._confirming = False
+            self.wake()
 
     def caught_up(self, state: ClusterState) -> bool:
         """No alive robot gossips a plan newer than ours, and no fetch is in flight."""
@@ -277,6 +358,16 @@ class Coordinator:
                 remote[inst.name] = Remote(robot, inst.state, inst.data)
         active_here = {s["name"] for s in self.manager.status() if s.get("state") == "ACTIVE"}
         specs = specs_for_robot(plan, self.name, remote, active_here)
+        if (self.cutoff.cut or self.cutoff.rejoining) and plan.system is not None:
+            now = asyncio.get_running_loop().time()
+            system = plan.system
+            specs = [
+                replace(s, desired="inactive")
+                if s.role == "active"
+                and self.cutoff.holds_down(now, system.component(s.component).disconnect)
+                else s
+                for s in specs
+            ]
         names = {s.name for s in specs}
         current = self.manager.desired()
         for gone in sorted(self._owned - names):
@@ -291,7 +382,9 @@ class Coordinator:
         info = self.election.info()
         allocator = {"name": info.leader, "epoch": info.epoch}
         alive = self.cluster().alive
-        return status_doc(self.store.plan, alive, allocator, self._since, now_wall)
+        doc = status_doc(self.store.plan, alive, allocator, self._since, now_wall)
+        doc["cut_off"] = self.cutoff.cut
+        return doc
 
     # ----------------------------------------------------------------- the allocator
     async def request_recovery(self, d: Decision) -> bool:

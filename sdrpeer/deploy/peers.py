@@ -36,10 +36,20 @@ def peer_tokens(keyring: Keyring | None) -> list[str]:
 
 
 async def fetch_plan(api: str, token: str) -> Plan:
-    """The plan another agent holds."""
+    """The plan another agent holds (ApiError when it holds none)."""
+    plan = await peer_plan(api, token)
+    if plan is None:
+        raise ApiError(f"{api}/v1/plan: it holds no plan")
+    return plan
+
+
+async def peer_plan(api: str, token: str) -> Plan | None:
+    """The plan another agent holds, None when it holds none."""
     status, doc = await call(api, "GET", "/v1/plan", token)
-    if status != 200 or not isinstance(doc, dict) or doc.get("plan") is None:
+    if status != 200 or not isinstance(doc, dict) or "plan" not in doc:
         raise ApiError(f"{api}/v1/plan: status {status}: {_error(doc)}")
+    if doc["plan"] is None:
+        return None
     try:
         return plan_from_json(doc["plan"])
     except ValueError as e:

@@ -46,12 +46,14 @@ def place(
     previous: Plan | None,
     avoid: Mapping[str, Collection[str]] | None = None,
     recovery: bool = False,
+    held: Collection[str] = (),
 ) -> Plan | Infeasible:
     """A plan for `system` on the robots in `view`, or why there is none.
 
     `recovery`: components move because of a failure: the thresholds are `relaxed_for_recovery`
     and standbys are placed where they fit (the actives first: availability), the plan keeping
-    the system as given."""
+    the system as given. `held`: components kept where the previous plan has them (the
+    disconnect policy: their robot is lost, and the fleet does not replace them yet)."""
     result = allocate(
         relaxed_for_recovery(system) if recovery else system,
         view,
@@ -61,6 +63,7 @@ def place(
         previous=previous,
         avoid=avoid,
         standbys_optional=recovery,
+        held=held,
     )
     if result.plan is not None and recovery:
         return replace(result.plan, system=system)

@@ -20,10 +20,18 @@ import yaml
 
 from sdrpeer.runtime.spec import SpecError, _launcher, _name, _target
 from sdrpeer.system.classes import ClassInfo, check_params, inspect_target
-from sdrpeer.system.model import STANDBY_MODES, ComponentDef, Requirements, StandbySpec
+from sdrpeer.system.model import (
+    RECONCILE,
+    STANDBY_MODES,
+    ComponentDef,
+    DisconnectSpec,
+    Requirements,
+    StandbySpec,
+)
 from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.profiles import ProfileError, ProfileFigures, read_profile
 from sdrpeer.system.values import (
+    boolean,
     bounded,
     integer,
     param_value,
@@ -45,9 +53,11 @@ COMPONENT_KEYS = (
     "pin",
     "prefer",
     "watchdog",
+    "disconnect",
 )
 REQUIRES_KEYS = ("cpu", "memory", "traffic")
 STANDBY_KEYS = ("same_robot", "other_robots", "mode", "sync")
+DISCONNECT_KEYS = ("stop_after", "replace", "lost_after", "reconcile")
 
 parse_cpu = bounded(parse_percent, 0.0, 10_000.0, "0% to 10000%: percent of one core")
 parse_memory = bounded(lambda v: float(parse_size(v)), 0.0, 1e12, "0 to 1TB")
@@ -111,6 +121,7 @@ def _component(
     pin = p.get(fields, "pin", where, robot_name, None)
     prefer = p.get(fields, "prefer", where, robot_names, ())
     watchdog = p.get(fields, "watchdog", where, _watchdog, None)
+    disconnect = _disconnect(p, fields, where)
     definition = None
     if len(p.items) == errors_before:
         definition = ComponentDef(
@@ -123,6 +134,7 @@ def _component(
             pin=pin,
             prefer=prefer,
             watchdog_s=watchdog,
+            disconnect=disconnect,
         )
     if not name and "name" in fields:  # a bad name still names it for the connections
         raw = p.f.value(fields["name"])
@@ -242,20 +254,61 @@ def _traffic(
     return out
 
 
+def _block(
+    p: Problems, fields: dict[str, yaml.Node], key: str, where: str, keys: tuple[str, ...]
+) -> tuple[dict[str, yaml.Node], str] | None:
+    """The mapping under `key` with its dotted name; None when absent or not a mapping."""
+    node = fields.get(key)
+    items = None if node is None else p.mapping(node, f"{where}.{key}", keys)
+    return None if items is None else (items, f"{where}.{key}")
+
+
 def _standby(p: Problems, fields: dict[str, yaml.Node], where: str) -> StandbySpec:
-    node = fields.get("standby")
-    if node is None:
+    block = _block(p, fields, "standby", where, STANDBY_KEYS)
+    if block is None:
         return StandbySpec()
-    items = p.mapping(node, f"{where}.standby", STANDBY_KEYS)
-    if items is None:
-        return StandbySpec()
-    w = f"{where}.standby"
+    items, w = block
     return StandbySpec(
         same_robot=p.get(items, "same_robot", w, integer(0, 16), 0),
         other_robots=p.get(items, "other_robots", w, integer(0, 64), 0),
         mode=p.get(items, "mode", w, _mode, "hot"),
         sync_s=p.get(items, "sync", w, bounded(parse_duration, 0, 3600, "0s to 3600s"), 0.0),
     )
+
+
+def _disconnect(p: Problems, fields: dict[str, yaml.Node], where: str) -> DisconnectSpec:
+    """`disconnect:` (sdrpeer.deploy.disconnect); without `stop_after`, a component the fleet
+    does not replace keeps running on a robot cut off (one copy either way)."""
+    block = _block(p, fields, "disconnect", where, DISCONNECT_KEYS)
+    if block is None:
+        return DisconnectSpec()
+    items, w = block
+    replace = p.get(items, "replace", w, boolean, True)
+    return DisconnectSpec(
+        stop_after_s=p.get(items, "stop_after", w, _stop_after, 0.0 if replace else None),
+        replace=replace,
+        lost_after_s=p.get(items, "lost_after", w, _lost_after, 0.0),
+        reconcile=p.get(items, "reconcile", w, _reconcile, "keep_replacement"),
+    )
+
+
+_lost_after = bounded(parse_duration, 0, 86_400, "0s to 86400s")
+
+
+def _stop_after(value: object) -> float | None:
+    """`never`, or 0s to 86400s."""
+    if value == "never":
+        return None
+    try:
+        return _lost_after(value)
+    except ValueError as e:
+        raise ValueError(f"{e} (or never)") from None
+
+
+def _reconcile(value: object) -> str:
+    if value not in RECONCILE:
+        raise ValueError(f"expected one of {', '.join(RECONCILE)}, got {value!r}")
+    return str(value)
 
 
 def _mode(value: object) -> str:

@@ -54,6 +54,28 @@ class StandbySpec:
     `on_snapshot` -> their `on_restore`); 0: none (a planned move still carries the last state)."""
 
 
+QUORUMS = ("majority", "any")
+
+RECONCILE = ("keep_replacement", "keep_original")
+"""Which copy survives a heal: the fleet's replacement (its plan is the newer), or the robot that
+ran the component before it was cut off gets it back by a planned move (state handed over)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DisconnectSpec:
+    """What becomes of a component's active copy when its robot is cut off from the fleet
+    (in the spirit of Nomad's `disconnect` block; `sdrpeer.deploy.disconnect` carries it out)."""
+
+    stop_after_s: float | None = 0.0
+    """How long a robot cut off from the fleet keeps this active copy running (None: for ever)."""
+    replace: bool = True
+    """Whether the fleet replaces the active copy of a robot it has lost."""
+    lost_after_s: float = 0.0
+    """How long the fleet waits, once it lost the robot, before it replaces the copy."""
+    reconcile: str = "keep_replacement"
+    """Which copy survives a heal (see RECONCILE)."""
+
+
 @dataclass(frozen=True, slots=True)
 class ComponentDef:
     """One component of the system: what to run, what it needs, and where it may go."""
@@ -75,6 +97,7 @@ class ComponentDef:
     watchdog_s: float | None = None
     """Seconds its host may go without a heartbeat before it is killed as hung (None: the
     agent's default, 0: no watchdog)."""
+    disconnect: DisconnectSpec = field(default_factory=DisconnectSpec)
 
     def params_map(self) -> dict[str, Any]:
         """The parameters as a dict."""
@@ -136,6 +159,10 @@ class AllocationDef:
     """Extra constraint plugins by name (entry point group sdrpeer.constraints)."""
     preempt: bool = False
     """Whether a returning higher-priority robot takes the allocator role from a healthy one."""
+    quorum: str = "majority"
+    """majority: only robots that hear a majority of the fleet act as it (`deploy.disconnect`);
+    any: every robot does, also alone (a fleet of two that must survive either robot's death;
+    a partition then runs a copy on each side until the heal). See QUORUMS."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,6 +267,7 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
                 pin=c.get("pin"),
                 prefer=tuple(c.get("prefer", ())),
                 watchdog_s=c.get("watchdog_s"),
+                disconnect=DisconnectSpec(**c.get("disconnect", {})),
             )
         )
     conns = tuple(
@@ -260,6 +288,7 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
         weights=tuple((str(k), float(v)) for k, v in a["weights"]),
         constraints=tuple(a["constraints"]),
         preempt=bool(a["preempt"]),
+        quorum=str(a.get("quorum", "majority")),
     )
     r = doc["recovery"]
     recovery = RecoveryDef(

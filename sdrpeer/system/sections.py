@@ -19,7 +19,7 @@ from typing import Any
 import yaml
 
 from sdrpeer.system.metrics import METRICS, parse_condition
-from sdrpeer.system.model import AllocationDef, RecoveryDef, RecoveryRule, Thresholds
+from sdrpeer.system.model import QUORUMS, AllocationDef, RecoveryDef, RecoveryRule, Thresholds
 from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.recovery_defaults import ACTIONS, CAUSES, default_recovery
 from sdrpeer.system.values import boolean, bounded, integer
@@ -31,7 +31,7 @@ from sdrpeer.units import (
     parse_size,
 )
 
-ALLOCATION_KEYS = ("strategy", "constraints", "weights", "plugins", "preempt")
+ALLOCATION_KEYS = ("strategy", "constraints", "weights", "plugins", "preempt", "quorum")
 RECOVERY_KEYS = ("rules", "max_attempts", "window", "min_dwell")
 RULE_KEYS = ("cause", "when", "for", "clear", "actions")
 BUILTIN_STRATEGIES = ("first_fit", "objective")
@@ -120,6 +120,7 @@ def read_allocation(p: Problems, node: yaml.Node | None) -> AllocationDef:
         weights=weights,
         constraints=plugins,
         preempt=p.get(fields, "preempt", "allocation", boolean, False),
+        quorum=p.get(fields, "quorum", "allocation", _one_of(list(QUORUMS)), "majority"),
     )
 
 
