@@ -56,9 +56,11 @@ def test_two_actives_are_a_violation_only_past_the_fence_window_of_a_whole_netwo
     judge.observe(look(24.5, {"A": {"r1", "r3"}, "B": {"r2"}}))  # 5.5 s after the heal
     judge.observe(look(25.0, {"A": {"r1", "r3"}, "B": {"r2"}}))  # reported once
     assert [(v["kind"], v["subject"]) for v in judge.violations] == [("two_active", "A")]
-    judge.observe(look(26.0, {"A": {"r3"}, "B": {"r2"}}))  # the episode ends 7 s after the heal
-    assert judge.double_active_s == [7.0]
-    assert judge.report()["double_active_max_s"] == 7.0
+    judge.observe(look(26.0, {"A": {"r3"}, "B": {"r2"}}))  # seen until 25: 6 s after the heal
+    assert judge.double_active_s == [6.0]
+    report = judge.report()
+    assert report["double_active_max_s"] == 6.0
+    assert report["look_interval_s"]["max"] == 2.0
 
 
 def test_recoveries_convergence_plans_and_memory() -> None:

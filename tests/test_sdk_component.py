@@ -22,6 +22,7 @@ from sdrpeer.sdk import (
     Periodic,
 )
 from sdrpeer.sdk.errors import ComponentError, PortError
+from tests.virtual_time import run_virtual
 
 S = LifecycleState
 
@@ -285,20 +286,24 @@ class Ticker(Component):
         self.ticks += 1
 
 
-async def test_periodic_runs_at_roughly_the_rate_and_only_while_active() -> None:
-    comp = Ticker()
-    runner = ComponentRunner(comp)
-    await runner.initialize()
-    await asyncio.sleep(0.1)
-    assert comp.ticks == 0  # INACTIVE: nothing runs
-    await runner.activate()
-    await asyncio.sleep(0.5)
-    await runner.deactivate()
-    assert 5 <= comp.ticks <= 30  # 20 Hz for 0.5 s is 10-11; loose on purpose
-    after = comp.ticks
-    await asyncio.sleep(0.1)
-    assert comp.ticks == after
-    await runner.finalize()
+def test_periodic_runs_at_its_rate_and_only_while_active() -> None:
+    """On virtual loop time (tests/virtual_time.py) the count is exact, on any machine."""
+
+    async def scenario() -> None:
+        comp = Ticker()
+        runner = ComponentRunner(comp)
+        await runner.initialize()
+        await asyncio.sleep(0.1)
+        assert comp.ticks == 0  # INACTIVE: nothing runs
+        await runner.activate()
+        await asyncio.sleep(0.49)
+        await runner.deactivate()
+        assert comp.ticks == 10  # 20 Hz: at 0, 0.05, ..., 0.45 s
+        await asyncio.sleep(1.0)
+        assert comp.ticks == 10
+        await runner.finalize()
+
+    run_virtual(scenario())
 
 
 class RateFromParam(Ticker):
@@ -306,21 +311,27 @@ class RateFromParam(Ticker):
     rate = Param(float, 0.0, min=0.0)
 
 
-async def test_periodic_rate_from_a_param_changes_live() -> None:
-    comp = RateFromParam()
-    runner = ComponentRunner(comp)
-    await runner.initialize()
-    await runner.activate()
-    await asyncio.sleep(0.1)
-    assert comp.ticks == 0  # rate 0: paused
-    assert await runner.set_params({"rate": "50"}) == {"rate": 50.0}
-    await asyncio.sleep(0.3)
-    assert 5 <= comp.ticks <= 40
-    await runner.set_params({"rate": 0})
-    after = comp.ticks
-    await asyncio.sleep(0.1)
-    assert comp.ticks == after
-    await runner.finalize()
+def test_periodic_rate_from_a_param_changes_live() -> None:
+    async def scenario() -> None:
+        comp = RateFromParam()
+        runner = ComponentRunner(comp)
+        await runner.initialize()
+        await runner.activate()
+        await asyncio.sleep(1.0)
+        assert comp.ticks == 0  # rate 0: paused
+        assert await runner.set_params({"rate": "50"}) == {"rate": 50.0}
+        await asyncio.sleep(0.299)
+        assert comp.ticks == 15  # 50 Hz for 0.3 s: at 0, 0.02, ..., 0.28 s
+        assert await runner.set_params({"rate": 10}) == {"rate": 10.0}
+        await asyncio.sleep(0.5)
+        assert comp.ticks == 20  # the next one 0.1 s after the last, then every 0.1 s
+        await runner.set_params({"rate": 0})
+        after = comp.ticks
+        await asyncio.sleep(5.0)
+        assert comp.ticks == after
+        await runner.finalize()
+
+    run_virtual(scenario())
 
 
 class Echo(Component):

@@ -1,6 +1,6 @@
 """The chaos soak's invariants, checked on every look at the fleet (pure: times passed in).
 
-How it works: the runner looks at every robot about twice a second and hands `Judge.observe` one
+How it works: the runner looks at every robot four times a second and hands `Judge.observe` one
 `Look`: per component, the robots where an instance of it is ACTIVE as the active one (each
 robot's own word, from its instance manager), each robot's plan key, each agent's RSS, and
 whether a partition is on. The judge keeps:
@@ -9,8 +9,11 @@ whether a partition is on. The judge keeps:
   cut off may keep its copy by policy; the clock starts at the heal), but with the default
   disconnect policy (`sdrpeer.deploy.disconnect`) the side cut off has stood its actives down
   before the heal, so a heal finds one copy. The window covers a handover: the new copy is
-  activated as the plan reaches its robot, the old one deactivated as it reaches its own. Every
-  episode's length is kept (`double_active_s`) so the report shows how close the fleet came;
+  activated as the plan reaches its robot, the old one deactivated as it reaches its own. An
+  episode's length is what the looks saw (from the first to the last look that found two
+  actives: a lower bound, as fine as the looks are frequent; the report gives their spacing,
+  `look_interval_s`). Every episode's length is kept (`double_active_s`) so the report shows how
+  close the fleet came;
 - **no plan lost**: a robot's plan key never goes backwards (plans are fenced and persisted, also
   across an agent restart), and at the end the plan still places every component;
 - **memory bounded**: each agent's RSS stays below `rss_limit` bytes;
@@ -97,6 +100,11 @@ class Judge:
         self._pending: list[tuple[float, int]] = []
         """(start, index in _spans) of the faults not recovered yet."""
         self._double: dict[str, float] = {}
+        """Component -> the first look that saw two actives (the heal's, after a partition)."""
+        self._double_last: dict[str, float] = {}
+        """Component -> the last look that saw two actives."""
+        self._intervals: list[float] = []
+        self._last_look: float | None = None
         self._reported_double: set[str] = set()
         self._plans: dict[str, PlanKey] = {}
         self._faults_over: float | None = None
@@ -115,12 +123,17 @@ class Judge:
     def observe(self, look: Look) -> bool:
         """Check one look; True when it is whole (every component ACTIVE on exactly one robot)."""
         self._looks += 1
+        if self._last_look is not None:
+            self._intervals.append(look.t - self._last_look)
+        self._last_look = look.t
         for comp in self.components:
             where = look.actives.get(comp, frozenset())
             if len(where) > 1 and look.partitioned:
                 self._double[comp] = look.t  # allowed while cut: the clock starts at the heal
+                self._double_last[comp] = look.t
             elif len(where) > 1:
                 since = self._double.setdefault(comp, look.t)
+                self._double_last[comp] = look.t
                 if look.t - since > self.fence_window_s and comp not in self._reported_double:
                     self._reported_double.add(comp)
                     self._violate(
@@ -128,8 +141,9 @@ class Judge:
                     )
             else:
                 began = self._double.pop(comp) if comp in self._double else None
-                if began is not None and not look.partitioned:
-                    self.double_active_s.append(round(look.t - began, 3))
+                last = self._double_last.pop(comp, None)
+                if began is not None and last is not None and not look.partitioned:
+                    self.double_active_s.append(round(last - began, 3))
                 self._reported_double.discard(comp)
         for robot, key in look.plans.items():
             if key is None:
@@ -187,6 +201,11 @@ class Judge:
             "double_active_max_s": max(self.double_active_s, default=None),
             "fence_window_s": self.fence_window_s,
             "looks": self._looks,
+            "look_interval_s": {
+                "p50": _pct(self._intervals, 0.5),
+                "p99": _pct(self._intervals, 0.99),
+                "max": round(max(self._intervals), 3) if self._intervals else None,
+            },
             "agent_rss_peak_mib": round(max(self.peak_rss.values(), default=0) / 2**20, 1),
             "agent_rss_growth_mib": round(max(growth.values(), default=0) / 2**20, 1),
             "violations": self.violations,

@@ -6,12 +6,19 @@ loss a strict majority of the links it measures reach, from its record's link su
 deployed system's allocation thresholds (none deployed: every alive robot is eligible), priority and
 published election state from its record. Robots not alive are left out of the view (the core treats
 a missing robot as gone). The core's timers are run here too.
+
+Another robot's claim is taken at its word: a robot that claims the role is eligible in every
+view, because it judges its own eligibility (its battery, RSSI and links are its own
+measurements, its quorum its own view) and abdicates the moment it is not. Judging it again here,
+with recovery conditions whose `for:` clocks started at other moments, let one robot call the role
+vacant (and show "allocator (none)") while the rest of the fleet followed the allocator.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Collection, Mapping
+from dataclasses import replace
 
 from sdrpeer.election.config import ElectionConfig, lan
 from sdrpeer.election.core import Election
@@ -64,7 +71,8 @@ class ElectionShell:
             self.core = Election(self.name, self.config, now, known_epoch=self.known_epoch)
         t = thresholds or Thresholds()
         view = {
-            name: self._candidate(name, rec, t, name not in degraded) for name, rec in alive.items()
+            name: self._candidate(name, rec, t, name not in degraded or self._claims(name, rec))
+            for name, rec in alive.items()
         }
         for gone in self._candidates.keys() - alive.keys():
             del self._candidates[gone]
@@ -74,11 +82,18 @@ class ElectionShell:
         while self.core.next_event() is not None:
             pass
 
+    def _claims(self, name: str, rec: RobotRecord) -> bool:
+        """Whether `name` (another robot) publishes a claim to the role."""
+        e = rec.election
+        return name != self.name and e is not None and e.claiming and e.leader == name
+
     def _candidate(self, name: str, rec: RobotRecord, t: Thresholds, healthy: bool) -> Candidate:
         made = self._candidates.get(name)
         if made is not None and made[0] is rec and made[1] == t and made[2] == healthy:
             return made[3]
         c = candidate(rec, t, healthy)
+        if self._claims(name, rec) and not c.eligible:
+            c = replace(c, eligible=True)  # its claim, at its word (module docstring)
         self._candidates[name] = (rec, t, healthy, c)
         return c
 
