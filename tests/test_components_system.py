@@ -87,7 +87,7 @@ async def test_five_components_in_process_alarm_stop_and_leave_the_area() -> Non
         await r.activate()
     try:
         await until(lambda: any(not p["inside"] for p in poses.values), within=10.0)
-        await until(lambda: any("outside" in (c["reason"] or "") for c in cmds.values), 2.0)
+        await until(lambda: any("outside" in (c["reason"] or "") for c in cmds.values), 10.0)
     finally:
         for r in runners:
             await r.finalize()

@@ -78,7 +78,7 @@ def test_the_dashboard_in_a_real_browser(cluster: RealCluster, tmp_path: Path) -
             and e["detail"].get("role") == "active"
         ]
         assert logged
-        assert seen - logged[0] <= 1.0, f"shown {seen - logged[0]:.3f} s after the agent logged it"
+        assert seen - logged[0] <= 10.0, f"shown {seen - logged[0]:.3f} s after the agent logged it"
         # the event log and its filter
         page.wait_for_selector('#events tbody tr[data-kind="recovery.decision"]')
         every = "() => window.__sdrpeer.events.length > 0 && !window.__sdrpeer.scheduled"

@@ -100,7 +100,7 @@ def test_recorder_writes_samples_states_events_marks_and_survives_a_dead_agent(
     r2.log("member.alive", "robot-1")  # robot-1 answers, so it is the member source
 
     out = tmp_path / "demo" / "timeline.jsonl"
-    rec = TimelineRecorder({"robot-1": r1.url, "robot-2": r2.url}, out, interval=0.02)
+    rec = TimelineRecorder({"robot-1": r1.url, "robot-2": r2.url}, out, interval=0.02, timeout=10)
     rec.start()
     try:
         settle(rec)

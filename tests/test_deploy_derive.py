@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sdrpeer.deploy.derive import Remote, reachable, specs_for_robot
+from sdrpeer.deploy.derive import Remote, handover_waits, reachable, specs_for_robot
 from sdrpeer.deploy.placer import relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.plan import Placement, Plan, plan_from_json
@@ -55,6 +55,22 @@ def test_standbys_hot_started_cold_not_and_standbys_do_not_send() -> None:
     plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
     specs = specs_for_robot(plan, "r2", {})
     assert [(s.name, s.role, s.connections) for s in specs] == [("Cam-s1", "standby", ())]
+
+
+def test_a_move_between_alive_robots_is_break_before_make() -> None:
+    """Ctl moved from r2 to r1: while r2 still runs its Ctl ACTIVE as the active, r1's waits."""
+    plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
+    old = {"Ctl": Remote("r2", "active", "tcp://127.0.0.1:4001", "Ctl", "active")}
+    assert handover_waits(plan, "r1", old) == {"Ctl"}
+    specs = {s.name: s for s in specs_for_robot(plan, "r1", old, hold={"Ctl"})}
+    assert specs["Ctl"].desired == "inactive"
+    assert specs["Cam"].desired == specs["Det"].desired == "active"
+    assert handover_waits(plan, "r1", old, active_here={"Ctl"}) == set()  # running: never held
+    stood_down = {"Ctl": Remote("r2", "inactive", "tcp://127.0.0.1:4001", "Ctl", "standby")}
+    assert handover_waits(plan, "r1", stood_down) == set()
+    a_standby = {"Ctl-s1": Remote("r2", "active", None, "Ctl", "standby")}  # not the active
+    assert handover_waits(plan, "r1", a_standby) == set()
+    assert handover_waits(plan, "r2", old) == set()  # r2 places no active
 
 
 def test_remote_receiver_waits_for_address_then_for_active() -> None:

@@ -137,7 +137,7 @@ def test_host_dies_with_its_parent(tmp_path: Path) -> None:
         host_pid = int(pid_file.read_text())
         parent.kill()
         parent.wait(5)
-        deadline = time.monotonic() + 3
+        deadline = time.monotonic() + 10
         while _alive(host_pid) and time.monotonic() < deadline:
             time.sleep(0.02)
         assert not _alive(host_pid), "the host outlived its agent"
@@ -170,7 +170,7 @@ def test_standalone_activates_reports_and_exits_on_sigterm(tmp_path: Path) -> No
         )
     try:
         wait_log(log, "state ACTIVE")
-        text = wait_log(log, "ports out: frames_out=", 3.0)
+        text = wait_log(log, "ports out: frames_out=", 10.0)
         unix = text.split("'unix': '")[1].split("'")[0]
         assert os.path.exists(unix)
         proc.send_signal(signal.SIGTERM)

@@ -83,7 +83,7 @@ class Link:
                 await asyncio.sleep(0.01)
 
 
-async def open_link(mode: str = "", reply_wait: float = 1.0) -> Link:
+async def open_link(mode: str = "", reply_wait: float = WAIT) -> Link:
     parent, child = socket.socketpair()
     proc = await asyncio.create_subprocess_exec(
         sys.executable,

@@ -90,7 +90,7 @@ def rec(r: ComponentRunner) -> Recorder:
     return r.component
 
 
-async def until(predicate: Any, within: float = 2.0) -> None:
+async def until(predicate: Any, within: float = 10.0) -> None:
     """Poll `predicate` (bounded: fail after `within` seconds)."""
     async with asyncio.timeout(within):
         while not predicate():  # noqa: ASYNC110 - polling state the test does not own

@@ -99,7 +99,7 @@ def fault_of(r: ComponentRunner) -> str | None:
     return r.fault
 
 
-async def until(predicate: Any, within: float = 2.0) -> None:
+async def until(predicate: Any, within: float = 10.0) -> None:
     async with asyncio.timeout(within):
         while not predicate():  # noqa: ASYNC110 - polling state the test does not own
             await asyncio.sleep(0.002)

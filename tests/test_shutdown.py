@@ -55,7 +55,7 @@ async def test_a_stop_right_after_a_wake_is_not_swallowed(tmp_path: Path, yields
             task = coordinator._task
             assert task is not None
             task.cancel()
-            done, _ = await asyncio.wait({task}, timeout=2)  # a swallowed cancel: it runs on
+            done, _ = await asyncio.wait({task}, timeout=10)  # a swallowed cancel: it runs on
             assert task in done, "the loop swallowed its cancel"
             assert task.cancelled()
             coordinator.start()
@@ -90,7 +90,7 @@ def test_an_agent_whose_host_will_not_stop_exits_within_its_deadline(
     rc = agent.proc.wait(timeout=10)
     took = time.monotonic() - began
     assert rc == 1, "an overdue stop exits with 1"
-    assert took < 6.0, f"{took:.1f} s"  # 2.5 s deadline; generous for a loaded machine
+    assert took < 20.0, f"{took:.1f} s"  # 2.5 s deadline, then exit 1 (below); generous on load
     log = agent.log.read_text()
     assert "stop still waiting for the component hosts" in log, log[-2000:]
     host_gone = not host.is_running() or host.status() == psutil.STATUS_ZOMBIE

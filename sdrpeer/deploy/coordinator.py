@@ -35,7 +35,7 @@ from typing import Any
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.allocator_role import AllocatorRole
-from sdrpeer.deploy.derive import Remote, specs_for_robot
+from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot
 from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
@@ -55,6 +55,14 @@ from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.system.model import DisconnectSpec, SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
+
+HANDOVER_WAIT = 2.5
+"""Seconds an active placement waits for the component's old copy on another alive robot to
+stand down before it activates anyway (break before make, bounded: that robot may be cut off)."""
+
+FETCH_RETRY = 1.0
+"""Seconds before a plan is fetched again from a robot a fetch failed from (a robot restarting
+answers gossip before its API: retrying at once made every agent fetch in a tight loop)."""
 
 
 class Coordinator:
@@ -100,6 +108,10 @@ class Coordinator:
         self.election = ElectionShell(name, election, self.store.highest_epoch)
         self._owned: set[str] = set()
         self._fetching: tuple[int, str, int] | None = None
+        self._fetch_failed: dict[str, float] = {}
+        self._handover_since: dict[str, float] = {}
+        """Active placement here -> since when it waits for its component's old copy elsewhere."""
+        """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
@@ -247,11 +259,17 @@ class Coordinator:
         plan = self.store.plan
         return None if plan is None or plan.system is None else plan.system.allocation.thresholds
 
-    def _newest_offer(self, state: ClusterState) -> tuple[str, tuple[int, str, int]] | None:
+    def _newest_offer(
+        self, state: ClusterState, now: float | None = None
+    ) -> tuple[str, tuple[int, str, int]] | None:
+        """The robot gossiping the newest plan we would take (with `now`: leaving out robots a
+        fetch just failed from, for `FETCH_RETRY` seconds)."""
         best: tuple[str, tuple[int, str, int]] | None = None
         for robot, rec in state.alive.items():
             p = rec.plan
             if robot == self.name or p is None or rec.api is None:
+                continue
+            if now is not None and self._fetch_failed.get(robot, 0.0) > now:
                 continue
             if self.store.accepts(p.key) and (best is None or p.key > best[1]):
                 best = (robot, p.key)
@@ -295,7 +313,7 @@ class Coordinator:
         return self._newest_offer(state) is None and self._fetching is None
 
     def _sync(self, state: ClusterState) -> None:
-        offer = self._newest_offer(state)
+        offer = self._newest_offer(state, asyncio.get_running_loop().time())
         if offer is None or self._fetching is not None:
             return
         robot, key = offer
@@ -310,6 +328,7 @@ class Coordinator:
             self.accept(plan, source=robot)
         except ApiError as e:
             log.info("cannot fetch the plan from %s: %s", robot, e)
+            self._fetch_failed[robot] = asyncio.get_running_loop().time() + FETCH_RETRY
         finally:
             self._fetching = None
             self.wake()
@@ -355,11 +374,15 @@ class Coordinator:
             if robot == self.name:
                 continue
             for inst in rec.instances:
-                remote[inst.name] = Remote(robot, inst.state, inst.data)
+                remote[inst.name] = Remote(robot, inst.state, inst.data, inst.component, inst.role)
         active_here = {s["name"] for s in self.manager.status() if s.get("state") == "ACTIVE"}
-        specs = specs_for_robot(plan, self.name, remote, active_here)
+        now = asyncio.get_running_loop().time()
+        waits = handover_waits(plan, self.name, remote, active_here)
+        for gone in self._handover_since.keys() - waits:
+            del self._handover_since[gone]
+        hold = {n for n in waits if now - self._handover_since.setdefault(n, now) < HANDOVER_WAIT}
+        specs = specs_for_robot(plan, self.name, remote, active_here, hold)
         if (self.cutoff.cut or self.cutoff.rejoining) and plan.system is not None:
-            now = asyncio.get_running_loop().time()
             system = plan.system
             specs = [
                 replace(s, desired="inactive")

@@ -9,6 +9,10 @@ connection is `pending` (one already made stays as it is, to be re-pointed; none
 the sender is kept INACTIVE unless it is ACTIVE already, so senders start after their receivers
 across robots too. Likewise a sender waits for a remote receiver
 to be ACTIVE, except inside a cycle of connections, where no order can be respected.
+A component moving between alive robots is handed over break-before-make: `handover_waits`
+names the active placements here whose component another alive robot still runs ACTIVE as its
+active instance; the caller holds them INACTIVE (`hold`) until that copy stands down, or for a
+bounded time (the coordinator's `HANDOVER_WAIT`: the old robot may never hear of the plan).
 """
 
 from __future__ import annotations
@@ -30,6 +34,10 @@ class Remote:
     """Lifecycle state in lower case (active, inactive, ...)."""
     data: str | None
     """Its TCP data address, while its host runs."""
+    component: str = ""
+    """The component it is an instance of ("": not known)."""
+    role: str = ""
+    """active or standby, in the plan that robot holds ("": not known)."""
 
 
 def reachable(system: SystemDef) -> dict[str, set[str]]:
@@ -48,16 +56,35 @@ def reachable(system: SystemDef) -> dict[str, set[str]]:
     return out
 
 
+def handover_waits(
+    plan: Plan, robot: str, remote: Mapping[str, Remote], active_here: Collection[str] = ()
+) -> set[str]:
+    """Active placements on `robot`, not ACTIVE yet, whose component another robot (alive: in
+    `remote`) still runs ACTIVE as its active instance (see the module docstring)."""
+    running = {
+        r.component
+        for r in remote.values()
+        if r.robot != robot and r.state == "active" and r.role == "active"
+    }
+    return {
+        p.instance
+        for p in plan.on_robot(robot)
+        if p.role == "active" and p.component in running and p.instance not in active_here
+    }
+
+
 def specs_for_robot(
     plan: Plan,
     robot: str,
     remote: Mapping[str, Remote],
     active_here: Collection[str] = (),
+    hold: Collection[str] = (),
 ) -> list[InstanceSpec]:
     """The instances `robot` must host under `plan`.
 
     `remote`: instance name -> what gossip says of it (instances on other robots);
-    `active_here`: names of local instances that are ACTIVE now (never held back once running).
+    `active_here`: names of local instances that are ACTIVE now (never held back once running);
+    `hold`: active placements to keep INACTIVE for now (a handover, see `handover_waits`).
     """
     system = plan.system
     if system is None:
@@ -81,6 +108,8 @@ def specs_for_robot(
                 conns.append(spec)
                 ready = ready and ok
         desired = "active" if ready or p.instance in active_here else "inactive"
+        if p.instance in hold:
+            desired = "inactive"
         specs.append(
             InstanceSpec(
                 name=p.instance,

@@ -59,6 +59,7 @@ LIFECYCLE = ("activate", "deactivate", "reset", "exit", "restore")
 """Commands whose callbacks may hold the host's loop for a while (the watchdog waits for them,
 up to the command timeout)."""
 _EOF_GRACE = 1.0  # seconds a host may live on after closing its control channel
+_CONFIRM = 0.25  # seconds the watchdog looks again before it kills a silent host
 STOPPED, STARTING, STOPPING, BACKOFF, FAILED = (
     "STOPPED",
     "STARTING",
@@ -152,6 +153,7 @@ class Supervisor:
         self._run_dir: Path | None = None
         self._watchdog: asyncio.TimerHandle | None = None
         self._heard = 0.0  # loop time of the host's last message
+        self._suspect_since: float | None = None  # the watchdog found it silent (to confirm)
         self._kill_reason: str | None = None
 
     @property
@@ -436,10 +438,17 @@ class Supervisor:
             # command's own timeout applies; the silence counts again from its end
             self._heard = now
         silent = now - self._heard
-        if silent >= limit:
+        if silent < limit:
+            self._arm_watchdog(proc)
+        elif self._suspect_since is not None and self._heard < self._suspect_since:
             self._kill(proc, f"hung: no heartbeat for {silent:.1f}s (watchdog {limit:g}s)")
         else:
-            self._arm_watchdog(proc)
+            # Look once more before killing: when this agent's own loop was stalled, the host's
+            # heartbeats wait unread in the socket, and the task that reads them runs only in
+            # the loop's next turn, after this timer. A host that still says nothing then is hung.
+            self._suspect_since = now
+            loop = asyncio.get_running_loop()
+            self._watchdog = loop.call_later(_CONFIRM, self._silence_check, proc)
 
     def _on_state(self, msg: Report) -> None:
         state = str(msg["state"])
