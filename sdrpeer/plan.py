@@ -42,6 +42,10 @@ class Plan:
     placements: tuple[Placement, ...] = ()
     allocator: str = ""
     """The robot that issued the plan."""
+    origins: tuple[tuple[str, str], ...] = ()
+    """(component, robot) for each `reconcile: keep_original` component the fleet replaced off
+    a robot it lost: whichever robot holds the allocator role moves it back when that robot
+    returns (kept in the plan, so a change of allocator forgets nothing)."""
 
     @property
     def key(self) -> tuple[int, str, int]:
@@ -83,6 +87,7 @@ class Plan:
             "placements": [
                 [p.component, p.instance, p.robot, p.role, p.mode] for p in self.placements
             ],
+            "origins": [list(o) for o in self.origins],
         }
 
 
@@ -100,6 +105,7 @@ def plan_from_json(doc: Any) -> Plan:
             system=system,
             placements=placements,
             allocator=str(doc.get("allocator", "")),
+            origins=tuple((str(c), str(r)) for c, r in doc.get("origins", ())),
         )
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise ValueError(f"malformed plan: {type(e).__name__}: {e}") from None

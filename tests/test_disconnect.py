@@ -9,9 +9,11 @@ import pytest
 
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.view import ClusterView
+from sdrpeer.deploy.allocator_role import with_origins
 from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum, held_components
+from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError
-from sdrpeer.plan import Placement, Plan
+from sdrpeer.plan import Placement, Plan, plan_from_json
 from sdrpeer.system.loader import parse_system
 from sdrpeer.system.model import DisconnectSpec, StandbySpec, SystemDef, system_from_json
 from tests.test_alloc_core import TABLE_V, comp, robot
@@ -92,8 +94,7 @@ def test_back_in_touch_it_keeps_them_down_until_it_has_caught_up_with_the_plan()
     assert c.next_timer([NOW]) == math.inf
     assert not c.update(4.0, quorum=True, caught_up=False)
     assert c.update(4.5, quorum=True, caught_up=True)
-    assert not c.rejoining
-    assert not c.holds_down(4.5, NOW)
+    assert (c.rejoining, c.holds_down(4.5, NOW)) == (False, False)
 
 
 # -- the fleet side ------------------------------------------------------------------------
@@ -119,6 +120,12 @@ def test_the_fleet_waits_lost_after_and_never_replaces_what_it_may_not():
     assert due == math.inf
     # robot-2 alive again: nothing is held
     assert held_components(plan, alive | {"robot-2"}, {}, 14.0) == (frozenset(), math.inf)
+    # alive but degraded (robot-wide recovery moves its components): B, tied to it, stays
+    back = alive | {"robot-2"}
+    assert held_components(plan, back, {}, 14.0, degraded={"robot-2"}) == (
+        frozenset({"B"}),
+        math.inf,
+    )
 
 
 def test_held_components_keep_their_placements_off_the_view_and_the_rest_moves():
@@ -202,3 +209,22 @@ def test_the_allocation_quorum_is_majority_unless_a_fleet_of_two_asks_for_any():
         parse_system("allocation: {quorum: most}\n" + BASE, "s.yaml")
     assert "s.yaml:1" in str(e.value)
     assert "allocation.quorum" in str(e.value)
+
+
+def test_origins_travel_in_the_plan_until_the_component_is_back():
+    back = DisconnectSpec(reconcile="keep_original")
+    system = SystemDef("s", (comp("A", disconnect=back), comp("B")), allocation=TABLE_V)
+
+    def plan(version: int, a: str, b: str, origins: tuple[tuple[str, str], ...] = ()) -> Plan:
+        placements = (Placement("A", "A", a), Placement("B", "B", b))
+        return Plan(1, version, system, placements, "robot-1", origins)
+
+    alive = ClusterState(dict.fromkeys(("robot-1", "robot-3")))  # type: ignore[arg-type]
+    old = plan(1, "robot-2", "robot-2")
+    moved = with_origins(plan(2, "robot-3", "robot-3"), old, alive)
+    assert moved.origins == (("A", "robot-2"),)  # B (keep_replacement) is not remembered
+    assert plan_from_json(moved.to_json()) == moved  # it travels to every robot
+    later = with_origins(plan(3, "robot-3", "robot-1"), moved, alive)
+    assert later.origins == (("A", "robot-2"),)  # kept while A is elsewhere
+    home = with_origins(plan(4, "robot-2", "robot-1"), later, alive)
+    assert home.origins == ()  # A is back on robot-2

@@ -5,6 +5,8 @@ keeps what the fleet may not replace, and after the heal no component is ACTIVE 
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,7 +23,7 @@ from sdrpeer.netlab.plan import PART_CHAIN
 from sdrpeer.system.loader import parse_system
 from tests.realnet import NETNS_ONLY
 
-pytestmark = [pytest.mark.realnet, NETNS_ONLY]
+pytestmark = pytest.mark.realnet
 T = TypeVar("T")
 
 SYSTEM = """name: cut
@@ -50,7 +52,7 @@ def until(probe: Callable[[], T], ok: Callable[[T], bool], what: str, within: fl
 
 
 @pytest.fixture
-def lab(tmp_path: Path) -> Iterator[RunningLab]:
+def lab(tmp_path: Path) -> Iterator[RunningLab]:  # a namespace lab
     running = start_lab(
         UpOptions(3, tmp_path / "lab", preset="lan", netns=True, timeout=30), say=lambda _: None
     )
@@ -76,6 +78,7 @@ def placed(status: dict[str, Any]) -> dict[str, str | None]:
     return {c["component"]: c["robot"] for c in status["components"]}
 
 
+@NETNS_ONLY
 def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: RunningLab) -> None:
     clients = {r.name: AgentClient(str(r.api), r.token, timeout=2) for r in lab.lab.robots}
     one, three = clients["robot-1"], clients["robot-3"]
@@ -107,24 +110,66 @@ def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: Runni
     net.run([plan.in_ns(r, "iptables", "-F", PART_CHAIN) for r in plan.names()])
     healed = time.monotonic()
     twice: list[tuple[float, str]] = []
-    for _ in range(600):  # bounded: 600 looks, and 60 s
+    # until robot-3 is back in touch and holds the fleet's plan: Cam never ACTIVE twice
+    for _ in range(400):  # bounded: 400 looks, and 40 s
         seen = {name: actives(c) for name, c in clients.items()}
-        for comp in ("Cam", "Keep", "Back"):
-            if sum(comp in a for a in seen.values()) > 1:
-                twice.append((round(time.monotonic() - healed, 2), comp))
-        back = placed(one.get("/v1/status")).get("Back") == "robot-3"
-        if back and "Back" in seen["robot-3"] and not three.get("/v1/status")["cut_off"]:
+        twice += [
+            (round(time.monotonic() - healed, 2), comp)
+            for comp in ("Cam", "Keep", "Back")
+            if sum(comp in a for a in seen.values()) > 1
+        ]
+        status = three.get("/v1/status")
+        if not status["cut_off"] and status["plan"] == one.get("/v1/status")["plan"]:
             break
-        if time.monotonic() - healed > 60:
+        if time.monotonic() - healed > 40:
             break
         time.sleep(0.05)
     assert not any(comp == "Cam" for _, comp in twice), twice  # stood down: never two Cams
-    # keep_original: Back was moved back to robot-3 (a planned move: at most a handover)
-    assert placed(one.get("/v1/status"))["Back"] == "robot-3"
-    assert "Back" in actives(three)
-    back_twice = [t for t, comp in twice if comp == "Back"]
-    assert not back_twice or max(back_twice) - min(back_twice) < 5.0, twice  # a handover
-    assert actives(three) >= {"Keep", "Back"}
     assert "Cam" not in actives(three)
+    # keep_original: Back goes back to robot-3 (a planned move, once robot-3's link is judged
+    # sound again: the loss measured across the cut makes it degraded for a while)
+    until(
+        lambda: (placed(one.get("/v1/status"))["Back"], actives(three)),
+        lambda x: x[0] == "robot-3" and "Back" in x[1],
+        "Back moved back to robot-3",
+        60,
+    )
+    assert "Keep" in actives(three)  # never replaced, also not while robot-3 was degraded
     kinds = [e["kind"] for e in three.events(0, 1000)]
     assert kinds.index("fleet.cut_off") < kinds.index("fleet.rejoined")
+
+
+@NETNS_ONLY
+def test_an_agent_restarted_into_the_fleet_launches_nothing_from_its_old_plan(
+    lab: RunningLab,
+) -> None:
+    """robot-3's agent is SIGKILLed (its hosts with it) and the fleet re-places its components;
+    restarted with its data dir, it holds the old plan, yet it starts no host before it is in
+    touch with the fleet and has the fleet's plan (a namespace lab: its address is kept)."""
+    clients = {r.name: AgentClient(str(r.api), r.token, timeout=5) for r in lab.lab.robots}
+    one, three = clients["robot-1"], clients["robot-3"]
+    system = parse_system(SYSTEM, "cut.yaml").to_json()
+    post_when_elected(one, "/v1/deploy", {"system": system}, 30.0)
+    until(lambda: actives(three), lambda a: a == {"Cam", "Keep", "Back"}, "actives on robot-3")
+    os.killpg(lab.procs["robot-3"].pid, signal.SIGKILL)
+    lab.procs["robot-3"].wait(10)
+    until(
+        lambda: placed(one.get("/v1/status")),
+        lambda p: p["Cam"] not in (None, "robot-3"),
+        "the fleet re-placing Cam",
+    )
+    log = Path(lab.lab.robot("robot-3").log)  # type: ignore[union-attr]
+    before = len(log.read_text().splitlines())
+    lab.restart("robot-3")
+    until(
+        lambda: (three.get("/v1/status")["plan"], one.get("/v1/status")["plan"]),
+        lambda p: p[0] is not None and p[0] == p[1],
+        "robot-3 holding the fleet's plan",
+    )
+    until(lambda: actives(three), lambda a: "Keep" in a, "Keep (replace: false) back")
+    lines = log.read_text().splitlines()[before:]
+    touch = next(i for i, line in enumerate(lines) if "fleet.in_touch" in line)
+    started = [i for i, line in enumerate(lines) if "started pid" in line]
+    assert started
+    assert min(started) > touch, "\n".join(lines[: max(started) + 1])
+    assert "Cam" not in actives(three)

@@ -57,8 +57,9 @@ class AllocatorRole:
         self._lost_since: dict[str, float] = {}
         """Robot -> when this allocator first saw it gone while the plan placed something there."""
         self._due = math.inf
-        self._origin: dict[str, str] = {}
-        """Component (reconcile: keep_original) -> the lost robot its active was replaced off."""
+        self._moving_back: tuple[str, tuple[int, str, int]] | None = None
+        """The keep_original move last asked for, with the key of the plan it was asked under
+        (asked once per plan: a move that cannot be made waits for the next plan)."""
 
     def next_timer(self) -> float:
         """When a held component may be replaced (inf: none waits)."""
@@ -68,7 +69,6 @@ class AllocatorRole:
         """This robot does not hold the role (any more)."""
         self._elected_at = None
         self._lost_since.clear()
-        self._origin.clear()
         self._due = math.inf
 
     def held(self, now: float, plan: Plan | None, state: ClusterState) -> frozenset[str]:
@@ -81,7 +81,8 @@ class AllocatorRole:
         for robot in list(self._lost_since):
             if robot in state.alive or robot not in placed_on:
                 del self._lost_since[robot]
-        held, self._due = held_components(plan, state.alive, self._lost_since, now)
+        sick = self.c.health.degraded(now)
+        held, self._due = held_components(plan, state.alive, self._lost_since, now, sick)
         return held
 
     def view(
@@ -113,10 +114,10 @@ class AllocatorRole:
         if plan is None or plan.system is None:
             return
         held = self.held(now, plan, state)
-        self._reconcile(plan, state)
+        sick = frozenset(self.c.health.degraded(now))
+        self._reconcile(plan, state, sick)
         lost = {p.robot for p in plan.placements if p.component not in held} - set(state.alive)
         placed_on = {p.robot for p in plan.placements}
-        sick = frozenset(self.c.health.degraded(now))
         short = plan.standbys_short()
         if not (lost or placed_on & sick or short) or self._lock.locked():
             return
@@ -184,39 +185,28 @@ class AllocatorRole:
         self.c.events.add(time.time(), "allocation", self.c.name, reason=reason, epoch=epoch)
         if recovery:
             moved = moved_components(plan, new)
-            self._remember_origins(plan, moved, state)
             if moved:
                 self.c.events.add(
                     time.time(), "recovery.move", self.c.name, reason=reason, moved=moved
                 )
         self._publish_plan(new, state)
 
-    def _remember_origins(
-        self, plan: Plan, moved: dict[str, list[str]], state: ClusterState
-    ) -> None:
-        """Note where `keep_original` components were replaced off a lost robot."""
-        assert plan.system is not None
-        for comp, (src, _) in moved.items():
-            if src not in state.alive and plan.system.component(comp).disconnect.reconcile == (
-                "keep_original"
-            ):
-                self._origin.setdefault(comp, src)
-
-    def _reconcile(self, plan: Plan, state: ClusterState) -> None:
-        """Move a `keep_original` component back to its robot once that robot is alive again
-        (one at a time; a move that cannot be made is given up, logged)."""
-        back = [c for c, robot in sorted(self._origin.items()) if robot in state.alive]
-        if not back or self._lock.locked():
+    def _reconcile(self, plan: Plan, state: ClusterState, sick: frozenset[str]) -> None:
+        """Move a `keep_original` component back to its robot (`plan.origins`) once that robot
+        is alive again and not degraded: one move at a time, each asked once per plan."""
+        if self._lock.locked():
             return
-        comp = back[0]
-        robot = self._origin.pop(comp)
-        active = plan.active_of(comp)
-        if active is None or active.robot == robot:
+        for comp, robot in plan.origins:
+            active = plan.active_of(comp)
+            if robot not in state.alive or robot in sick or active is None:
+                continue
+            if active.robot == robot or self._moving_back == (comp, plan.key):
+                continue
+            self._moving_back = (comp, plan.key)
+            self.c.events.add(time.time(), "reconcile", self.c.name, component=comp, to=robot,
+                              policy="keep_original")  # fmt: skip
+            self.c._spawn(self._move_back(comp, robot))
             return
-        self.c.events.add(
-            time.time(), "reconcile", self.c.name, component=comp, to=robot, policy="keep_original"
-        )
-        self.c._spawn(self._move_back(comp, robot))
 
     async def _move_back(self, component: str, robot: str) -> None:
         try:
@@ -228,6 +218,7 @@ class AllocatorRole:
             log.info("cannot move %s back to %s: %s", component, robot, result)
 
     def _publish_plan(self, plan: Plan, state: ClusterState) -> None:
+        plan = with_origins(plan, self.c.store.plan, state)
         if not self.c.accept(plan, source=self.c.name):
             return
         for robot, rec in state.alive.items():
@@ -366,6 +357,27 @@ class AllocatorRole:
             )
             self._publish_plan(plan, state)
             return plan
+
+
+def with_origins(new: Plan, old: Plan | None, state: ClusterState) -> Plan:
+    """`new` with the origins of `old` it still needs (the component is not back on its robot),
+    and one for each `keep_original` active it moves off a robot that is gone."""
+    if new.system is None or old is None or old.system is None:
+        return replace(new, origins=())
+    names = {c.name for c in new.system.components}
+    same = old.system.digest() == new.system.digest()  # a new system starts afresh
+    origins = dict(old.origins) if same else {}
+    for comp, (src, _) in moved_components(old, new).items():
+        if src not in state.alive and new.system.component(comp).disconnect.reconcile == (
+            "keep_original"
+        ):
+            origins.setdefault(comp, src)
+    kept = {}
+    for comp, robot in origins.items():
+        active = new.active_of(comp)
+        if comp in names and (active is None or active.robot != robot):
+            kept[comp] = robot
+    return replace(new, origins=tuple(sorted(kept.items())))
 
 
 def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:

@@ -56,9 +56,12 @@ from sdrpeer.system.model import DisconnectSpec, SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
 
-HANDOVER_WAIT = 2.5
+HANDOVER_WAIT = 10.0
 """Seconds an active placement waits for the component's old copy on another alive robot to
-stand down before it activates anyway (break before make, bounded: that robot may be cut off)."""
+stand down before it activates anyway. The component runs meanwhile (the old copy is ACTIVE); a
+robot cut off drops out of the view at its death and is not waited for, so this bound is only a
+safety valve (a robot alive in gossip whose plan never arrives: a lossy link in a 10-robot soak
+took more than 2.5 s)."""
 
 FETCH_RETRY = 1.0
 """Seconds before a plan is fetched again from a robot a fetch failed from (a robot restarting
@@ -118,12 +121,19 @@ class Coordinator:
         self._since = SinceTracker()
         self.cutoff = CutOff()
         """Whether this robot is cut off from the fleet, and the actives it holds down."""
+        self._joined = False
+        """This robot has been in touch with the fleet (and caught up) since it started: until
+        then a plan it kept from before a restart is not applied (no host is launched for a
+        plan the fleet has very likely replaced)."""
         self._confirmed = False
         """Back in touch, a robot of the fleet has told us its plan (gossip alone could still
         show us the records it had before the cut)."""
         self._confirming = False
         self._confirm_after = 0.0
         self.role = AllocatorRole(self, adopt_after, retry_every)
+        kept = self.store.plan
+        if kept is not None and any(p.robot != name for p in kept.placements):
+            self.cutoff.restarted()  # like a robot back from a cut: the fleet's plan first
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
@@ -210,6 +220,7 @@ class Coordinator:
         self._sync(state)
         if self.cutoff.update(now, quorum, self.caught_up(state) and self._confirmed):
             self._log_cutoff(len(state.heard | state.alive.keys()), len(fleet))
+        self._joined = self._joined or not (self.cutoff.cut or self.cutoff.rejoining)
         if not quorum:
             self._confirmed = False
         elif self.cutoff.rejoining and not self._confirming and now >= self._confirm_after:
@@ -280,8 +291,9 @@ class Coordinator:
         plan) for its plan: a robot back from a cut resumes only on the fleet's own word."""
         asked = {n: r for n, r in state.alive.items() if n != self.name and r.api is not None}
         if not asked:
-            self._confirmed = True  # nobody to ask: the quorum is this robot's half alone
-            return
+            if not (state.heard | state.alive.keys()) - {self.name}:
+                self._confirmed = True  # nobody to ask: the quorum is this robot's half alone
+            return  # else their records (with their API addresses) are on their way
 
         def newest(name: str) -> tuple[tuple[int, str, int], str]:
             p = asked[name].plan
@@ -367,7 +379,7 @@ class Coordinator:
 
     def _apply(self, state: ClusterState) -> None:
         plan = self.store.plan
-        if plan is None:
+        if plan is None or not self._joined:
             return
         remote: dict[str, Remote] = {}
         for robot, rec in state.alive.items():

@@ -14,6 +14,8 @@ How it works, in three parts that share one notion of the fleet:
   INACTIVE (the host stays up, so a short cut costs one activation). Once it is back in touch it
   keeps what it held down until it has caught up with the newest plan it can hear of: the fleet
   has replaced those copies meanwhile, and re-activating them from the stale plan would run two.
+  An agent that starts with a plan placing other robots too is treated the same way (restarted
+  into a running fleet: its plan is very likely stale); it launches no host until then.
 - **the fleet side** (`held_components`): the allocator replaces an active copy on a robot it has
   lost only when that component's policy allows (`replace`) and `lost_after_s` has passed since the
   loss; until then the component keeps its placements as they are.
@@ -66,6 +68,13 @@ class CutOff:
         self.lasted = 0.0
         """How long the last cut lasted (while rejoining)."""
 
+    def restarted(self) -> None:
+        """This agent starts with a plan that places robots other than itself: it is treated
+        as back from a cut of unknown length (everything held down until it has caught up)."""
+        self.lost_at = None
+        self.rejoining = True
+        self.lasted = math.inf
+
     @property
     def cut(self) -> bool:
         """Whether this robot is cut off from the fleet now."""
@@ -108,10 +117,16 @@ class CutOff:
 
 
 def held_components(
-    plan: Plan, alive: Collection[str], lost_since: Mapping[str, float], now: float
+    plan: Plan,
+    alive: Collection[str],
+    lost_since: Mapping[str, float],
+    now: float,
+    degraded: Collection[str] = (),
 ) -> tuple[frozenset[str], float]:
     """The fleet's side: (components whose active sits on a lost robot and must not be replaced
-    yet, the time the first of them may be). `lost_since`: robot -> when the allocator saw it go."""
+    yet, the time the first of them may be). `lost_since`: robot -> when the allocator saw it go.
+    A component the fleet never replaces (`replace: false`: tied to its robot) also stays on a
+    robot that is alive but `degraded` (robot-wide recovery moves the rest off it)."""
     system = plan.system
     if system is None:
         return frozenset(), math.inf
@@ -119,9 +134,12 @@ def held_components(
     due = math.inf
     for comp in system.components:
         active = plan.active_of(comp.name)
+        policy = comp.disconnect
+        if active is not None and active.robot in degraded and not policy.replace:
+            held.add(comp.name)
+            continue
         if active is None or active.robot in alive:
             continue
-        policy = comp.disconnect
         if not policy.replace:
             held.add(comp.name)
             continue
