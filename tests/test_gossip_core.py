@@ -124,6 +124,24 @@ def test_dead_overrides_at_same_or_higher_incarnation_only() -> None:
     assert core.state_of("r1") == ALIVE
 
 
+def test_a_death_declared_across_a_heal_is_only_a_suspicion() -> None:
+    """r2 was dead to us (a partition); the deaths it declared over there reach us with the heal
+    and must not kill members we hear: they become suspicions the members refute."""
+    core = robot()
+    feed(core, 0.0, Alive("r1", addr(1), 0), Alive("r2", addr(2), 0), Alive("r3", addr(3), 0))
+    feed(core, 1.0, Dead("r2", 0, "r1"))  # r2 cut off: r1 (with us) declares it dead
+    assert core.state_of("r2") == DEAD
+    feed(core, 2.0, Dead("r3", 0, "r2"))  # its verdict while we still hold it dead
+    assert core.state_of("r3") == SUSPECT
+    feed(core, 3.0, Alive("r2", addr(2), 1))  # the heal: r2 refutes, back
+    assert core.state_of("r2") == ALIVE
+    feed(core, 3.1, Dead("r1", 0, "r2"))  # its verdict on r1, from before the heal
+    assert core.state_of("r1") == SUSPECT
+    window = core.config.stale_verdict_time
+    feed(core, 3.0 + window + 1.0, Alive("r1", addr(1), 1), Dead("r1", 1, "r2"))
+    assert core.state_of("r1") == DEAD  # long after its return, r2 is trusted again
+
+
 def test_dead_from_the_member_itself_means_left() -> None:
     core = robot()
     feed(core, 0.0, Alive("r1", addr(1), 0))

@@ -28,7 +28,6 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +35,6 @@ from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.allocator_role import AllocatorRole
 from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot
-from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
@@ -44,6 +42,7 @@ from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
+from sdrpeer.deploy.touch_shell import TouchShell
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.election.config import ElectionConfig
 from sdrpeer.errors import ApiError
@@ -52,7 +51,7 @@ from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.system.model import DisconnectSpec, SystemDef, Thresholds
+from sdrpeer.system.model import SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
 
@@ -112,28 +111,24 @@ class Coordinator:
         self._owned: set[str] = set()
         self._fetching: tuple[int, str, int] | None = None
         self._fetch_failed: dict[str, float] = {}
+        """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
         self._handover_since: dict[str, float] = {}
         """Active placement here -> since when it waits for its component's old copy elsewhere."""
-        """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
         self._since = SinceTracker()
-        self.cutoff = CutOff()
-        """Whether this robot is cut off from the fleet, and the actives it holds down."""
-        self._joined = False
-        """This robot has been in touch with the fleet (and caught up) since it started: until
-        then a plan it kept from before a restart is not applied (no host is launched for a
-        plan the fleet has very likely replaced)."""
-        self._confirmed = False
-        """Back in touch, a robot of the fleet has told us its plan (gossip alone could still
-        show us the records it had before the cut)."""
-        self._confirming = False
-        self._confirm_after = 0.0
+        self.touch = TouchShell(
+            name,
+            events,
+            self.store.plan,
+            ask=lambda api: peers.peer_plan(api, self.token),
+            accept=lambda plan, source: self.accept(plan, source=source),
+            spawn=self._spawn,
+            wake=self.wake,
+        )
+        """Whether this robot is in touch with the fleet (quorum, cut off, rejoining)."""
         self.role = AllocatorRole(self, adopt_after, retry_every)
-        kept = self.store.plan
-        if kept is not None and any(p.robot != name for p in kept.placements):
-            self.cutoff.restarted()  # like a robot back from a cut: the fleet's plan first
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
@@ -170,7 +165,7 @@ class Coordinator:
                 self.health.next_timer(),
                 self.local.next_timer(),
                 self.role.next_timer(),
-                self.cutoff.next_timer(self._policies_here()),
+                self.touch.next_timer(self.store.plan),
             )
             busy = self.store.plan is not None or self.election.is_allocator()
             wait = min(self.tick if busy else self.idle_tick, max(0.0, due - loop.time()))
@@ -198,10 +193,7 @@ class Coordinator:
         self.health.update(now, recovery, state.alive)
         self.local.tick()
         self._log_health()
-        fleet = fleet_of(self.name, state.members, plan, state.heard_of_others)
-        quorum = has_quorum(self.name, state.heard | state.alive.keys(), fleet) or (
-            plan is not None and plan.system is not None and plan.system.allocation.quorum == "any"
-        )
+        quorum = self.touch.quorum(state, plan)
         degraded = set(self.health.degraded(now))
         if not quorum:  # a robot cut off from the fleet neither claims nor keeps the role
             degraded.add(self.name)
@@ -218,13 +210,7 @@ class Coordinator:
             )
             self.on_change()
         self._sync(state)
-        if self.cutoff.update(now, quorum, self.caught_up(state) and self._confirmed):
-            self._log_cutoff(len(state.heard | state.alive.keys()), len(fleet))
-        self._joined = self._joined or not (self.cutoff.cut or self.cutoff.rejoining)
-        if not quorum:
-            self._confirmed = False
-        elif self.cutoff.rejoining and not self._confirming and now >= self._confirm_after:
-            self._confirm(state)
+        self.touch.after_sync(now, state, quorum, self.caught_up(state), info.leader)
         self._apply(state)
         self.handoff.tick()
         if self.election.is_allocator():
@@ -244,23 +230,6 @@ class Coordinator:
                 metric=event.metric,
                 value=event.value,
             )
-
-    def _log_cutoff(self, heard: int, fleet: int) -> None:
-        c = self.cutoff
-        kind = "fleet.cut_off" if c.cut else "fleet.rejoined" if c.rejoining else "fleet.in_touch"
-        log.info("%s: hears %d of %d robots", kind, heard, fleet)
-        self.events.add(time.time(), kind, self.name, heard=heard, fleet=fleet)
-
-    def _policies_here(self) -> list[DisconnectSpec]:
-        """The disconnect policies of the components active on this robot under our plan."""
-        plan = self.store.plan
-        if plan is None or plan.system is None:
-            return []
-        return [
-            plan.system.component(p.component).disconnect
-            for p in plan.on_robot(self.name)
-            if p.role == "active"
-        ]
 
     def _api_of(self, robot: str) -> str | None:
         rec = self.cluster().alive.get(robot)
@@ -285,40 +254,6 @@ class Coordinator:
             if self.store.accepts(p.key) and (best is None or p.key > best[1]):
                 best = (robot, p.key)
         return best
-
-    def _confirm(self, state: ClusterState) -> None:
-        """Ask one robot of the fleet (the allocator first, else the one gossiping the newest
-        plan) for its plan: a robot back from a cut resumes only on the fleet's own word."""
-        asked = {n: r for n, r in state.alive.items() if n != self.name and r.api is not None}
-        if not asked:
-            if not (state.heard | state.alive.keys()) - {self.name}:
-                self._confirmed = True  # nobody to ask: the quorum is this robot's half alone
-            return  # else their records (with their API addresses) are on their way
-
-        def newest(name: str) -> tuple[tuple[int, str, int], str]:
-            p = asked[name].plan
-            return (p.key if p is not None else (-1, "", -1), name)
-
-        leader = self.election.info().leader
-        robot = leader if leader is not None and leader in asked else max(asked, key=newest)
-        api = state.alive[robot].api
-        assert api is not None
-        self._confirming = True
-        self._spawn(self._confirm_from(robot, api))
-
-    async def _confirm_from(self, robot: str, api: str) -> None:
-        try:
-            plan = await peers.peer_plan(api, self.token)
-        except ApiError as e:
-            log.info("cannot ask %s for its plan after a cut: %s", robot, e)
-            self._confirm_after = asyncio.get_running_loop().time() + 0.5
-        else:
-            if plan is not None:
-                self.accept(plan, source=robot)
-            self._confirmed = True
-        finally:
-            self._confirming = False
-            self.wake()
 
     def caught_up(self, state: ClusterState) -> bool:
         """No alive robot gossips a plan newer than ours, and no fetch is in flight."""
@@ -379,7 +314,7 @@ class Coordinator:
 
     def _apply(self, state: ClusterState) -> None:
         plan = self.store.plan
-        if plan is None or not self._joined:
+        if plan is None or not self.touch.joined:
             return
         remote: dict[str, Remote] = {}
         for robot, rec in state.alive.items():
@@ -394,15 +329,7 @@ class Coordinator:
             del self._handover_since[gone]
         hold = {n for n in waits if now - self._handover_since.setdefault(n, now) < HANDOVER_WAIT}
         specs = specs_for_robot(plan, self.name, remote, active_here, hold)
-        if (self.cutoff.cut or self.cutoff.rejoining) and plan.system is not None:
-            system = plan.system
-            specs = [
-                replace(s, desired="inactive")
-                if s.role == "active"
-                and self.cutoff.holds_down(now, system.component(s.component).disconnect)
-                else s
-                for s in specs
-            ]
+        specs = self.touch.hold_down(now, plan, specs)
         names = {s.name for s in specs}
         current = self.manager.desired()
         for gone in sorted(self._owned - names):
@@ -418,7 +345,7 @@ class Coordinator:
         allocator = {"name": info.leader, "epoch": info.epoch}
         alive = self.cluster().alive
         doc = status_doc(self.store.plan, alive, allocator, self._since, now_wall)
-        doc["cut_off"] = self.cutoff.cut
+        doc["cut_off"] = self.touch.cut
         return doc
 
     # ----------------------------------------------------------------- the allocator

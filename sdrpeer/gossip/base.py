@@ -118,6 +118,8 @@ class CoreState:
         self._seen_events: dict[tuple[str, int], None] = {}
         self._sync_replied: dict[str, float] = {}
         self._dead_addrs: dict[str, tuple[Addr, float]] = {}
+        self._revived: dict[str, float] = {}
+        """Member -> when it last came back from the dead (its verdicts may be stale a while)."""
         self._seeds: list[Addr] = []
         self.counters: dict[str, int] = {}
         self._budget = config.max_datagram - config.packet_overhead - 64

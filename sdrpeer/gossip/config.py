@@ -45,6 +45,11 @@ class GossipConfig:
     long partitions)."""
     dead_reap_time: float = 60.0
     """A dead or left member is forgotten after this long."""
+    stale_verdict_time: float = 10.0
+    """A death declared by a member that is dead in our view, or came back from the dead less
+    than this long ago, is taken as a suspicion only: it was very likely declared on the far
+    side of a partition and reaches us as the partition heals (the member it names refutes it;
+    taken as a death, it made the majority lose members it could still hear)."""
     awareness_max: int = 8
     """Ceiling of the local-health score; timeouts are scaled by (1 + score)."""
     max_datagram: int = 1400

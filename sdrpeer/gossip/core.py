@@ -13,6 +13,9 @@ How it works:
 - Corrections: a robot that receives a Suspect or Dead older than the Alive it holds answers the
   sender with that Alive. Push gossip reaches almost everyone; corrections reach exactly the
   robots the epidemic missed. Together these took false deaths at 30 % loss to zero.
+- Stale verdicts: a Dead declared by a member that is dead in our view, or came back from the
+  dead less than `stale_verdict_time` ago, is merged as a Suspect (the named member refutes it):
+  such a verdict was made on the far side of a partition and arrives with the heal.
 - Records: each robot owns one versioned record; the higher version wins. A robot that finds a
   record of its own with a higher version (it restarted) jumps past it; its first version comes
   from the shell (a floor kept across restarts), so a new life does not reuse an old version.
@@ -358,6 +361,9 @@ class Membership(Probing, AntiEntropy):
         m = self._members.get(d.name)
         if m is None or d.incarnation < m.incarnation or m.state in (DEAD, LEFT):
             return
+        if d.source != d.name and self._stale_verdict(d.source):
+            self._merge_suspect(Suspect(d.name, d.incarnation, d.source))
+            return
         self._set_state(m, LEFT if d.source == d.name else DEAD, d.incarnation)
         self._enqueue(("m", m.name), d)
         self._urgent_round()
@@ -412,8 +418,20 @@ class Membership(Probing, AntiEntropy):
         self._enqueue(("m", self.name), Alive(self.name, self.addr, self.incarnation))
         self._gossip_round()
 
+    def _stale_verdict(self, source: str) -> bool:
+        """Whether a death declared by `source` is likely from the far side of a partition."""
+        src = self._members.get(source)
+        if src is None or src is self._me:
+            return False
+        if src.state in (DEAD, LEFT):
+            return True
+        back = self._revived.get(source)
+        return back is not None and self._now - back < self.config.stale_verdict_time
+
     def _set_state(self, m: Member, state: int, incarnation: int) -> None:
         previous = m.state
+        if previous == DEAD and state in (ALIVE, SUSPECT):
+            self._revived[m.name] = self._now
         self._mark(m.name)
         m.incarnation = incarnation
         if state != SUSPECT:
@@ -458,6 +476,7 @@ class Membership(Probing, AntiEntropy):
         if m is None or m.state not in (DEAD, LEFT) or m.since != since:
             return
         del self._members[name]
+        self._revived.pop(name, None)
         self._records.pop(name, None)
         self._vitals.pop(name, None)
         self._vitals_acked.pop(name, None)
