@@ -102,6 +102,8 @@ def test_recoveries_are_reported_isolated_or_overlapping() -> None:
                                              "mean": 1.5}  # fmt: skip
     assert report["recovery_overlapping_s"] == {"n": 1, "p50": 1.0, "p99": 1.0, "max": 1.0,
                                                 "mean": 1.0}  # fmt: skip
+    assert report["recovery_isolated_by_kind"] == {"kill_host": [0.5], "partition": [1.0],
+                                                   "loss": [3.0]}  # fmt: skip
     assert Judge(["A"]).fence_window_s == 1.0  # the window is the default
 
 

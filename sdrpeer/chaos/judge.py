@@ -99,6 +99,9 @@ class Judge:
         """How long each episode of two actives lasted once the network was whole."""
         self._pending: list[tuple[float, int]] = []
         """(start, index in _spans) of the faults not recovered yet."""
+        self._kinds: list[str] = []
+        """The kind of every fault so far (by index in _spans)."""
+        self.isolated_by_kind: dict[str, list[float]] = {}
         self._double: dict[str, float] = {}
         """Component -> the first look that saw two actives (the heal's, after a partition)."""
         self._double_last: dict[str, float] = {}
@@ -114,6 +117,7 @@ class Judge:
         """A fault was injected at `t`, on until `until` (None: an instant, like a kill)."""
         self.faults[kind] += 1
         self._pending.append((t, len(self._spans)))
+        self._kinds.append(kind)
         self._spans.append((t, t if until is None else max(t, until)))
 
     def faults_over(self, t: float) -> None:
@@ -164,6 +168,9 @@ class Judge:
                 others = (s for j, s in enumerate(self._spans) if j != k)
                 if not any(start <= look.t and end >= t for start, end in others):
                     self.isolated.append(look.t - t)
+                    self.isolated_by_kind.setdefault(self._kinds[k], []).append(
+                        round(look.t - t, 3)
+                    )
             self._pending.clear()
             if self._faults_over is not None and self.converged_after is None:
                 self.converged_after = round(max(0.0, look.t - self._faults_over), 3)
@@ -195,6 +202,7 @@ class Judge:
             "recoveries": len(self.recoveries),
             "recovery_s": _figures(self.recoveries),
             "recovery_isolated_s": _figures(self.isolated),
+            "recovery_isolated_by_kind": dict(sorted(self.isolated_by_kind.items())),
             "recovery_overlapping_s": _figures(overlapping),
             "converged_after_s": self.converged_after,
             "double_active_episodes": len(self.double_active_s),

@@ -329,6 +329,8 @@ def format_report(r: dict[str, Any]) -> str:
                 ("overlapping", r["recovery_overlapping_s"]),
             )
         ),
+        "  isolated, by kind: "
+        + (", ".join(f"{k} {v}" for k, v in r["recovery_isolated_by_kind"].items()) or "none"),
         f"after the last fault: whole again in {r['converged_after_s']} s (target <= 3 s)",
         f"two actives once the network was whole: {r['double_active_episodes']} episodes, longest "
         f"{r['double_active_max_s']} s seen (window {r['fence_window_s']:g} s; looks every "
