@@ -10,9 +10,10 @@ are left for every standby: the missing standbys are placed later, when robots a
 `deploy` and `recover_component` (a robot's recovery step that changes who is active) run here
 too; every new plan is accepted locally, gossiped, and pushed to every alive robot.
 The disconnect policy (`deploy.disconnect`) says when a lost robot's actives are replaced: a
-component whose policy waits keeps its placements until then (`held`). One replaced off a robot
-with `reconcile: keep_original` is moved back (a planned move, state handed over) when that robot
-is alive again.
+component whose policy waits keeps its placements until then (`held`). One replaced off a lost
+robot with `reconcile: keep_original` is noted in the plan (`Plan.origins`, so any later
+allocator knows) and moved back (a planned move, state handed over) once that robot is alive
+again and not degraded.
 """
 
 from __future__ import annotations
