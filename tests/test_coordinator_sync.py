@@ -11,14 +11,12 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.deploy import peers
-from sdrpeer.deploy.coordinator import FETCH_RETRY, Coordinator
+from sdrpeer.deploy.coordinator import FETCH_RETRY
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
-from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.record import LinkSummary, Metrics, PlanInfo, RobotRecord
-from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.supervisor import SupervisorConfig
+from tests.test_shutdown import coordinator_with
 
 
 async def test_a_failed_fetch_is_not_retried_at_once(
@@ -37,19 +35,7 @@ async def test_a_failed_fetch_is_not_retried_at_once(
     )
     me = RobotRecord(metrics, LinkSummary(), "http://127.0.0.1:8", 0, ())
     state = ClusterState({"robot-1": me, "robot-2": offers}, ["robot-1", "robot-2"])
-    manager = InstanceManager(tmp_path / "m", SupervisorConfig.fast_test(), interval=0.05)
-    await manager.start()
-    c = Coordinator(
-        "robot-1",
-        tmp_path,
-        manager,
-        lambda: state,
-        token="t" * 32,
-        events=EventLog(),
-        on_change=lambda: None,
-        tick=0.01,
-        idle_tick=0.01,
-    )
+    c, manager = await coordinator_with(tmp_path, state)
     try:
         c.start()
         loop = asyncio.get_running_loop()

@@ -248,15 +248,22 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
         await manager.stop()
 
 
-async def test_a_stopped_host_is_killed_by_the_watchdog_as_hung_and_restarted(sups):
-    """SIGSTOP: the host goes silent; after its heartbeat deadline it is killed, counted as a
-    crash (its last error says hung), and restarted."""
-    seen: list[str] = []
+async def watched(sups, seen: list[str]):
+    """A fake host beating every 0.1 s under a 0.6 s watchdog, initialized and heard from once;
+    its problems' causes go to `seen`."""
     sup = sups(fake(heartbeat=0.1), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.6))
     sup.on_problem = lambda s, cause: seen.append(cause)
     sup.start()
     await until("INACTIVE", lambda: sup.state == "INACTIVE")
     await until("a heartbeat", lambda: sup.ports)
+    return sup
+
+
+async def test_a_stopped_host_is_killed_by_the_watchdog_as_hung_and_restarted(sups):
+    """SIGSTOP: the host goes silent; after its heartbeat deadline it is killed, counted as a
+    crash (its last error says hung), and restarted."""
+    seen: list[str] = []
+    sup = await watched(sups, seen)
     old = sup.pid
     loop = asyncio.get_running_loop()
     stopped = loop.time()
@@ -275,11 +282,7 @@ async def test_a_stall_of_the_agents_own_loop_does_not_make_its_hosts_hung(sups)
     unread, and the watchdog timer runs before the task that reads them. It looks again before it
     kills: the host lives (before, it was killed as hung: 197 times in a 10-robot soak)."""
     seen: list[str] = []
-    sup = sups(fake(heartbeat=0.1), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.6))
-    sup.on_problem = lambda s, cause: seen.append(cause)
-    sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
-    await until("a heartbeat", lambda: sup.ports)
+    sup = await watched(sups, seen)
     pid = sup.pid
     for _ in range(3):
         time.sleep(1.2)  # noqa: ASYNC251 - the point: this loop does nothing for 1.2 s

@@ -23,14 +23,19 @@ from tests.realnet import RealCluster
 from tests.test_recovery_e2e import deploy
 
 
-async def _coordinator(tmp_path: Path) -> tuple[Coordinator, InstanceManager]:
+async def coordinator_with(
+    tmp_path: Path, state: ClusterState | None = None
+) -> tuple[Coordinator, InstanceManager]:
+    """robot-1's coordinator on fast ticks, with a started instance manager, seeing `state`
+    (default: no robot); the caller stops both."""
     manager = InstanceManager(tmp_path / "m", SupervisorConfig.fast_test(), interval=0.05)
     await manager.start()
+    seen = state if state is not None else ClusterState({})
     coordinator = Coordinator(
         "robot-1",
         tmp_path,
         manager,
-        lambda: ClusterState({}),
+        lambda: seen,
         token="t" * 32,
         events=EventLog(),
         on_change=lambda: None,
@@ -44,7 +49,7 @@ async def _coordinator(tmp_path: Path) -> tuple[Coordinator, InstanceManager]:
 async def test_a_stop_right_after_a_wake_is_not_swallowed(tmp_path: Path, yields: int) -> None:
     """The exact race: the wake event is set (a peer's leave record during a fleet-wide stop),
     then the loop is cancelled a few loop iterations later. Every interleaving must stop."""
-    coordinator, manager = await _coordinator(tmp_path)
+    coordinator, manager = await coordinator_with(tmp_path)
     try:
         coordinator.start()
         for _ in range(20):  # many rounds: the loop is at a different point in each
