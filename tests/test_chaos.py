@@ -50,13 +50,15 @@ def test_two_actives_are_a_violation_only_past_the_fence_window_of_a_whole_netwo
     for t in range(1, 20):  # a partition: each side may run its own A
         judge.observe(look(float(t), {"A": {"r1", "r3"}, "B": {"r2"}}, partitioned=True))
     assert judge.violations == []
-    judge.observe(look(21.0, {"A": {"r1", "r3"}, "B": {"r2"}}))  # healed at 19: 2 s
+    judge.healed(20.0)  # the clock starts at the heal, not at the last look of the partition
+    judge.observe(look(21.0, {"A": {"r1", "r3"}, "B": {"r2"}}))
     judge.observe(look(23.0, {"A": {"r1", "r3"}, "B": {"r2"}}))
+    judge.observe(look(25.0, {"A": {"r1", "r3"}, "B": {"r2"}}))  # 5 s after the heal: not past
     assert judge.violations == []
-    judge.observe(look(24.5, {"A": {"r1", "r3"}, "B": {"r2"}}))  # 5.5 s after the heal
-    judge.observe(look(25.0, {"A": {"r1", "r3"}, "B": {"r2"}}))  # reported once
+    judge.observe(look(25.5, {"A": {"r1", "r3"}, "B": {"r2"}}))  # 5.5 s after the heal
+    judge.observe(look(26.0, {"A": {"r1", "r3"}, "B": {"r2"}}))  # reported once
     assert [(v["kind"], v["subject"]) for v in judge.violations] == [("two_active", "A")]
-    judge.observe(look(26.0, {"A": {"r3"}, "B": {"r2"}}))  # seen until 25: 6 s after the heal
+    judge.observe(look(27.0, {"A": {"r3"}, "B": {"r2"}}))  # seen until 26: 6 s after the heal
     assert judge.double_active_s == [6.0]
     report = judge.report()
     assert report["double_active_max_s"] == 6.0

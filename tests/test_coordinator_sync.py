@@ -1,11 +1,13 @@
-"""Plan sync against a robot whose API does not answer (restarting: gossip is back before the
+"""Plan sync. Against a robot whose API does not answer (restarting: gossip is back before the
 API): the coordinator waits FETCH_RETRY before it asks that robot again, instead of fetching in
-a tight loop (it did, hundreds of times a second, on every agent of a 10-robot soak)."""
+a tight loop (it did, hundreds of times a second, on every agent of a 10-robot soak). And the old
+side of a heal: gossip of a newer plan's running copy stands its own copy down at once."""
 
 from __future__ import annotations
 
 import asyncio
 import itertools
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -14,8 +16,9 @@ from sdrpeer.deploy import peers
 from sdrpeer.deploy.coordinator import FETCH_RETRY
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
-from sdrpeer.plan import Plan
-from sdrpeer.record import LinkSummary, Metrics, PlanInfo, RobotRecord
+from sdrpeer.plan import Placement, Plan
+from sdrpeer.record import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
+from sdrpeer.system.loader import parse_system
 from tests.test_shutdown import coordinator_with
 
 
@@ -45,6 +48,60 @@ async def test_a_failed_fetch_is_not_retried_at_once(
         assert 2 <= len(calls) <= 4, len(calls)  # one now, then one per FETCH_RETRY
         gaps = [b - a for a, b in itertools.pairwise(calls)]
         assert min(gaps) >= FETCH_RETRY
+    finally:
+        await c.stop()
+        await manager.stop()
+
+
+async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """robot-1 runs Cnt ACTIVE under plan (1, robot-1, 1). After a heal, gossip shows robot-2
+    holding a newer plan and running Cnt ACTIVE as its active; robot-2's API does not answer
+    (the fetch hangs). robot-1 stands its copy down anyway, and says why in an event."""
+
+    async def hangs(api: str, token: str) -> Plan:
+        await asyncio.Event().wait()
+        raise AssertionError("unreachable")
+
+    monkeypatch.setattr(peers, "fetch_plan", hangs)
+    system = parse_system(
+        "name: s\ncomponents:\n  - {name: Cnt, target: tests.components_fixture:Counter,"
+        " params: {rate: 5}}\n",
+        "s.yaml",
+    )
+    old = Plan(1, 1, system, (Placement("Cnt", "Cnt", "robot-1"),), allocator="robot-1")
+    metrics = Metrics(5.0, 10**9, 10**9, 90.0, -45.0, (0.0, 0.0))
+    me = RobotRecord(metrics, LinkSummary(), "http://127.0.0.1:8", 0, ())
+    other = RobotRecord(metrics, LinkSummary(), "http://127.0.0.1:9", 0, ())
+    state = ClusterState({"robot-1": me, "robot-2": other}, ["robot-1", "robot-2"])
+    c, manager = await coordinator_with(tmp_path, state)
+
+    def cnt_state() -> str | None:
+        return next((s.get("state") for s in manager.status() if s["name"] == "Cnt"), None)
+
+    try:
+        c.start()
+        assert c.accept(old, source="robot-1")
+        async with asyncio.timeout(60):
+            while cnt_state() != "ACTIVE":  # noqa: ASYNC110
+                await asyncio.sleep(0.02)
+        running = InstanceInfo("Cnt", "Cnt", "active", "active", 1.0, 10**7, "tcp://127.0.0.1:7")
+        state.alive["robot-2"] = replace(
+            other, instances=(running,), plan=PlanInfo(2, 1, "d", "robot-2")
+        )
+        c.wake()
+        async with asyncio.timeout(30):
+            while cnt_state() != "INACTIVE":  # noqa: ASYNC110
+                await asyncio.sleep(0.02)
+        assert c.store.plan is old  # not fetched: gossip alone made it yield
+        (event,) = [e for e in c.events.since(0) if e["kind"] == "plan.superseded"]
+        assert event["detail"] == {"instance": "Cnt", "newer": ["robot-2"]}
+        state.alive["robot-2"] = replace(other, plan=PlanInfo(2, 1, "d", "robot-2"))
+        c.wake()  # the newer copy is gone (and its plan never came): robot-1's runs again
+        async with asyncio.timeout(30):
+            while cnt_state() != "ACTIVE":  # noqa: ASYNC110
+                await asyncio.sleep(0.02)
     finally:
         await c.stop()
         await manager.stop()

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sdrpeer.deploy.derive import Remote, handover_waits, reachable, specs_for_robot
+from sdrpeer.deploy.derive import (
+    Remote,
+    handover_waits,
+    reachable,
+    specs_for_robot,
+    superseded,
+)
 from sdrpeer.deploy.placer import relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.plan import Placement, Plan, plan_from_json
@@ -71,6 +77,23 @@ def test_a_move_between_alive_robots_is_break_before_make() -> None:
     a_standby = {"Ctl-s1": Remote("r2", "active", None, "Ctl", "standby")}  # not the active
     assert handover_waits(plan, "r1", a_standby) == set()
     assert handover_waits(plan, "r2", old) == set()  # r2 places no active
+
+
+def test_the_old_side_of_a_heal_yields_to_a_newer_plans_running_copy() -> None:
+    """r1 still runs Ctl ACTIVE under its old plan; r2, holding a newer plan, runs Ctl ACTIVE as
+    its active: r1 stands its copy down (held INACTIVE although it runs) before it has the plan."""
+    plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
+    new = {"Ctl": Remote("r2", "active", "tcp://127.0.0.1:4001", "Ctl", "active")}
+    assert superseded(plan, "r1", new, newer={"r2"}) == {"Ctl"}
+    specs = {s.name: s for s in specs_for_robot(plan, "r1", new, active_here={"Ctl"}, hold={"Ctl"})}
+    assert specs["Ctl"].desired == "inactive"
+    assert specs["Cam"].desired == "active"
+    assert superseded(plan, "r1", new, newer=set()) == set()  # r2's plan is not newer: r1 keeps it
+    held = {"Ctl": Remote("r2", "inactive", "tcp://127.0.0.1:4001", "Ctl", "active")}
+    assert superseded(plan, "r1", held, newer={"r2"}) == set()  # r2's copy waits: a handover
+    spare = {"Ctl-s1": Remote("r2", "active", None, "Ctl", "standby")}
+    assert superseded(plan, "r1", spare, newer={"r2"}) == set()  # a standby is not the active
+    assert superseded(plan, "r2", new, newer={"r2"}) == set()  # never yields to itself
 
 
 def test_remote_receiver_waits_for_address_then_for_active() -> None:

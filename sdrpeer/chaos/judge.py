@@ -6,7 +6,8 @@ robot's own word, from its instance manager), each robot's plan key, each agent'
 whether a partition is on. The judge keeps:
 - **one active**: a component ACTIVE on two robots at once, while the network is whole, for longer
   than `fence_window_s` (1 s) is a violation. During a partition the judge lets it pass (the side
-  cut off may keep its copy by policy; the clock starts at the heal), but with the default
+  cut off may keep its copy by policy; the clock starts at the heal, which the runner reports
+  with `healed(t)`), but with the default
   disconnect policy (`sdrpeer.deploy.disconnect`) the side cut off has stood its actives down
   before the heal, so a heal finds one copy. The window covers a handover: the new copy is
   activated as the plan reaches its robot, the old one deactivated as it reaches its own. An
@@ -103,7 +104,8 @@ class Judge:
         """The kind of every fault so far (by index in _spans)."""
         self.isolated_by_kind: dict[str, list[float]] = {}
         self._double: dict[str, float] = {}
-        """Component -> the first look that saw two actives (the heal's, after a partition)."""
+        """Component -> when its two actives began to count: the first look that saw them, or the
+        heal for two actives seen while the partition was on."""
         self._double_last: dict[str, float] = {}
         """Component -> the last look that saw two actives."""
         self._intervals: list[float] = []
@@ -123,6 +125,11 @@ class Judge:
     def faults_over(self, t: float) -> None:
         """The last fault ended at `t`: the fleet must converge within `converge_s`."""
         self._faults_over = t
+
+    def healed(self, t: float) -> None:
+        """The partition was healed at `t`: two actives seen while it was on count from `t`."""
+        for comp in self._double:
+            self._double[comp] = t
 
     def observe(self, look: Look) -> bool:
         """Check one look; True when it is whole (every component ACTIVE on exactly one robot)."""

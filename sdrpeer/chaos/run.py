@@ -108,6 +108,8 @@ class Soak:
         self.done: list[dict[str, Any]] = []
         self.down: set[str] = set()
         self.partitioned = False
+        self.t0 = time.monotonic()
+        """Where the soak's clock starts (reset when the faults begin)."""
         self.pool = ThreadPoolExecutor(max_workers=len(self.clients), thread_name_prefix="look")
 
     # -- faults ----------------------------------------------------------------------------
@@ -153,6 +155,7 @@ class Soak:
             plan = self.lab.net
             net.run([plan.in_ns(r, "iptables", "-F", PART_CHAIN) for r in plan.names()])
             self.partitioned = False
+            self.judge.healed(time.monotonic() - self.t0)  # once every rule is gone
         elif fault.kind == "loss" and self.lab.net is not None:
             net.run(self.lab.net.loss(robot, 0.0))
 
@@ -257,7 +260,7 @@ def _soak(
     faults = schedule(opts.seed, opts.robots, duration, netns)
     ends = sorted(((f.until, i) for i, f in enumerate(faults) if f.until is not None))
     say(f"deployed; {len(faults)} faults over {duration:g} s")
-    t0 = time.monotonic()
+    t0 = soak.t0 = time.monotonic()
     started = ended = 0
     next_look = 0.0
     while True:

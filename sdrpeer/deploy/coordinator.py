@@ -12,7 +12,9 @@ idle fleet steps at most every `idle_tick` seconds:
    from that robot's API (one fetch in flight); plans pushed to `POST /v1/plan` go the same way;
 3. apply: the plan's placements on this robot become the instance manager's desired set (only
    the names the plan owns; instances added by hand through the API are left alone), except the
-   actives a robot cut off holds INACTIVE by their components' disconnect policy (`CutOff`);
+   actives a robot cut off holds INACTIVE by their components' disconnect policy (`CutOff`), and
+   the actives a robot holding a newer plan already runs (`derive.superseded`: the old side of a
+   heal stands down on the first gossip of the new side, before it has fetched the newer plan);
 4. if this robot is the allocator: once it has caught up with the newest plan it can hear of
    (`adopt_after` seconds after winning, or at once when no robot gossips a newer one), it
    re-issues that plan under its own epoch — losing the allocator loses nothing — and from then
@@ -34,7 +36,7 @@ from typing import Any
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.allocator_role import AllocatorRole
-from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot
+from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot, superseded
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
@@ -114,6 +116,8 @@ class Coordinator:
         """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
         self._handover_since: dict[str, float] = {}
         """Active placement here -> since when it waits for its component's old copy elsewhere."""
+        self._yielded: set[str] = set()
+        """Active placements here stood down for a newer plan's copy elsewhere (`superseded`)."""
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
@@ -328,6 +332,18 @@ class Coordinator:
         for gone in self._handover_since.keys() - waits:
             del self._handover_since[gone]
         hold = {n for n in waits if now - self._handover_since.setdefault(n, now) < HANDOVER_WAIT}
+        newer = {
+            robot
+            for robot, rec in state.alive.items()
+            if robot != self.name and rec.plan is not None and self.store.accepts(rec.plan.key)
+        }
+        yielded = superseded(plan, self.name, remote, newer)
+        for name in sorted(yielded - self._yielded):
+            self.events.add(
+                time.time(), "plan.superseded", self.name, instance=name, newer=sorted(newer)
+            )
+        self._yielded = yielded
+        hold |= yielded
         specs = specs_for_robot(plan, self.name, remote, active_here, hold)
         specs = self.touch.hold_down(now, plan, specs)
         names = {s.name for s in specs}

@@ -13,6 +13,11 @@ A component moving between alive robots is handed over break-before-make: `hando
 names the active placements here whose component another alive robot still runs ACTIVE as its
 active instance; the caller holds them INACTIVE (`hold`) until that copy stands down, or for a
 bounded time (the coordinator's `HANDOVER_WAIT`: the old robot may never hear of the plan).
+The old side yields at once: `superseded` names the active placements here whose component a
+robot holding a newer plan (one this robot's store would take) already runs ACTIVE as its active
+instance. That is the old side of a healed partition, or of a move whose plan reached the new robot
+first; it stands its copy down as soon as gossip shows the newer copy running, before it has
+fetched the newer plan itself.
 """
 
 from __future__ import annotations
@@ -70,6 +75,21 @@ def handover_waits(
         p.instance
         for p in plan.on_robot(robot)
         if p.role == "active" and p.component in running and p.instance not in active_here
+    }
+
+
+def superseded(
+    plan: Plan, robot: str, remote: Mapping[str, Remote], newer: Collection[str]
+) -> set[str]:
+    """Active placements on `robot` whose component a robot in `newer` (robots holding a plan
+    newer than `plan`) runs ACTIVE as its active instance (see the module docstring)."""
+    running = {
+        r.component
+        for r in remote.values()
+        if r.robot in newer and r.robot != robot and r.state == "active" and r.role == "active"
+    }
+    return {
+        p.instance for p in plan.on_robot(robot) if p.role == "active" and p.component in running
     }
 
 
