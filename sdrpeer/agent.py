@@ -82,6 +82,15 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("sdrpeer.agent")
 
+INSECURE_WARNING = (
+    "running INSECURE (no cluster key): gossip on %s is neither authenticated, encrypted nor "
+    "replay-protected: anyone who can reach it reads every robot's metrics, position and plan "
+    "and can forge members, deaths and records; and robots cannot authenticate each other, so "
+    "plans, recovery requests and component states do not travel between robots (this robot "
+    "works alone). The HTTP API still needs this agent's token. For a fleet, give every robot "
+    "the same --key-file."
+)
+
 
 class Agent:
     """One robot's agent (implements `sdrpeer.api.view.AgentView`)."""
@@ -159,7 +168,7 @@ class Agent:
         self._started = loop.time()
         cfg.data_dir.mkdir(parents=True, exist_ok=True)
         if cfg.insecure:
-            log.warning("running INSECURE: gossip is neither authenticated nor replay-protected")
+            log.warning(INSECURE_WARNING, cfg.bind)
         else:
             assert cfg.key_file is not None
             self.keyring = Keyring.from_file(cfg.key_file)

@@ -33,7 +33,10 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for the virtual robot")
     p.add_argument("--key-file", type=Path, metavar="FILE", help="cluster key (hex)")
     p.add_argument(
-        "--insecure", action="store_true", default=None, help="run without a cluster key"
+        "--insecure",
+        action="store_true",
+        default=None,
+        help="run without a cluster key: gossip open to all, no calls between robots",
     )
     p.add_argument("--token-file", type=Path, metavar="FILE", help="API token (default: generate)")
     p.add_argument("--preset", choices=sorted(PRESETS), help="gossip tuning (default lan)")

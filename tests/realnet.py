@@ -166,8 +166,11 @@ class RealCluster:
             )
         return path
 
-    def start(self, name: str, join: Iterable[Agent] = (), *, run: int = 0) -> Agent:
-        """Start an agent (data dir `name` or `name.run<N>`), wait for its agent.json."""
+    def start(
+        self, name: str, join: Iterable[Agent] = (), *, run: int = 0, insecure: bool = False
+    ) -> Agent:
+        """Start an agent (data dir `name` or `name.run<N>`), wait for its agent.json;
+        `insecure`: without the cluster key (`--insecure`)."""
         data_dir = self.root / (name if run == 0 else f"{name}.run{run}")
         data_dir.mkdir(parents=True)
         command = [
@@ -183,8 +186,7 @@ class RealCluster:
             "127.0.0.1:0",
             "--data-dir",
             str(data_dir),
-            "--key-file",
-            str(self.key_file),
+            *(["--insecure"] if insecure else ["--key-file", str(self.key_file)]),
             "--robot-file",
             str(self.robot_file(name)),
             "--preset",

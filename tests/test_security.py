@@ -1,9 +1,12 @@
 """Security on real agents (docs/security.md): keys rotate with no downtime (add the new key
 everywhere, sign with it, retire the old: SIGHUP re-reads the key file), a robot left with only
-the retired key is locked out, and no state-changing route answers without a token."""
+the retired key is locked out, no state-changing route answers without a token, and without a
+key (`--insecure`) no token is a constant."""
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import os
 import signal
 import time
@@ -134,3 +137,31 @@ def test_gossip_seqs_keep_rising_across_restarts_even_when_the_clock_went_back(
     assert seq_start(tmp_path, again + 10 * SEQ_RESERVE) == again + 10 * SEQ_RESERVE
     (tmp_path / "seq.floor").write_text("garbage")
     assert seq_start(tmp_path, 7) == 7  # an unreadable floor: the clock alone
+
+
+def test_insecure_agents_take_no_constant_token_and_say_what_is_exposed(
+    cluster: RealCluster,
+) -> None:
+    """Without a key the peer token once was HMAC-SHA256 of a fixed label under an empty key: a
+    public constant that opened every route, an `exec` launch included. Now an insecure agent
+    takes no peer token at all (not even its insecure peers'), only its own random API token."""
+    first = cluster.start("robot-1", insecure=True)
+    second = cluster.start("robot-2", join=[first], insecure=True)
+    cluster.wait_states(first, {"robot-1": "alive", "robot-2": "alive"}, what="an insecure fleet")
+    constant = hmac.new(b"", b"sdrpeer peer api v1", hashlib.sha256).hexdigest()
+    shell = {
+        "instances": [
+            {"name": "sh", "launcher": "exec", "target": ["/bin/sh", "-c", "touch pwned"]}
+        ]
+    }
+    for agent in (first, second):
+        for method, path, body in [*STATE_CHANGING, ("POST", "/v1/instances", shell)]:
+            code, doc = http(method, agent.api + path, body, constant)
+            assert code == 401, (agent.name, method, path, doc)
+        assert not list(cluster.root.rglob("pwned"))
+        assert agent.agent_info()["insecure"] is True
+        log = agent.log.read_text()
+        assert "INSECURE" in log
+        assert "robots cannot authenticate each other" in log
+        code, _ = http("GET", agent.api + "/v1/plan", None, agent.token)
+        assert code == 200  # the operator's own token still works

@@ -60,6 +60,7 @@ from sdrpeer.dataplane.frames import (
     parse_reply,
     reply_auth,
 )
+from sdrpeer.deploy.handoff_rules import StateMsg
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
@@ -482,17 +483,30 @@ HTTP_ROUTES: list[tuple[str, str, Any]] = [
     ("POST", "/v1/plan", {"plan": {"epoch": 0, "version": 0}}),
     ("POST", "/v1/deploy", {"system": {"name": "x", "components": []}}),
     ("POST", "/v1/undeploy", {}),
+    ("POST", "/v1/state", StateMsg("sync", "Cam", "Cam", "Cam-s1", (1, "robot-1", 1),
+                                   {"n": 1, "pose": [0.5, 1.5]}, "robot-2").encode()),
     ("POST", "/v1/instances/{n}/activate", None),
+    ("POST", "/v1/instances/{n}/deactivate", None),
+    ("POST", "/v1/instances/{n}/reset", None),
+    ("POST", "/v1/instances/{n}/restart", None),
+    ("POST", "/v1/instances/{n}/{n}", None),
     ("DELETE", "/v1/instances/{n}", None),
     ("GET", "/v1/events?{q}", None),
+    ("GET", "/v1/history?{q}", None),
     ("GET", "/v1/instances/{n}/logs?{q}", None),
+    ("GET", "/v1/instances", None),
     ("GET", "/v1/members", None),
     ("GET", "/v1/status", None),
+    ("GET", "/v1/plan", None),
+    ("GET", "/v1/agent", None),
+    ("GET", "/dashboard/{n}", None),
+    ("GET", "/healthz", None),
     ("GET", "/metrics", None),
 ]  # fmt: skip
 """What the HTTP surface sends: every state-changing route whose valid inputs start nothing
-(POST /v1/instances and a deployable system would launch hosts: their bodies are left to the
-route tests) and the reads."""
+(JSON bodies, and the msgpack state message of POST /v1/state) and every read but the SSE
+stream. POST /v1/instances and a deployable system would launch a host for every valid input:
+their bodies are left to the route tests."""
 
 
 class HttpSurface:
@@ -556,6 +570,15 @@ class HttpSurface:
         seed = HTTP_ROUTES[route][2]
         if kind == 0 or seed is None:
             body = rng.randbytes(rng.randrange(0, 300))
+        elif isinstance(seed, bytes):  # msgpack: its bytes, or its tree, mutated
+            if kind == 1:
+                body = mutate_bytes(rng, seed)
+            else:
+                try:
+                    tree = mutate_tree(rng, msgpack.unpackb(seed, raw=False))
+                    body = msgpack.packb(tree, use_bin_type=True, default=repr)
+                except (TypeError, ValueError, RecursionError, OverflowError):
+                    body = seed[: rng.randrange(1, len(seed))]
         elif kind == 1:
             body = mutate_bytes(rng, json.dumps(seed).encode())
         else:
