@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_files, agent_keys, agent_views
 from sdrpeer.agent_files import load_token, write_agent_json
-from sdrpeer.api.server import serve_api
+from sdrpeer.api.server import BoundedSite, serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
 from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
@@ -116,6 +116,7 @@ class Agent:
         self.traps = TrapDetector()
         self.meter = ProcessTreeMeter(os.getpid())
         self._runner: AppRunner | None = None
+        self.api_site: BoundedSite | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = time.time()
         self._started = 0.0
@@ -329,7 +330,7 @@ class Agent:
 
     async def _start_api(self, token: str) -> None:
         host, port = parse_hostport(self.config.api)
-        self._runner, self.api_url = await serve_api(
+        self._runner, self.api_site = await serve_api(
             self,
             token,
             host,
@@ -337,6 +338,7 @@ class Agent:
             extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES],
             peer_tokens=self.peer_tokens,
         )
+        self.api_url = self.api_site.name
 
     # ----------------------------------------------------------------- monitoring
     async def _metrics_loop(self) -> None:

@@ -101,6 +101,7 @@ def agent_view(self: Agent) -> dict[str, Any]:
     assert self.shell is not None
     c = self.shell.counters
     codec = self.shell.codec.counters
+    site = self.api_site
     states = dict.fromkeys(STATE_NAMES.values(), 0)
     for m in self.core.members():
         states[STATE_NAMES[m.state]] += 1
@@ -123,6 +124,10 @@ def agent_view(self: Agent) -> dict[str, Any]:
             "sent_by_kind": dict(sorted(self.shell.sent_by_kind.items())),
         },
         "rejected": {r: codec.get(r, 0) for r in REASONS},
+        "api_connections": {
+            "open": 0 if site is None else len(site.connections()),
+            "refused": 0 if site is None else site.refused,
+        },
         "clock": {
             "offset_ms": self.shell.codec.clock.offset_ms,
             "advanced": codec.get("clock_advanced", 0),
