@@ -49,6 +49,9 @@ def test_loss_replaces_the_robots_fault_rule() -> None:
         "--probability", "0.3000", "-j", "DROP",
     ]  # fmt: skip
     assert PLAN.loss("robot-2", 0.0) == [flush]  # 0 %: only the flush
+    _, spare, drop = PLAN.loss("robot-2", 0.3, spare_host=True)  # an observer's calls pass
+    assert spare[4:] == ["iptables", "-A", FAULT_CHAIN, "-s", "10.213.7.254", "-j", "RETURN"]
+    assert drop == rule
     with pytest.raises(ValueError, match="0% to 100%"):
         PLAN.loss("robot-2", 1.5)
 

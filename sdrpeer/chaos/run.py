@@ -5,13 +5,14 @@ is root with ip, iptables and tc, so partitions and packet loss are real; else o
 without those two faults). A system of `components` components is deployed — camera and
 anomaly-detector pairs, each with a hot standby on another robot, and Table III's rules for
 errors, lost signal, low battery and packet loss, spread by the `objective` strategy (first_fit
-would put every active on robot-1 and every standby on robot-2). Then, for `minutes`, the faults of
-`schedule.schedule(seed, ...)` are carried out (SIGKILL of a component host or of an agent,
-which is restarted later; RSSI or battery pushed past the rules through the robot's API; a
-partition; packet loss) while the fleet is looked at four times a second: every robot's own list of
-instances, its plan key and its agent's RSS go to `judge.Judge`. When the last fault has ended
-the soak waits (at most `settle_s`) for the fleet to be whole again, checks the final plan, stops
-the lab and returns the judge's report plus what was done.
+would put every active on robot-1 and every standby on robot-2). Then, for `minutes`, the faults
+of `schedule.schedule(seed, ...)` are carried out (SIGKILL of a component host — on the next
+robot that runs one when the drawn robot runs none — or of an agent, which is restarted later;
+RSSI or battery pushed past the rules through the robot's API; a partition; packet loss, which
+spares the runner's own calls) while the fleet is looked at four times a second: every robot's
+own list of instances, its plan key and its agent's RSS go to `judge.Judge`. When the last fault
+has ended the soak waits (at most `settle_s`) for the fleet to be whole again, checks the final
+plan, stops the lab and returns the judge's report plus what was done.
 """
 
 from __future__ import annotations
@@ -133,7 +134,7 @@ class Soak:
             self.partitioned = True
         elif fault.kind == "loss":
             assert self.lab.net is not None
-            net.run(self.lab.net.loss(robot, fault.amount))
+            net.run(self.lab.net.loss(robot, fault.amount, spare_host=True))  # looks see all
         if what != "skipped":
             self.judge.fault(
                 t, fault.kind, None if fault.until is None else t + fault.until - fault.at
@@ -160,18 +161,24 @@ class Soak:
             net.run(self.lab.net.loss(robot, 0.0))
 
     def _kill_host(self, robot: str, pick: int) -> str:
-        if robot in self.down:
-            return "skipped"
-        try:
-            rows = self.clients[robot].get("/v1/instances")
-        except ApiError:
-            return "skipped"
-        pids = [r["pid"] for r in rows if r.get("state") == "ACTIVE" and r.get("pid")]
-        if not pids:
-            return "skipped"
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(int(pids[pick % len(pids)]), signal.SIGKILL)
-        return ""
+        """SIGKILL an ACTIVE host of `robot`, or, when it runs none (the allocation may gather
+        the actives on a few robots), of the next robot in name order that does; "skipped"
+        when no robot runs one, else the robot whose host was killed."""
+        names = list(self.clients)
+        start = names.index(robot)
+        for name in names[start:] + names[:start]:
+            if name in self.down:
+                continue
+            try:
+                rows = self.clients[name].get("/v1/instances")
+            except ApiError:
+                continue
+            pids = [r["pid"] for r in rows if r.get("state") == "ACTIVE" and r.get("pid")]
+            if pids:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(int(pids[pick % len(pids)]), signal.SIGKILL)
+                return "" if name == robot else f"on {name}"
+        return "skipped"
 
     def _kill_agent(self, robot: str) -> None:
         proc = self.lab.procs[robot]

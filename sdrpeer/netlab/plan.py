@@ -133,11 +133,16 @@ class NetPlan:
 
     # -- faults ----------------------------------------------------------------------------------
 
-    def loss(self, robot: str, ratio: float) -> list[Argv]:
-        """Drop `ratio` (0..1) of the packets arriving at the robot (replaces an earlier loss)."""
+    def loss(self, robot: str, ratio: float, *, spare_host: bool = False) -> list[Argv]:
+        """Drop `ratio` (0..1) of the packets arriving at the robot (replaces an earlier loss);
+        `spare_host`: not those from the host (the gateway), e.g. an observer's API calls."""
         if not 0.0 <= ratio <= 1.0:
             raise ValueError(f"loss {ratio:g}: expected 0% to 100%")
         out = [self.in_ns(robot, "iptables", "-F", FAULT_CHAIN)]
+        if ratio > 0 and spare_host:
+            out.append(
+                self.in_ns(robot, "iptables", "-A", FAULT_CHAIN, "-s", self.gateway, "-j", "RETURN")
+            )
         if ratio > 0:
             out.append(
                 self.in_ns(
