@@ -254,6 +254,7 @@ class Agent:
             lambda: self._publish(force=True),
             on_fault=self._on_fault,
             on_instance_problem=self._on_fault,
+            policy=cfg.launch_policy,
         )
         instances.data_keys = agent_keys.data_keys(self.keyring)
         self.coordinator = Coordinator(
@@ -392,6 +393,7 @@ class Agent:
             infos,
             election=None if coord is None else coord.election.info(),
             plan=None if coord is None else coord.store.info(),
+            launch=self.config.launch_policy,
         )
         self.current = record
         decision, version = publish(self.shell, self.publisher, now, record, force=force)

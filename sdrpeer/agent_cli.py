@@ -38,6 +38,22 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         default=None,
         help="run without a cluster key: gossip open to all, no calls between robots",
     )
+    p.add_argument(
+        "--allow-launchers",
+        "--allow-launcher",
+        dest="allow_launchers",
+        action="append",
+        metavar="NAME",
+        help="a launcher hosts may use besides python (exec, script, a plugin): off unless named",
+    )
+    p.add_argument(
+        "--allow-targets",
+        "--allow-target",
+        dest="allow_targets",
+        action="append",
+        metavar="PATTERN",
+        help="python targets allowed (shell pattern on package.module:Class; default *); repeat",
+    )
     p.add_argument("--token-file", type=Path, metavar="FILE", help="API token (default: generate)")
     p.add_argument("--preset", choices=sorted(PRESETS), help="gossip tuning (default lan)")
     p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")

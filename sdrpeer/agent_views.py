@@ -68,6 +68,7 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
                 "links": doc["links"],
                 "link_summary": doc.get("link_summary"),
                 "instances": instances,
+                "launch": doc.get("launch"),
             }
         )
     return out

@@ -17,6 +17,7 @@ from typing import Any
 
 from sdrpeer.errors import ConfigError
 from sdrpeer.gossip.config import PRESETS
+from sdrpeer.launch_policy import DEFAULT_TARGETS, LaunchPolicy
 from sdrpeer.limits import check_int
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
@@ -48,6 +49,11 @@ class AgentConfig:
     """Cluster key (hex) used to sign every datagram; required unless `insecure`."""
     insecure: bool = False
     """Run without a cluster key (unauthenticated; not for real robots)."""
+    allow_launchers: tuple[str, ...] = ()
+    """Launchers this robot's hosts may use besides python (`sdrpeer.launch_policy`): exec and
+    script run anything the agent's user can, so they are off unless named here."""
+    allow_targets: tuple[str, ...] = DEFAULT_TARGETS
+    """Shell patterns a python target (package.module:Class) must match one of."""
     token_file: Path | None = None
     """API bearer token file; None = the agent generates one into data_dir/token (mode 0600)."""
     preset: str = "lan"
@@ -62,6 +68,11 @@ class AgentConfig:
     """debug, info, warning or error."""
     log_format: str = "text"
     """text (human) or json (one object per line)."""
+
+    @property
+    def launch_policy(self) -> LaunchPolicy:
+        """What this agent lets its hosts run."""
+        return LaunchPolicy(("python", *self.allow_launchers), self.allow_targets)
 
     def __post_init__(self) -> None:
         expanded = Path(str(self.data_dir).replace("{name}", self.name)).expanduser()
@@ -153,6 +164,17 @@ def _as_str_tuple(value: Any) -> tuple[str, ...]:
     return tuple(value)
 
 
+def _as_names(value: Any) -> tuple[str, ...]:
+    if isinstance(value, str):
+        return (value,)
+    if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+        raise TypeError("expected a list of names")
+    return tuple(value)
+
+
+_TUPLE_FIELDS = ("join", "allow_launchers", "allow_targets")
+
+
 _CONVERT: dict[str, Callable[[Any], Any]] = {
     "name": _as_str,
     "bind": _as_str,
@@ -162,6 +184,8 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "scenario": _as_path,
     "key_file": _as_path,
     "insecure": _as_bool,
+    "allow_launchers": _as_names,
+    "allow_targets": _as_names,
     "token_file": _as_path,
     "preset": _as_str,
     "data_dir": _as_path,
@@ -231,7 +255,7 @@ def build_config(
                 raise ConfigError(f"unknown agent config field {field!r}")
             if value is None:
                 continue
-            merged[field] = tuple(value) if field == "join" else value
+            merged[field] = tuple(value) if field in _TUPLE_FIELDS else value
             origin[field] = flag_name(field) if is_flag else file_origin.get(field, "config file")
     _validate(merged, origin)
     return AgentConfig(**merged)
@@ -257,6 +281,18 @@ def _validate(values: dict[str, Any], origin: dict[str, str]) -> None:
             parse_hostport(peer, allow_port_zero=False)
         except ValueError as exc:
             raise fail("join", str(exc)) from None
+    if "allow_launchers" in values:
+        from sdrpeer.launchers import known_launchers  # noqa: PLC0415 - plugins: entry points
+
+        known = known_launchers()
+        for name in values["allow_launchers"]:
+            if name not in known:
+                raise fail(
+                    "allow_launchers", f"unknown launcher {name!r} (known: {', '.join(known)})"
+                )
+    for pattern in values.get("allow_targets", ()):
+        if not pattern.strip():
+            raise fail("allow_targets", "a pattern must not be empty")
     if "preset" in values and values["preset"] not in PRESETS:
         raise fail("preset", f"unknown preset {values['preset']!r} (known: {', '.join(PRESETS)})")
     if "log_level" in values and values["log_level"] not in LOG_LEVELS:

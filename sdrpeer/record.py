@@ -11,7 +11,8 @@ robot's metrics; a *summary* of the links it measures (how many peers, the typic
 time, jitter and loss — the values a strict majority of its links reach or pass, the same rule
 the recovery judge applies — and, exactly, the few links past the bounds the deployed system
 cares about: `LinkSummary`); its API address and election priority; the instances it hosts;
-its election belief and the plan it holds. A record is O(1) in the number of robots.
+its election belief, the plan it holds, and what it lets hosts run (its launch policy, nil for the
+default). A record is O(1) in the number of robots.
 
 The *vitals* of a robot (its metrics, link summary and the measured load of each instance) also
 travel as a revision of the current record: `encode_vitals` bytes that the gossip core carries
@@ -21,7 +22,8 @@ directly to each peer on its probes (not epidemically), ordered by (record versi
 
 Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
 
-    record    = [FORMAT, metrics, links, api, priority, components, instances, election, plan]
+    record    = [FORMAT, metrics, links, api, priority, components, instances, election, plan,
+                 launch]
     vitals    = [FORMAT, [cpu, mem_free, battery, rssi, pos], [peers, rtt, jitter, loss, bad,
                  listed], loads]   (metrics and links without what only a record changes:
                  the capacity and the link bounds)
@@ -36,13 +38,15 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
     loads     = [cpu_dpct, rss_kib, out_bytes_per_s, ...]   (3 per instance, in record order)
     election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
     plan      = [epoch, version, digest, allocator] | nil   (the newest plan this robot holds)
+    launch    = [[launcher, ...], [python target pattern, ...]] | nil   (nil: python, any target)
 
 `dpct` is 0.1 %, `ddbm` 0.1 dB, `10us` 0.01 ms, `permille` 0.1 % loss. An instance name usually
 starts with its component's name (`CameraRTC2` of `CameraRTC`), so only the differing tail is
 sent. Well-known states and roles are sent as a small index, any other as its string.
 Decoding returns the rounded values: `decode_record(encode_record(r))` equals `r` only once `r`
-is already on that grid. Format 2 (this one) replaced format 1, whose record listed every link
-and a timestamp; a format-1 record is refused, so a fleet is upgraded all at once.
+is already on that grid. Format 3 (this one) added `launch` to format 2, which had replaced format
+1 (whose record listed every link and a timestamp); a record of another format is refused, so a
+fleet is upgraded all at once.
 """
 
 from __future__ import annotations
@@ -53,9 +57,10 @@ from typing import Any
 import msgpack
 
 from sdrpeer.errors import WireError
+from sdrpeer.launch_policy import DEFAULT_POLICY, LaunchPolicy
 from sdrpeer.limits import LIMITS, MAX_COORD_M
 
-FORMAT = 2
+FORMAT = 3
 """Version of the wire layout above; a decoder refuses any other."""
 
 STATES = ("created", "inactive", "active", "error", "finalized", "starting", "stopping")
@@ -220,6 +225,8 @@ class RobotRecord:
     instances: tuple[InstanceInfo, ...]
     election: ElectionInfo | None = None
     plan: PlanInfo | None = None
+    launch: LaunchPolicy = DEFAULT_POLICY
+    """What this robot lets its hosts run (`sdrpeer.launch_policy`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -350,6 +357,7 @@ def encode_record(r: RobotRecord) -> bytes:
         instances,
         None if e is None else [e.epoch, e.leader, e.claiming],
         None if p is None else [p.epoch, p.version, p.digest, p.allocator],
+        None if r.launch.is_default else [list(r.launch.launchers), list(r.launch.targets)],
     ]
     data: bytes = msgpack.packb(wire, use_bin_type=True)
     return data
@@ -532,11 +540,23 @@ def _unpack(b: bytes, what: str) -> list[Any]:
     return wire
 
 
+def _launch(x: object) -> LaunchPolicy:
+    if x is None:
+        return LaunchPolicy()
+    launchers, targets = _list(x, "launch", 2)
+    return LaunchPolicy(
+        tuple(_str(n, "launch.launcher") for n in _list(launchers, "launch.launchers")),
+        tuple(_str(t, "launch.target") for t in _list(targets, "launch.targets")),
+    )
+
+
 def decode_record(b: bytes) -> RobotRecord:
     """Bytes from the wire -> a checked record; raises WireError("malformed", ...) otherwise."""
     wire = _unpack(b, "record")
     try:
-        _, metrics, links, api, priority, comps, instances, elect, plan = _list(wire, "record", 9)
+        _, metrics, links, api, priority, comps, instances, elect, plan, launch = _list(
+            wire, "record", 10
+        )
         if api is not None:
             _str(api, "api")
         return RobotRecord(
@@ -547,6 +567,7 @@ def decode_record(b: bytes) -> RobotRecord:
             instances=_instances(comps, instances),
             election=_election(elect),
             plan=_plan(plan),
+            launch=_launch(launch),
         )
     except (_Malformed, ValueError, TypeError) as e:
         # ValueError/TypeError come from unpacking a list of the wrong length.
@@ -646,6 +667,7 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
             "digest": r.plan.digest,
             "allocator": r.plan.allocator,
         },
+        "launch": {"launchers": list(r.launch.launchers), "targets": list(r.launch.targets)},
     }
 
 

@@ -22,7 +22,7 @@ import sys
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -167,10 +167,16 @@ class RealCluster:
         return path
 
     def start(
-        self, name: str, join: Iterable[Agent] = (), *, run: int = 0, insecure: bool = False
+        self,
+        name: str,
+        join: Iterable[Agent] = (),
+        *,
+        run: int = 0,
+        insecure: bool = False,
+        flags: Sequence[str] = (),
     ) -> Agent:
         """Start an agent (data dir `name` or `name.run<N>`), wait for its agent.json;
-        `insecure`: without the cluster key (`--insecure`)."""
+        `insecure`: without the cluster key (`--insecure`); `flags`: more `sdrpeer agent` flags."""
         data_dir = self.root / (name if run == 0 else f"{name}.run{run}")
         data_dir.mkdir(parents=True)
         command = [
@@ -194,6 +200,7 @@ class RealCluster:
         ]
         for peer in join:
             command += ["--join", peer.gossip]
+        command += flags
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH")) if p)
         env.pop("SDRPEER_API", None)

@@ -12,6 +12,7 @@ from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.result import AllocationResult
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.errors import ConfigError
+from sdrpeer.launch_policy import LaunchPolicy
 from sdrpeer.plan import Plan
 from sdrpeer.record import InstanceInfo, LinkStats, LinkSummary, Metrics
 from sdrpeer.system.loader import load_system
@@ -152,6 +153,37 @@ def test_not_enough_memory_reports_every_robot():
     assert result.infeasible.reason_for("CameraRTC", "robot-2") == (
         "memory: free memory 200MB after adding 500MB would not be above 500MB"
     )
+
+
+def test_a_robot_that_would_refuse_a_component_never_gets_it():
+    """robot-1 allows only python (the default), robot-2 also exec, robot-3 only components.*
+    python targets: an exec component (and its cold standby) and a python one land where they
+    may run, and with nowhere to go the reason names the setting."""
+    shell = ComponentDef(
+        "Sh",
+        "exec",
+        ("/bin/true",),
+        requires=Requirements(5.0, 10 * MB),
+        standby=StandbySpec(other_robots=1, mode="cold"),
+    )
+    mine = ComponentDef("Mine", "python", "mylab.nav:Nav", requires=Requirements(5.0, 10 * MB))
+    view = cluster(
+        robot("robot-1"),
+        replace(robot("robot-2"), launch=LaunchPolicy(("python", "exec"))),
+        replace(robot("robot-3"), launch=LaunchPolicy(("python", "exec"), ("components.*",))),
+    )
+    placed = where(run(SystemDef("s", (shell, mine)), view))
+    assert placed == {"Sh": "robot-2", "Sh-s1": "robot-3", "Mine": "robot-1"}
+    alone = run(SystemDef("s", (shell,)), cluster(robot("robot-1")))
+    assert alone.infeasible is not None
+    assert alone.infeasible.reason_for("Sh", "robot-1") == (
+        "launch: launcher 'exec' is off on this robot (allowed: python); enable it in the agent's"
+        " configuration: allow_launchers: [exec] (or --allow-launcher exec)"
+    )
+    narrow = cluster(replace(robot("robot-1"), launch=LaunchPolicy(targets=("components.*",))))
+    refused = run(SystemDef("s", (mine,)), narrow).infeasible
+    assert refused is not None
+    assert "matches none of this robot's allow_targets (components.*)" in str(refused)
 
 
 # -- standbys -------------------------------------------------------------------------------

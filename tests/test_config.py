@@ -16,6 +16,7 @@ from sdrpeer.config import (
     parse_hostport,
 )
 from sdrpeer.errors import ConfigError
+from sdrpeer.launch_policy import LaunchPolicy
 
 
 def write(tmp_path: Path, text: str, name: str = "agent.yaml") -> Path:
@@ -42,6 +43,8 @@ def test_fields_are_the_documented_set() -> None:
         "scenario",
         "key_file",
         "insecure",
+        "allow_launchers",
+        "allow_targets",
         "token_file",
         "preset",
         "data_dir",
@@ -60,6 +63,7 @@ def test_defaults_and_data_dir_expansion() -> None:
     assert config.preset == "lan"
     assert config.data_dir == Path.home() / ".local/share/sdrpeer/robot-1"
     assert config.token_file is None
+    assert config.launch_policy == LaunchPolicy(("python",), ("*",))  # exec and script off
 
 
 def test_file_values_are_typed_and_paths_file_relative(tmp_path: Path) -> None:
@@ -86,6 +90,23 @@ def test_file_values_are_typed_and_paths_file_relative(tmp_path: Path) -> None:
     config = build_config(values, {})
     assert config.key_file == tmp_path / "cluster.key"
     assert config.join == ("10.0.0.1:7946", "10.0.0.2:7946")
+
+
+def test_launch_settings_from_a_file_and_flags(tmp_path: Path, key: Path) -> None:
+    path = write(
+        tmp_path,
+        "name: r\nallow-launchers: [exec, script]\nallow_targets: [components.*, mylab.*]\n",
+    )
+    config = build_config(load_agent_config(path), {"key_file": key})
+    assert config.launch_policy == LaunchPolicy(
+        ("python", "exec", "script"), ("components.*", "mylab.*")
+    )
+    flags = {"key_file": key, "allow_launchers": ["exec"], "allow_targets": None}
+    config = build_config(load_agent_config(path), flags)
+    assert config.launch_policy.launchers == ("python", "exec")  # the flag wins, the file's
+    assert config.launch_policy.targets == ("components.*", "mylab.*")  # targets stay
+    with pytest.raises(ConfigError, match=r":2: allow-launchers: expected a list of names"):
+        load_agent_config(write(tmp_path, "name: r\nallow-launchers: [exec, 3]\n"))
 
 
 def test_flags_override_file(tmp_path: Path, key: Path) -> None:
@@ -148,6 +169,11 @@ def test_missing_file(tmp_path: Path) -> None:
         ({"log_level": "loud"}, "--log-level: log-level: must be one of debug, info, warning"),
         ({"log_format": "xml"}, "--log-format: log-format: must be one of text, json"),
         ({"metrics_interval": 0.0}, "--metrics-interval: metrics-interval: must be > 0 seconds"),
+        (
+            {"allow_launchers": ["exec", "rsh"]},
+            "--allow-launchers: allow-launchers: unknown launcher 'rsh' (known: exec, python,",
+        ),
+        ({"allow_targets": [" "]}, "--allow-targets: allow-targets: a pattern must not be empty"),
         ({"robot_file": Path("/no/such.yaml")}, "--robot-file: robot-file: /no/such.yaml does"),
         ({"token_file": Path("/no/token")}, "--token-file: token-file: /no/token does not exist"),
     ],

@@ -1,7 +1,8 @@
 """Plan sync. Against a robot whose API does not answer (restarting: gossip is back before the
 API): the coordinator waits FETCH_RETRY before it asks that robot again, instead of fetching in
 a tight loop (it did, hundreds of times a second, on every agent of a 10-robot soak). And the old
-side of a heal: gossip of a newer plan's running copy stands its own copy down at once."""
+side of a heal: gossip of a newer plan's running copy stands its own copy down at once. And a
+plan placing what this robot's launch policy refuses launches nothing."""
 
 from __future__ import annotations
 
@@ -102,6 +103,33 @@ async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
         async with asyncio.timeout(30):
             while cnt_state() != "ACTIVE":  # noqa: ASYNC110
                 await asyncio.sleep(0.02)
+    finally:
+        await c.stop()
+        await manager.stop()
+
+
+async def test_a_plan_placing_what_the_launch_policy_refuses_launches_nothing(
+    tmp_path: Path,
+) -> None:
+    """A plan (from an allocator that did not know this robot's policy yet) places an exec
+    component here: the coordinator keeps it out of the desired set and says why, once."""
+    system = parse_system(
+        "name: s\ncomponents:\n  - {name: Sh, launcher: exec, target: [/bin/sh, -c, 'exit 0']}\n"
+        "  - {name: Cnt, target: tests.components_fixture:Counter, params: {rate: 5}}\n",
+        "s.yaml",
+    )
+    placements = (Placement("Sh", "Sh", "robot-1"), Placement("Cnt", "Cnt", "robot-1"))
+    plan = Plan(1, 1, system, placements, allocator="robot-2")
+    c, manager = await coordinator_with(tmp_path)
+    try:
+        c.start()
+        assert c.accept(plan, source="robot-2")
+        for _ in range(5):  # more steps: the refusal is said once
+            c.step()
+        assert sorted(manager.desired()) == ["Cnt"]
+        (event,) = [e for e in c.events.since(0) if e["kind"] == "launch.refused"]
+        assert event["detail"]["instance"] == "Sh"
+        assert "launcher 'exec' is off on this robot" in event["detail"]["reason"]
     finally:
         await c.stop()
         await manager.stop()

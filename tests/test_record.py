@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sdrpeer.errors import WireError
+from sdrpeer.launch_policy import LaunchPolicy
 from sdrpeer.record import (
     MAX_LISTED,
     ElectionInfo,
@@ -88,7 +89,7 @@ def test_minimal_record_and_unknown_names() -> None:
         instances=(InstanceInfo("cam", "camera_driver", "weird-state", "observer", 0.0, 0),),
     )
     assert decode_record(encode_record(r)) == r
-    assert len(encode_record(r)) == 69  # 30 of them are the three free-form strings
+    assert len(encode_record(r)) == 70  # 30 of them are the three free-form strings
 
 
 def test_vitals_round_trip_and_overlay() -> None:
@@ -157,7 +158,7 @@ def test_record_to_json() -> None:
 def wire(**changes: object) -> bytes:
     """A valid wire array with some positions replaced."""
     base: list[object] = [
-        2,
+        3,
         [100, 4, 2, None, None, None],
         [3, 1, 1, 0, 1, [None, None, 500], ["p", 1, 1, 900]],
         None,
@@ -166,12 +167,22 @@ def wire(**changes: object) -> bytes:
         [[0, 1, "1", 2, 0, 0, 0, None, 0]],
         None,
         None,
+        None,
     ]
-    names = ["fmt", "metrics", "links", "api", "priority", "comps", "instances", "e", "p"]
+    names = ["fmt", "metrics", "links", "api", "priority", "comps", "instances", "e", "p", "launch"]
     for k, v in changes.items():
         base[names.index(k)] = v
     data: bytes = msgpack.packb(base)
     return data
+
+
+def test_a_launch_policy_travels_and_the_default_costs_one_byte() -> None:
+    policy = LaunchPolicy(("python", "exec"), ("components.*", "mylab.*:Cam*"))
+    r = replace(reference_record(peers=3), launch=policy)
+    assert decode_record(encode_record(r)).launch == policy
+    default = reference_record(peers=3)
+    assert decode_record(encode_record(default)).launch == LaunchPolicy()
+    assert decode_record(wire()).launch.is_default
 
 
 def test_wire_helper_is_valid() -> None:
@@ -208,6 +219,9 @@ def test_wire_helper_is_valid() -> None:
         ({"instances": [[0, 0, "", 2, 0, 0, 0, None, 0]]}, "instance.name: expected a name"),
         ({"instances": [[0, 1, "1", 2, 0, 0, 0]]}, "instance: expected a list of 9"),
         ({"metrics": [1, 4, 2, None, None, [10**10, 0]]}, "pos.x: 10000000000 out of range"),
+        ({"launch": [["python"]]}, "launch: expected a list of 2"),
+        ({"launch": [["python", 5], []]}, "launch.launcher: expected a name"),
+        ({"launch": [[], "*"]}, "launch.targets: expected a list"),
     ],
 )
 def test_malformed_fields_are_named(changes: dict[str, object], detail: str) -> None:

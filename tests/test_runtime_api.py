@@ -13,6 +13,7 @@ import pytest
 from aiohttp.test_utils import TestClient, TestServer
 
 from sdrpeer.api.app import build_app
+from sdrpeer.launch_policy import LaunchPolicy
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.supervisor import SupervisorConfig
 
@@ -20,6 +21,10 @@ TOKEN = "tok"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 FAKE_HOST = str(Path(__file__).with_name("fake_host.py"))
 WAIT = 10.0
+
+
+WITH_EXEC = LaunchPolicy(("python", "exec"))
+"""The fake hosts are run by the exec launcher, off by default."""
 
 
 class View:
@@ -49,7 +54,9 @@ def fake(name: str, *conns: dict[str, Any], mode: str = "") -> dict[str, Any]:
 
 @pytest.fixture
 async def setup(tmp_path: Path) -> AsyncIterator[tuple[TestClient[Any, Any], InstanceManager]]:
-    manager = InstanceManager(tmp_path, SupervisorConfig.fast_test(), interval=0.1)
+    manager = InstanceManager(
+        tmp_path, SupervisorConfig.fast_test(), interval=0.1, policy=WITH_EXEC
+    )
     await manager.start()
     client = TestClient(TestServer(build_app(View(manager), token=TOKEN)))
     await client.start_server()

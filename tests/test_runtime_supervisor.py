@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from sdrpeer.launch_policy import LaunchPolicy
 from sdrpeer.procstats import ProcessTreeMeter
 from sdrpeer.runtime.backoff import RestartConfig
 from sdrpeer.runtime.control import CommandError
@@ -22,6 +23,10 @@ from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
 
 FAKE_HOST = str(Path(__file__).with_name("fake_host.py"))
 WAIT = 10.0
+
+
+WITH_EXEC = LaunchPolicy(("python", "exec"))
+"""The fake hosts are run by the exec launcher, off by default."""
 
 
 def fake(name: str = "A", mode: str = "", heartbeat: float = 0.5) -> InstanceSpec:
@@ -226,7 +231,9 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
         return proc
 
     monkeypatch.setattr(asyncio, "create_subprocess_exec", slow)
-    manager = InstanceManager(tmp_path, SupervisorConfig.fast_test(), interval=0.02)
+    manager = InstanceManager(
+        tmp_path, SupervisorConfig.fast_test(), interval=0.02, policy=WITH_EXEC
+    )
     await manager.start()
     try:
         manager.set_desired([fake("A")])

@@ -9,6 +9,7 @@ import hashlib
 import hmac
 import os
 import signal
+import sys
 import time
 from functools import partial
 from pathlib import Path
@@ -165,3 +166,33 @@ def test_insecure_agents_take_no_constant_token_and_say_what_is_exposed(
         assert "robots cannot authenticate each other" in log
         code, _ = http("GET", agent.api + "/v1/plan", None, agent.token)
         assert code == 200  # the operator's own token still works
+
+
+def test_exec_is_off_unless_configured_and_never_placed_where_refused(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    """robot-1 runs with the default launch policy (python only), robot-2 allows exec. A spec
+    robot-1 refuses is answered 403 naming the setting, and nothing changes; the allocator
+    places an exec component on robot-2, the robot that gossips that it takes it."""
+    first = cluster.start("robot-1")
+    cluster.start("robot-2", join=[first], flags=["--allow-launcher", "exec"])
+    cluster.wait_states(first, {"robot-1": "alive", "robot-2": "alive"}, what="two robots")
+    host = [sys.executable, str(Path(__file__).with_name("fake_host.py"))]
+    spec = {"instances": [{"name": "Sh", "launcher": "exec", "target": host}]}
+    code, doc = http("POST", first.api + "/v1/instances", spec, first.token)
+    assert code == 403, doc
+    assert "launcher 'exec' is off on this robot" in doc["error"]
+    assert "allow_launchers: [exec] (or --allow-launcher exec)" in doc["error"]
+    assert first.get("/v1/instances") == []  # nothing was added
+    cluster.wait_until(
+        lambda: (first.members()["robot-2"]["launch"] or {}).get("launchers"),
+        lambda launchers: launchers == ["python", "exec"],
+        "robot-2's launch policy in robot-1's table",
+    )
+    path = tmp_path / "shell.yaml"
+    target = ", ".join(host)
+    path.write_text(
+        f"name: sh\ncomponents:\n  - {{name: Sh, launcher: exec, target: [{target}]}}\n"
+    )
+    doc = deploy(cluster, first, path)
+    assert [(c["component"], c["robot"]) for c in doc["components"]] == [("Sh", "robot-2")]

@@ -7,6 +7,10 @@ index pair, so a placement costs a dictionary lookup per placed peer, never a re
 load constraints (CPU, memory) run per candidate, against `RobotLoad`, which the core updates as
 instances land.
 
+A robot whose launch policy (`sdrpeer.launch_policy`, gossiped in its record) refuses the
+component's launcher or target never takes it, a cold standby included (it would be launched
+there on a failover).
+
 What an instance needs on a robot (`need`): nothing for a cold standby (placed, not running);
 otherwise its `requires`, less what an instance of the same name and component already running
 on that robot uses now (the robot's metrics count that already). Instances in `GONE_STATES` do
@@ -107,6 +111,9 @@ class Feasibility:
         """None when robot i may take the instance, else the first constraint it fails."""
         if self.robots[i].name in self.avoid.get(comp.name, ()):
             return "avoid: recovery is moving this component away from it"
+        refused = self.robots[i].launch.refusal(comp.launcher, comp.target)
+        if refused is not None:
+            return f"launch: {refused}"
         why = self._static_reason(i, comp, cold)
         if why is not None:
             return why

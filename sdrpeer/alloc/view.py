@@ -1,13 +1,13 @@
 """What the allocator knows of the cluster: one `RobotView` per alive robot.
 
 How it works: the agent builds a `ClusterView` from its gossip table (members, their records:
-metrics, link summaries, hosted instances) just before it allocates; the allocation core only
-reads it. A link between two robots is the worse of what each end's summary says of it: exact
-when an end lists it (every link at or past the deployed system's bounds is listed, up to
-`MAX_LISTED` per robot), else that end's typical link, kept just inside the bounds when its list
-is complete (so a constraint no tighter than the bounds passes exactly when it should). Order
-matters: `robots` is in the order robots are tried by `first_fit` after the robot that received the
-system (`origin`).
+metrics, link summaries, hosted instances, launch policies) just before it allocates; the allocation
+core only reads it. A link between two robots is the worse of what each end's summary says of it:
+exact when an end lists it (every link at or past the deployed system's bounds is listed, up to
+`MAX_LISTED` per robot), else that end's typical link, kept just inside the bounds when its list is
+complete (so a constraint no tighter than the bounds passes exactly when it should). Order matters:
+`robots` is in the order robots are tried by `first_fit` after the robot that received the system
+(`origin`).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from sdrpeer.launch_policy import DEFAULT_POLICY, LaunchPolicy
 from sdrpeer.record import InstanceInfo, LinkStats, LinkSummary, Metrics
 
 
@@ -28,6 +29,8 @@ class RobotView:
     """This robot's summary of the links it measures (`sdrpeer.record.LinkSummary`)."""
     instances: tuple[InstanceInfo, ...] = ()
     """Instances it hosts now (their measured RSS is already part of `metrics.mem_free`)."""
+    launch: LaunchPolicy = DEFAULT_POLICY
+    """What it lets hosts run: a component it would refuse is never placed there."""
 
     def link_to(self, other: RobotView) -> LinkStats | None:
         """The link between this robot and `other`: the worse of the two ends' estimates."""

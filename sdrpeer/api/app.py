@@ -22,6 +22,7 @@ from aiohttp import web
 
 from sdrpeer.api.view import AgentView, InstancesView
 from sdrpeer.errors import ConfigError
+from sdrpeer.launch_policy import LaunchRefused
 from sdrpeer.runtime import logfile
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec
@@ -242,7 +243,10 @@ async def post_instances(request: web.Request) -> web.Response:
     for i, name in enumerate(names):
         if name in names[:i]:
             return json_error(400, f"field 'instances[{i}].name': {name!r} given twice")
-    desired = manager.set_desired(specs, replace_all=replace_all)
+    try:
+        desired = manager.set_desired(specs, replace_all=replace_all)
+    except LaunchRefused as exc:
+        return json_error(403, str(exc))
     return web.json_response({"desired": desired})
 
 

@@ -25,7 +25,8 @@ class AgentView(Protocol):
         since (unix seconds of the last state change), api (URL or None), record_version,
         metrics (dict or None: cpu_pct, mem_total, mem_free, battery_pct, rssi_dbm, pos [x, y]),
         links (dict peer -> {rtt_ms, jitter_ms, loss, distance_m}), instances (the robot's
-        gossiped component instances: name, component, state, role, cpu_pct, rss).
+        gossiped component instances: name, component, state, role, cpu_pct, rss), launch
+        ({launchers, targets}: what it lets hosts run; None before its first record).
         """
         ...
 

@@ -94,7 +94,13 @@ class AllocatorRole:
         names = [n for n in state.order if n in state.alive] or sorted(state.alive)
         names = [n for n in names if n not in exclude]
         robots = tuple(
-            RobotView(n, state.alive[n].metrics, state.alive[n].links, state.alive[n].instances)
+            RobotView(
+                n,
+                state.alive[n].metrics,
+                state.alive[n].links,
+                state.alive[n].instances,
+                state.alive[n].launch,
+            )
             for n in names
         )
         return ClusterView(robots, origin)

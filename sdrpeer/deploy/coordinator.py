@@ -53,6 +53,7 @@ from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.system.model import SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
@@ -116,6 +117,8 @@ class Coordinator:
         """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
         self._handover_since: dict[str, float] = {}
         """Active placement here -> since when it waits for its component's old copy elsewhere."""
+        self._refused: dict[str, str] = {}
+        """Placements here the launch policy refuses, with why (logged once)."""
         self._yielded: set[str] = set()
         """Active placements here stood down for a newer plan's copy elsewhere (`superseded`)."""
         self._wake = asyncio.Event()
@@ -345,7 +348,7 @@ class Coordinator:
         self._yielded = yielded
         hold |= yielded
         specs = specs_for_robot(plan, self.name, remote, active_here, hold)
-        specs = self.touch.hold_down(now, plan, specs)
+        specs = self._allowed(self.touch.hold_down(now, plan, specs))
         names = {s.name for s in specs}
         current = self.manager.desired()
         for gone in sorted(self._owned - names):
@@ -354,6 +357,23 @@ class Coordinator:
         if changed:
             self.manager.set_desired(changed)
         self._owned = names
+
+    def _allowed(self, specs: list[InstanceSpec]) -> list[InstanceSpec]:
+        """`specs` less those this robot's launch policy refuses (a plan from an allocator that
+        did not know the policy yet): an event `launch.refused` says which and why, once."""
+        out = []
+        refused: dict[str, str] = {}
+        for spec in specs:
+            why = self.manager.policy.refusal(spec.launcher, spec.target)
+            if why is None:
+                out.append(spec)
+            else:
+                refused[spec.name] = why
+        for name, why in sorted(refused.items()):
+            if self._refused.get(name) != why:
+                self.events.add(time.time(), "launch.refused", self.name, instance=name, reason=why)
+        self._refused = refused
+        return out
 
     def status(self, now_wall: float) -> dict[str, Any]:
         """GET /v1/status: the plan's components with their robots and states."""

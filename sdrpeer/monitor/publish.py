@@ -6,15 +6,15 @@ metrics, link summary and instance loads — are also sent as revisions of the c
 directly to each peer on the next probe that peer has not acknowledged (`sdrpeer.gossip`), which
 costs the same at any fleet size. `Publisher.decide(now, record)` picks:
 
-- RECORD when something the fleet decides with changed: identity (API address, priority,
-  capacity, position-less <-> positioned), an instance's name, component, state, role or data
-  address, the election belief, the plan held, the link bounds, or a measured value moved across a
-  `Boundaries` cut (a threshold some decision compares it with: the deployed system's robot-wide
-  recovery rules and their clear levels, the allocation thresholds that decide who may be allocator,
-  the broadcast default traps). So every robot sees each robot on the
-  correct side of every threshold it judges by, at the same moment, whatever the fleet's size. A
-  crossing less than `min_gap` after the last record goes out as vitals and makes a record at the
-  next sample after the gap (a value flapping across a cut costs at most one record per gap);
+- RECORD when something the fleet decides with changed: identity (API address, priority, capacity,
+  position-less <-> positioned), an instance's name, component, state, role or data address, the
+  election belief, the plan held, the link bounds, the launch policy, or a measured value moved
+  across a `Boundaries` cut (a threshold some decision compares it with: the deployed system's
+  robot-wide recovery rules and their clear levels, the allocation thresholds that decide who may be
+  allocator, the broadcast default traps). So every robot sees each robot on the correct side of
+  every threshold it judges by, at the same moment, whatever the fleet's size. A crossing less than
+  `min_gap` after the last record goes out as vitals and makes a record at the next sample after the
+  gap (a value flapping across a cut costs at most one record per gap);
 - VITALS when a measured value moved past its deadband since the last record or vitals sent
   (cpu 5 points, free memory 1 % of capacity or 16 MiB, battery 1 point, RSSI 2 dB, position
   10 cm, typical link RTT 1 ms or 25 %, jitter 1 ms or 50 %, loss 5 points, a listed link
@@ -233,7 +233,12 @@ def _identity_changed(a: RobotRecord, b: RobotRecord) -> bool:
         return True
     if (a.metrics.pos is None) != (b.metrics.pos is None):
         return True
-    if (a.election, a.plan, a.links.bounds) != (b.election, b.plan, b.links.bounds):
+    if (a.election, a.plan, a.links.bounds, a.launch) != (
+        b.election,
+        b.plan,
+        b.links.bounds,
+        b.launch,
+    ):
         return True
     return [(i.name, i.component, i.state, i.role, i.data) for i in a.instances] != [
         (i.name, i.component, i.state, i.role, i.data) for i in b.instances

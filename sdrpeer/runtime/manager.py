@@ -1,19 +1,21 @@
 """The agent's instance manager: the desired set, one supervisor per instance, the reconcile loop.
 
-How it works: `set_desired` / `remove` change the desired set and wake the loop. The loop runs on
-every change (a supervisor's state, a hello, a finished action) and at least every `interval`
-seconds: it turns each supervisor into an `Observed`, asks the pure `Reconciler` for actions at
-`loop.time()`, and runs each action as its own task (start/stop through the supervisor, the rest
-as control commands). When an action finishes the reconciler hears `done`; a failed one only
-after `retry_after` seconds, so a refusing host is not hammered. `status()` and `infos()` are what
-the API and the gossip record show; `on_change` tells the agent to publish at once. Trouble goes
-to the agent's recovery at once, by instance name: `on_fault(name, kind, detail)` for every fault
-a component reports, `on_instance_problem(name, cause, detail)` for `component_error` (ERROR) and
-`crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
-`restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when
-set, runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands
-the instance's last state to its successor there. The instance is deactivated first, so it takes
-no frame after that state (the frames it never took are replayed to its successor).
+How it works: `set_desired` / `remove` change the desired set and wake the loop; `set_desired`
+refuses (LaunchRefused, nothing changed) a spec the robot's launch policy does not let run
+(`sdrpeer.launch_policy`), so no host starts that the agent's configuration did not allow. The loop
+runs on every change (a supervisor's state, a hello, a finished action) and at least every
+`interval` seconds: it turns each supervisor into an `Observed`, asks the pure `Reconciler` for
+actions at `loop.time()`, and runs each action as its own task (start/stop through the supervisor,
+the rest as control commands). When an action finishes the reconciler hears `done`; a failed one
+only after `retry_after` seconds, so a refusing host is not hammered. `status()` and `infos()` are
+what the API and the gossip record show; `on_change` tells the agent to publish at once. Trouble
+goes to the agent's recovery at once, by instance name: `on_fault(name, kind, detail)` for every
+fault a component reports, `on_instance_problem(name, cause, detail)` for `component_error` (ERROR)
+and `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
+`restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when set,
+runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands the
+instance's last state to its successor there. The instance is deactivated first, so it takes no
+frame after that state (the frames it never took are replayed to its successor).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from sdrpeer.launch_policy import LaunchPolicy, LaunchRefused
 from sdrpeer.record import InstanceInfo
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
@@ -57,8 +60,11 @@ class InstanceManager:
         retry_after: float = 1.0,
         on_fault: Callable[[str, str, str], None] = lambda name, kind, detail: None,
         on_instance_problem: Callable[[str, str, str], None] = lambda name, cause, detail: None,
+        policy: LaunchPolicy | None = None,
     ) -> None:
         self.data_dir = data_dir
+        self.policy = policy or LaunchPolicy()
+        """What hosts may run here: `set_desired` refuses any other spec."""
         self.config = config
         self.on_change = on_change
         self.on_fault = on_fault
@@ -86,7 +92,13 @@ class InstanceManager:
         return dict(self._desired)
 
     def set_desired(self, specs: Iterable[InstanceSpec], *, replace_all: bool = False) -> list[str]:
-        """Merge specs into the desired set (or replace it); returns the names now desired."""
+        """Merge specs into the desired set (or replace it); returns the names now desired.
+        LaunchRefused (and nothing changes) when the launch policy refuses one of them."""
+        specs = list(specs)
+        for spec in specs:
+            why = self.policy.refusal(spec.launcher, spec.target)
+            if why is not None:
+                raise LaunchRefused(f"instance {spec.name!r}: {why}")
         new = {} if replace_all else dict(self._desired)
         new.update({s.name: s for s in specs})
         self._desired = new

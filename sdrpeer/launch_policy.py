@@ -1,0 +1,74 @@
+"""What an agent lets run on its robot: the launchers it allows and the Python targets (pure).
+
+How it works: every host an agent starts runs code chosen by whoever hands it a spec: the
+operator (`POST /v1/instances`, with the agent's token) or the allocator (a plan, with the
+cluster key). `python` starts an installed module's class, `script` a Python file by path, `exec`
+any command line: `exec` and `script` can run anything the agent's user can, so they are off
+unless the agent's configuration names them (`allow_launchers`, `--allow-launcher`: launchers
+allowed besides `python`), as Nomad ships `raw_exec` disabled. `allow_targets` narrows the
+`python` launcher to module patterns (shell-style, matched against `package.module:Class`;
+default `*`, any installed module; an empty list turns `python` off). Plugin launchers (entry
+points) run only when named too.
+
+`LaunchPolicy.refusal(launcher, target)` is None when the policy lets the spec run, else the
+reason, naming the setting to change. The agent checks it where a spec comes in (the API answers
+403), where the coordinator applies a plan (an event, nothing runs) and again before it spawns a
+host. Robots gossip their policy (`sdrpeer.record`) so that the allocator never places a
+component on a robot that would refuse it.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from sdrpeer.errors import ConfigError
+
+
+class LaunchRefused(ConfigError):
+    """A spec this robot's launch policy does not let run (the API answers 403)."""
+
+
+DEFAULT_LAUNCHERS: tuple[str, ...] = ("python",)
+DEFAULT_TARGETS: tuple[str, ...] = ("*",)
+
+
+@dataclass(frozen=True, slots=True)
+class LaunchPolicy:
+    """The launchers and Python targets one agent allows."""
+
+    launchers: tuple[str, ...] = DEFAULT_LAUNCHERS
+    targets: tuple[str, ...] = DEFAULT_TARGETS
+    """Shell-style patterns a `python` target (`package.module:Class`) must match one of."""
+
+    @property
+    def is_default(self) -> bool:
+        """Whether this is the policy an agent has when its configuration says nothing."""
+        return self.launchers == DEFAULT_LAUNCHERS and self.targets == DEFAULT_TARGETS
+
+    def refusal(self, launcher: str, target: str | Sequence[str]) -> str | None:
+        """None if a host of `launcher` running `target` may start here, else why not."""
+        if launcher not in self.launchers:
+            allowed = ", ".join(self.launchers) or "none"
+            extra = [n for n in self.launchers if n != "python"]
+            return (
+                f"launcher {launcher!r} is off on this robot (allowed: {allowed}); "
+                f"enable it in the agent's configuration: allow_launchers: "
+                f"[{', '.join((*extra, launcher))}] (or --allow-launcher {launcher})"
+            )
+        if (
+            launcher == "python"
+            and isinstance(target, str)
+            and not any(fnmatch.fnmatchcase(target, p) for p in self.targets)
+        ):
+            return (
+                f"python target {target!r} matches none of this robot's allow_targets "
+                f"({', '.join(self.targets) or 'none'}); add a pattern to allow_targets in "
+                f"the agent's configuration (or --allow-target PATTERN)"
+            )
+        return None
+
+
+DEFAULT_POLICY = LaunchPolicy()
+"""What an agent allows when its configuration says nothing: python, any installed module."""
