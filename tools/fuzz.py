@@ -473,6 +473,17 @@ class HttpRefused(Exception):
     """A 4xx answer: the route refused the request (the status is the reason)."""
 
 
+_DEPLOYABLE = json.loads(
+    json.dumps(
+        parse_system(
+            "name: fuzz\ncomponents:\n  - {name: Cam, target: components.camera:Camera,"
+            " params: {rate: 2}, standby: {same_robot: 1}}\n",
+            "fuzz.yaml",
+        ).to_json()
+    )
+)
+"""A system `/v1/deploy` takes (every valid input is allocated; none launches: see below)."""
+
 HTTP_ROUTES: list[tuple[str, str, Any]] = [
     # (method, path with {q} for a fuzzed query or {n} for a fuzzed name, seed JSON body)
     ("POST", "/v1/robot", {"battery": "30%", "rssi": "-60dBm", "pos": [1, 2]}),
@@ -482,6 +493,12 @@ HTTP_ROUTES: list[tuple[str, str, Any]] = [
     ("POST", "/v1/move", {"component": "Cam", "to": "robot-2"}),
     ("POST", "/v1/plan", {"plan": {"epoch": 0, "version": 0}}),
     ("POST", "/v1/deploy", {"system": {"name": "x", "components": []}}),
+    ("POST", "/v1/deploy", {"system": _DEPLOYABLE}),
+    ("POST", "/v1/instances", {"instances": [{"name": "Cam", "launcher": "python",
+                               "target": "components.camera:Camera", "params": {"rate": 2}}],
+                               "replace": False}),
+    ("POST", "/v1/instances", {"instances": [{"name": "Sh", "launcher": "exec",
+                               "target": ["/bin/sh", "-c", "exit 0"]}]}),
     ("POST", "/v1/undeploy", {}),
     ("POST", "/v1/state", StateMsg("sync", "Cam", "Cam", "Cam-s1", (1, "robot-1", 1),
                                    {"n": 1, "pose": [0.5, 1.5]}, "robot-2").encode()),
@@ -503,10 +520,10 @@ HTTP_ROUTES: list[tuple[str, str, Any]] = [
     ("GET", "/healthz", None),
     ("GET", "/metrics", None),
 ]  # fmt: skip
-"""What the HTTP surface sends: every state-changing route whose valid inputs start nothing
-(JSON bodies, and the msgpack state message of POST /v1/state) and every read but the SSE
-stream. POST /v1/instances and a deployable system would launch a host for every valid input:
-their bodies are left to the route tests."""
+"""What the HTTP surface sends: every state-changing route (JSON bodies, and the msgpack state
+message of POST /v1/state) and every read but the SSE stream. The fuzzed agent allows no launcher
+(`allow_targets: []` turns python off), so a valid POST /v1/instances is refused (403) and a
+deployable system is infeasible: no input launches a host."""
 
 
 class HttpSurface:
@@ -535,6 +552,7 @@ class HttpSurface:
             robot_file=self.dir / "robot.yaml",
             key_file=self.dir / "cluster.key",
             preset="fast_test",
+            allow_targets=(),  # nothing may launch: valid specs are refused, not run
             data_dir=self.dir / "data",
         )
         self.loop = asyncio.new_event_loop()
