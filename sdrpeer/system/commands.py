@@ -1,9 +1,10 @@
 """`sdrpeer system check FILE` and `sdrpeer system schema`.
 
-How it works: `check` loads the file exactly as `sdrpeer deploy` would (nothing is sent
-anywhere) and prints what it understood: each component with its needs and standbys, each
-connection with its expected traffic, and the allocation thresholds; every problem is reported
-with file:line and the command exits 2. `schema` prints the JSON Schema for editors (or its path).
+How it works: `check` loads the file exactly as `sdrpeer deploy` would (nothing is sent anywhere;
+each `python` component's module is imported to check its ports and params, which runs the module's
+top-level code) and prints what it understood: each component with its needs and standbys, each
+connection with its expected traffic, and the allocation thresholds; every problem is reported with
+file:line and the command exits 2. `schema` prints the JSON Schema for editors (or its path).
 """
 
 from __future__ import annotations
@@ -19,7 +20,12 @@ def add_system_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     """Register `sdrpeer system check|schema`."""
     p = sub.add_parser("system", help="check a system file, print the schema")
     ssub = p.add_subparsers(dest="system_command", required=True, metavar="ACTION")
-    check = ssub.add_parser("check", help="validate a system file (nothing is deployed)")
+    check = ssub.add_parser(
+        "check",
+        help="validate a system file (nothing is deployed)",
+        description="Validate a system file: nothing is deployed, but each python component's"
+        " module is imported (its top-level code runs) to check its ports and params.",
+    )
     check.add_argument("file", type=Path)
     check.add_argument("--json", action="store_true", help="print the loaded system as JSON")
     check.set_defaults(func=cmd_check)
