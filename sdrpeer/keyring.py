@@ -1,11 +1,14 @@
-"""Cluster keys: a keyring whose first key signs and every key verifies (rotation without
-downtime), with the key file format.
+"""Cluster keys: a keyring whose first key seals and every key opens (rotation without downtime),
+with the key file format.
 
 How it works: a key is at least 16 random bytes, identified on the wire by the first 4 bytes of
-its SHA-256 (the key id). `Keyring.sign` uses the first key; `Keyring.verify` looks the key up by
-id and compares HMAC-SHA256 in constant time. Rotation: add the new key second everywhere (both
-verify), move it first everywhere (it signs, the old one still verifies), then remove the old.
-Key files hold one key a line, hex or base64 (a `hex:`/`base64:` prefix says which), `#` comments.
+its SHA-256 (the key id). Gossip is sealed with AES-256-GCM (authenticated encryption, as Serf
+does), under a key derived from each cluster key with HKDF-SHA256 (`GOSSIP_INFO`), from the
+`cryptography` package: `Keyring.seal` uses the first key, `Keyring.open` looks the key up by id
+(two keys whose ids collide are both tried). Rotation: add the new key second everywhere (both
+open), move it first everywhere (it seals, the old one still opens), then remove the old. Key
+files hold one key a line, hex or base64 (a `hex:`/`base64:` prefix says which), `#` comments.
+`cryptography` is imported only when a keyring first seals or opens.
 """
 
 from __future__ import annotations
@@ -13,23 +16,28 @@ from __future__ import annotations
 import base64
 import binascii
 import hashlib
-import hmac
 import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from sdrpeer.errors import ConfigError
 
 KEY_ID_SIZE = 4
-MAC_SIZE = 32
+NONCE_SIZE = 12
+"""AES-GCM's nonce: unique per datagram under one key (the codec makes it; see sdrpeer.wire)."""
+TAG_SIZE = 16
+"""AES-GCM's authentication tag, at the end of every sealed body."""
+GOSSIP_INFO = b"sdrpeer gossip aes-256-gcm v1"
+"""HKDF's `info` for the gossip key derived from a cluster key (other uses derive their own)."""
 INSECURE_KEY_ID = b"\0" * KEY_ID_SIZE
 MIN_KEY_SIZE = 16
 _HEX = re.compile(r"(?:[0-9a-fA-F]{2})+")
 
 
 def key_id(key: bytes) -> bytes:
-    """The 4-byte id of `key` sent in every datagram it signs: sha256(key)[:4]."""
+    """The 4-byte id of `key` sent in every datagram it seals: sha256(key)[:4]."""
     return hashlib.sha256(key).digest()[:KEY_ID_SIZE]
 
 
@@ -50,7 +58,7 @@ def parse_key(text: str) -> bytes:
 
 
 class Keyring:
-    """Cluster keys: the first signs, every key verifies (so keys rotate without downtime)."""
+    """Cluster keys: the first seals, every key opens (so keys rotate without downtime)."""
 
     def __init__(self, keys: Sequence[bytes]) -> None:
         unique = list(dict.fromkeys(bytes(k) for k in keys))
@@ -65,14 +73,12 @@ class Keyring:
         self._ids = tuple(key_id(k) for k in unique)
         if INSECURE_KEY_ID in self._ids:
             raise ConfigError("keyring: a key has the all-zero key id of unsigned datagrams")
-        self._macs: dict[bytes, list[hmac.HMAC]] = {}
-        for kid, key in zip(self._ids, self._keys, strict=True):
-            self._macs.setdefault(kid, []).append(hmac.new(key, digestmod=hashlib.sha256))
-        self._signer = self._macs[self._ids[0]][0]
+        self._aeads: dict[bytes, list[Any]] | None = None
+        """Key id -> the AES-GCM ciphers of the keys with that id (built on first use)."""
 
     @property
     def signing_key(self) -> bytes:
-        """The key that signs outgoing datagrams (the first one)."""
+        """The key that seals outgoing datagrams (the first one)."""
         return self._keys[0]
 
     @property
@@ -95,22 +101,38 @@ class Keyring:
 
     def knows(self, kid: bytes) -> bool:
         """Whether some key in the ring has id `kid`."""
-        return kid in self._macs
+        return kid in self._ids
 
-    def sign(self, data: bytes) -> tuple[bytes, bytes]:
-        """(key id, HMAC-SHA256 of `data`) under the signing key."""
-        mac = self._signer.copy()
-        mac.update(data)
-        return self._ids[0], mac.digest()
+    def _ciphers(self) -> dict[bytes, list[Any]]:
+        if self._aeads is None:
+            from cryptography.hazmat.primitives import hashes  # noqa: PLC0415 - on first use
+            from cryptography.hazmat.primitives.ciphers.aead import AESGCM  # noqa: PLC0415
+            from cryptography.hazmat.primitives.kdf.hkdf import HKDF  # noqa: PLC0415
 
-    def verify(self, kid: bytes, data: bytes, mac: bytes) -> bool:
-        """Whether `mac` is the HMAC of `data` under a key with id `kid` (constant-time compare)."""
-        ok = False
-        for base in self._macs.get(kid, ()):
-            h = base.copy()
-            h.update(data)
-            ok |= hmac.compare_digest(h.digest(), mac)
-        return ok
+            aeads: dict[bytes, list[Any]] = {}
+            for kid, key in zip(self._ids, self._keys, strict=True):
+                derived = HKDF(hashes.SHA256(), 32, None, GOSSIP_INFO).derive(key)
+                aeads.setdefault(kid, []).append(AESGCM(derived))
+            self._aeads = aeads
+        return self._aeads
+
+    def seal(self, nonce: bytes, data: bytes, aad: bytes) -> bytes:
+        """`data` encrypted under the first key, with the tag over it and `aad` appended."""
+        sealed: bytes = self._ciphers()[self._ids[0]][0].encrypt(nonce, data, aad)
+        return sealed
+
+    def open(self, kid: bytes, nonce: bytes, sealed: bytes, aad: bytes) -> bytes | None:
+        """The plaintext of `sealed` under a key with id `kid`, or None when no such key's tag
+        matches (forged, altered, truncated, or sealed under another key)."""
+        from cryptography.exceptions import InvalidTag  # noqa: PLC0415 - loaded by _ciphers
+
+        for cipher in self._ciphers().get(kid, ()):
+            try:
+                data: bytes = cipher.decrypt(nonce, sealed, aad)
+            except InvalidTag:
+                continue
+            return data
+        return None
 
     @staticmethod
     def generate() -> bytes:
@@ -121,7 +143,7 @@ class Keyring:
 
     @classmethod
     def from_file(cls, path: str | os.PathLike[str]) -> Keyring:
-        """Keys from a file: one per line, hex or base64, `#` comments; the first key signs.
+        """Keys from a file: one per line, hex or base64, `#` comments; the first key seals.
 
         A line of an even number of hex digits is hex, anything else must be base64 (a 32-byte
         key is 64 chars in hex, 44 chars ending in "=" in base64); "hex:" or "base64:" in front

@@ -1,15 +1,19 @@
-"""Wire format: gossip packets <-> authenticated datagrams. The only codec for `gossip.messages`.
+"""Wire format: gossip packets <-> sealed datagrams. The only codec for `gossip.messages`.
 
 How it works
 ------------
-A datagram is a fixed 39-byte header followed by a msgpack body::
+A datagram is a fixed 19-byte header, then the msgpack body encrypted with AES-256-GCM and its
+16-byte tag (35 bytes in all besides the body; the HMAC of protocol 2 took 39)::
 
-    b"SP" | version (1) | key id (4) | MAC (32) | body
+    b"SP" | version (1) | key id (4) | nonce (12) | AES-GCM(body) | tag (16)
 
 - *version* is `PROTOCOL_VERSION`; any other value is dropped as "version".
-- *key id* is the first 4 bytes of sha256(key) of the key that signed; all zeros when unsigned.
-- *MAC* is HMAC-SHA256 under that key over magic + version + key id + body (everything but the
-  MAC itself, so the version and key id cannot be altered either); all zeros when unsigned.
+- *key id* is the first 4 bytes of sha256(key) of the cluster key that sealed; all zeros when
+  not sealed (`--insecure`: then the body follows the header in clear, without a tag).
+- *nonce* is the codec's 4 random bytes (drawn when it is made) and the datagram's 8-byte seq:
+  unique per datagram under one key without coordination (seqs only rise, also across
+  restarts). The header is the additional authenticated data: version, key id and nonce cannot
+  be altered either. Nothing of the body — names, metrics, plans — is readable without the key.
 - *body* is a short *stream* of msgpack arrays, not one nested array:
   the head ``[tag, sender, seq, ts_ms, *fields]``, then (Sync only) one array per entry, then
   one array per piggybacked update ``[utag, *fields]``. A ping's head may end with the sender's
@@ -18,10 +22,10 @@ A datagram is a fixed 39-byte header followed by a msgpack body::
   preallocate megabytes of nested lists; and a packet's size is exactly its head plus the sum of
   `encoded_size(u)` of its updates.
 
-Checks on receive, cheapest and safest first: size, magic, version, key id + MAC (before the body
-is parsed), body (every field type-checked), then freshness (ts no older than the window before
-the cluster time, below) and replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs,
-as in IPsec).
+Checks on receive, cheapest and safest first: size, magic, version, key id + tag (the body is
+decrypted and authenticated before it is parsed), body (every field type-checked), then freshness
+(ts no older than the window before the cluster time, below) and replay (per-sender sliding window
+of the last `REPLAY_WINDOW` seqs, as in IPsec).
 
 Time: timestamps are in cluster time (`replay.ClusterClock`: the wall clock plus an offset that
 only grows to the newest authenticated timestamp accepted), so robots need no common clock;
@@ -30,10 +34,10 @@ only grows to the newest authenticated timestamp accepted), so robots need no co
 A failure raises `WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else
 escapes `decode`.
 
-Keys: a `Keyring` holds the cluster keys; the first signs, every one verifies. To rotate: add the
-new key second everywhere (both verify), then move it first everywhere (it signs, the old still
-verifies), then remove the old one. `Codec(sender, None)` is the explicit insecure choice: it sends
-unsigned datagrams and accepts anything well-formed, signed or not, without verifying.
+Keys: a `Keyring` holds the cluster keys; the first seals, every one opens. To rotate: add the
+new key second everywhere (both open), then move it first everywhere (it seals, the old still
+opens), then remove the old one. `Codec(sender, None)` is the explicit insecure choice: it sends
+datagrams in clear and accepts clear ones (a sealed one it cannot open: "unknown_key").
 
 Seqs: each `Codec` numbers its datagrams from `seq_start` (the shell passes wall-clock
 microseconds, so seqs keep rising across restarts); receivers track them per sender name, so a
@@ -42,6 +46,7 @@ codec only encodes packets whose `sender` is its own.
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 
 import msgpack
@@ -70,8 +75,9 @@ from sdrpeer.gossip.messages import (
 from sdrpeer.keyring import (
     INSECURE_KEY_ID,
     KEY_ID_SIZE,
-    MAC_SIZE,
     MIN_KEY_SIZE,
+    NONCE_SIZE,
+    TAG_SIZE,
     Keyring,
     format_key,
     key_id,
@@ -83,8 +89,8 @@ __all__ = [  # the keyring and replay guard live in their own modules; re-export
     "HEADER_SIZE",
     "INSECURE_KEY_ID",
     "KEY_ID_SIZE",
-    "MAC_SIZE",
     "MIN_KEY_SIZE",
+    "OVERHEAD",
     "PROTOCOL_VERSION",
     "REASONS",
     "REPLAY_WINDOW",
@@ -100,12 +106,14 @@ __all__ = [  # the keyring and replay guard live in their own modules; re-export
     "parse_key",
 ]
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 """Bumped on any incompatible change of the header or body layout (2: digests, vitals on pings,
-format-2 records)."""
+format-2 records; 3: AES-GCM instead of an HMAC, format-3 records)."""
 MAGIC = b"SP"
-HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + MAC_SIZE
-"""Bytes the envelope adds before the body (39; `GossipConfig.packet_overhead` budgets 48)."""
+HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + NONCE_SIZE
+"""Bytes the envelope adds before the body (19)."""
+OVERHEAD = HEADER_SIZE + TAG_SIZE
+"""Bytes a sealed datagram adds to its body (35; `GossipConfig.packet_overhead` budgets 48)."""
 MAX_FIELDS = 32
 """Largest msgpack array or map accepted anywhere in a body (a head has at most 8 fields)."""
 MAX_NAME = 255
@@ -128,7 +136,9 @@ U_ALIVE, U_SUSPECT, U_DEAD, U_RECORD, U_EVENT = range(5)
 
 _PACKER = msgpack.Packer(use_bin_type=True)
 _pack = _PACKER.pack
-_MAC_OFFSET = HEADER_SIZE - MAC_SIZE
+_SEQ_MASK = (1 << 64) - 1
+_KID = slice(len(MAGIC) + 1, len(MAGIC) + 1 + KEY_ID_SIZE)
+_NONCE = slice(_KID.stop, HEADER_SIZE)
 
 
 def encode_update(u: Update) -> list[object]:
@@ -178,7 +188,7 @@ _TYPICAL_TS_MS = 1 << 42
 
 
 def packet_body(packet: Packet, seq: int = _TYPICAL_SEQ, ts_ms: int = _TYPICAL_TS_MS) -> bytes:
-    """The unsigned msgpack body of `packet` (a datagram is `HEADER_SIZE` bytes more).
+    """The msgpack body of `packet`, in clear (a sealed datagram is `OVERHEAD` bytes more).
 
     The default seq and ts_ms are placeholders as wide on the wire as real ones, so the length
     is that of a real datagram body.
@@ -294,13 +304,13 @@ def _new_unpacker(max_size: int) -> msgpack.Unpacker:
     )
 
 
-def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, int, int]:
-    """(packet, seq, ts_ms, unknown updates skipped) from the body at data[HEADER_SIZE:].
+def _parse_body(unpacker: msgpack.Unpacker, body: bytes) -> tuple[Packet, int, int, int]:
+    """(packet, seq, ts_ms, unknown updates skipped) from a body in clear.
 
     `unpacker` must be empty; it is empty again on success (on failure, throw it away).
     """
     start = unpacker.tell()
-    unpacker.feed(memoryview(data)[HEADER_SIZE:])
+    unpacker.feed(body)
     head = unpacker.unpack()
     if type(head) is not list or len(head) < 4 or type(head[0]) is not int:
         raise _bad("head", head)
@@ -318,7 +328,7 @@ def _parse_body(unpacker: msgpack.Unpacker, data: bytes) -> tuple[Packet, int, i
         entries = tuple([_entry(unpacker.unpack()) for _ in range(_uint(head[5], "entries"))])
     updates: list[Update] = []
     unknown = 0
-    end = start + len(data) - HEADER_SIZE
+    end = start + len(body)
     while unpacker.tell() < end:  # (iterating would silently stop at a truncated update)
         u = decode_update(unpacker.unpack())
         if u is None:
@@ -378,8 +388,8 @@ class Codec:
         seq_start: int | None = None,
         max_senders: int = 4096,
     ) -> None:
-        if max_datagram <= HEADER_SIZE:
-            raise ValueError(f"max_datagram must exceed the {HEADER_SIZE}-byte header")
+        if max_datagram <= OVERHEAD:
+            raise ValueError(f"max_datagram must exceed the {OVERHEAD}-byte envelope")
         self.sender = sender
         """The robot whose packets this codec encodes (packets from others are refused)."""
         self.keyring = keyring
@@ -400,6 +410,8 @@ class Codec:
         """True after `decode` refused an authenticated datagram as stale (its sender is behind)."""
         self._unpacker = _new_unpacker(max_datagram)
         self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
+        self._nonce_prefix = os.urandom(NONCE_SIZE - 8)
+        """This codec's part of every nonce (with the seq: unique per datagram under a key)."""
 
     @property
     def secure(self) -> bool:
@@ -418,18 +430,18 @@ class Codec:
         seq = int(now_wall * 1e6) if self._seq is None else self._seq
         self._seq = seq + 1
         body = packet_body(packet, seq, self.clock.now_ms(now_wall))
-        if len(body) + HEADER_SIZE > self.max_datagram:
+        if len(body) + OVERHEAD > self.max_datagram:
             self.counters["send_oversized"] += 1
             raise WireError(
                 "oversized",
-                f"{type(packet).__name__} of {len(body) + HEADER_SIZE} bytes > {self.max_datagram}",
+                f"{type(packet).__name__} of {len(body) + OVERHEAD} bytes > {self.max_datagram}",
             )
         self.counters["sent"] += 1
         if self.keyring is None:
             return self._insecure_header + body
-        prefix = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0]
-        _, mac = self.keyring.sign(prefix + body)
-        return prefix + mac + body
+        nonce = self._nonce_prefix + (seq & _SEQ_MASK).to_bytes(8, "big")
+        header = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0] + nonce
+        return header + self.keyring.seal(nonce, body, header)
 
     def decode(self, data: bytes | bytearray | memoryview, now_wall: float) -> Packet:
         """The packet in datagram `data`, received at `now_wall`; else WireError (counted)."""
@@ -443,17 +455,24 @@ class Codec:
             raise self.reject("malformed", "not an sdrpeer datagram")
         if data[2] != PROTOCOL_VERSION:
             raise self.reject("version", f"protocol version {data[2]}, {PROTOCOL_VERSION} known")
-        if self.keyring is not None:
-            kid = data[3:_MAC_OFFSET]
+        kid = data[_KID]
+        if self.keyring is None:
+            if kid != INSECURE_KEY_ID:
+                raise self.reject("unknown_key", f"sealed under key id {kid.hex()}: no key here")
+            body = data[HEADER_SIZE:]
+        else:
             if kid == INSECURE_KEY_ID:
-                raise self.reject("unauthenticated", "unsigned datagram")
+                raise self.reject("unauthenticated", "datagram in clear")
             if not self.keyring.knows(kid):
                 raise self.reject("unknown_key", f"key id {kid.hex()}")
-            signed = data[:_MAC_OFFSET] + data[HEADER_SIZE:]
-            if not self.keyring.verify(kid, signed, data[_MAC_OFFSET:HEADER_SIZE]):
-                raise self.reject("unauthenticated", f"bad MAC under key id {kid.hex()}")
+            if size < OVERHEAD:
+                raise self.reject("malformed", "shorter than a tag")
+            opened = self.keyring.open(kid, data[_NONCE], data[HEADER_SIZE:], data[:HEADER_SIZE])
+            if opened is None:
+                raise self.reject("unauthenticated", f"bad tag under key id {kid.hex()}")
+            body = opened
         try:
-            packet, seq, ts_ms, unknown = _parse_body(self._unpacker, data)
+            packet, seq, ts_ms, unknown = _parse_body(self._unpacker, body)
         except BaseException as e:
             self._unpacker = _new_unpacker(self.max_datagram)  # it may hold half a body
             if isinstance(e, WireError):

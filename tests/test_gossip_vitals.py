@@ -8,6 +8,7 @@ from sdrpeer.gossip.config import lan
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent, RecordChanged, VitalsChanged
 from sdrpeer.gossip.messages import (
+    ALIVE,
     Ack,
     Addr,
     Alive,
@@ -110,6 +111,35 @@ def test_received_vitals_are_ordered_and_tied_to_the_record_held() -> None:
     assert core.vitals_of("r1") is None  # revisions of an older record are dropped
     core.receive(0.3, addr(9), Ping("r9", 1, "r0", (), VitalsRevision(1, 1, b"x")))
     assert core.vitals_of("r9") is None  # not a member
+
+
+def test_vitals_of_a_record_we_lack_pull_it_at_once() -> None:
+    """r1's ping revises its record version 6; we hold version 5 (we were cut off while the
+    fleet moved on): we send r1 our table at once, asking for its newer records."""
+    core = robot()
+    core.receive(0.0, addr(1), Gossip("r1", (Record("r1", 5, b"rec5"),)))
+    core.datagrams_to_send()
+
+    def pulls(t: float, version: int, revision: int) -> list[Sync]:
+        v = VitalsRevision(version, revision, b"v")
+        core.receive(t, addr(1), Ping("r1", revision, "r0", (), v))
+        return [p for dst, p in core.datagrams_to_send() if isinstance(p, Sync) and dst == addr(1)]
+
+    assert pulls(0.1, 5, 1) == []  # vitals of the record we hold: nothing to fetch
+    (pull,) = pulls(0.2, 6, 1)
+    assert pull.reply  # r1 answers with the records we lack, and its own table
+    assert ("r1", addr(1), 0, ALIVE, 5) in pull.entries
+    assert pulls(0.5, 6, 2) == []  # at most one pull a second per peer
+    assert len(pulls(1.3, 6, 3)) == 1  # still behind a second later: again
+    assert core.counters["pulls"] == 2
+
+
+def test_a_robot_declared_dead_pulls_what_it_missed() -> None:
+    core = robot()
+    core.receive(1.0, addr(2), Ack("r2", 1, (Dead("r0", 0, "r2"),)))  # "you were dead to us"
+    out = core.datagrams_to_send()
+    assert core.incarnation == 1  # refuted
+    assert any(isinstance(p, Sync) and p.reply for dst, p in out if dst == addr(2))
 
 
 def test_reaping_forgets_vitals() -> None:

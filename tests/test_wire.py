@@ -34,6 +34,7 @@ from sdrpeer.gossip.messages import (
 from sdrpeer.replay import MAX_TS_MS
 from sdrpeer.wire import (
     HEADER_SIZE,
+    OVERHEAD,
     PROTOCOL_VERSION,
     REASONS,
     REPLAY_WINDOW,
@@ -79,7 +80,7 @@ PACKETS: tuple[Packet, ...] = (
         UPDATES,
     ),
 )
-INSECURE_HEADER = b"SP" + bytes([PROTOCOL_VERSION]) + bytes(36)
+INSECURE_HEADER = b"SP" + bytes([PROTOCOL_VERSION]) + bytes(16)
 
 
 def pair(
@@ -120,7 +121,12 @@ def test_every_packet_round_trips(packet: Packet, secure: bool) -> None:
     a, b = pair(keys, keys)
     data = a.encode(packet, T)
     assert b.decode(data, T + 0.5) == packet
-    assert data[HEADER_SIZE:] == packet_body(packet, 1, T_MS)
+    body = packet_body(packet, 1, T_MS)
+    if secure:  # sealed: the body is nowhere in clear, and the envelope is exactly OVERHEAD
+        assert len(data) == len(body) + OVERHEAD
+        assert body[:8] not in data
+    else:
+        assert data[HEADER_SIZE:] == body
     assert len(packet_body(packet)) == len(packet_body(packet, int(T * 1e6), T_MS))
     assert a.counters["sent"] == 1
     assert b.counters["accepted"] == 1
@@ -147,7 +153,16 @@ def test_every_update_round_trips_and_size_is_exact(update: Update) -> None:
 
 
 def test_header_fits_the_configured_overhead() -> None:
-    assert HEADER_SIZE == 39 <= GossipConfig().packet_overhead
+    assert HEADER_SIZE == 19
+    assert OVERHEAD == 35 <= GossipConfig().packet_overhead
+
+
+def test_nonces_are_unique_per_datagram_and_per_codec() -> None:
+    a = Codec("a", Keyring([KEY_A]), seq_start=1)
+    again = Codec("a", Keyring([KEY_A]), seq_start=1)  # the same robot restarted, same seqs
+    nonces = [a.encode(Gossip("a"), T)[7:19] for _ in range(100)]
+    nonces.append(again.encode(Gossip("a"), T)[7:19])
+    assert len(set(nonces)) == 101
 
 
 def test_seqs_rise_from_seq_start_or_the_first_timestamp() -> None:
@@ -252,15 +267,20 @@ def test_generated_keys_are_random_and_formatted_as_hex(tmp_path: Path) -> None:
     assert Keyring.from_file(path).key_ids == (key_id(k1), key_id(k2))
 
 
-def test_keyring_signs_with_first_verifies_with_all_and_hides_keys() -> None:
+def test_keyring_seals_with_first_opens_with_all_and_hides_keys() -> None:
     ring = Keyring([KEY_A, KEY_B])
-    kid, mac = ring.sign(b"data")
-    assert kid == key_id(KEY_A)
-    assert ring.verify(kid, b"data", mac)
-    assert not ring.verify(kid, b"date", mac)
-    assert not ring.verify(key_id(KEY_B), b"data", mac)
-    kid_b, mac_b = Keyring([KEY_B]).sign(b"data")
-    assert ring.verify(kid_b, b"data", mac_b)
+    nonce = bytes(range(12))
+    sealed = ring.seal(nonce, b"data", b"aad")
+    assert b"data" not in sealed
+    assert len(sealed) == 4 + 16
+    assert ring.open(key_id(KEY_A), nonce, sealed, b"aad") == b"data"
+    assert ring.open(key_id(KEY_A), nonce, sealed, b"aae") is None  # header altered
+    assert ring.open(key_id(KEY_A), bytes(12), sealed, b"aad") is None  # nonce altered
+    assert ring.open(key_id(KEY_B), nonce, sealed, b"aad") is None  # not the sealing key
+    tampered = bytes([sealed[0] ^ 1]) + sealed[1:]
+    assert ring.open(key_id(KEY_A), nonce, tampered, b"aad") is None
+    by_b = Keyring([KEY_B]).seal(nonce, b"data", b"aad")
+    assert ring.open(key_id(KEY_B), nonce, by_b, b"aad") == b"data"
     assert KEY_A.hex() not in repr(ring)
     assert key_id(KEY_A).hex() in repr(ring)
 
@@ -308,8 +328,8 @@ def test_wrong_key_is_unknown_key() -> None:
     rejects(b, a.encode(Gossip("a"), T), "unknown_key")
 
 
-@pytest.mark.parametrize("where", [HEADER_SIZE, -1, 8])
-def test_tampered_body_or_mac_is_unauthenticated(where: int) -> None:
+@pytest.mark.parametrize("where", [HEADER_SIZE, -1, 8, 18, 2 + 1 + 4 + 12 + 3])
+def test_tampered_body_tag_or_nonce_is_unauthenticated(where: int) -> None:
     a, b = pair([KEY_A], [KEY_A])
     data = bytearray(a.encode(Ping("a", 1, "b", UPDATES), T))
     data[where] ^= 0x01
@@ -321,11 +341,15 @@ def test_unsigned_datagram_to_secure_codec_is_unauthenticated() -> None:
     rejects(b, a.encode(Gossip("a"), T), "unauthenticated")
 
 
-def test_insecure_codec_accepts_signed_datagrams_unverified() -> None:
+def test_an_insecure_codec_cannot_read_sealed_datagrams() -> None:
     a, b = pair([KEY_A], None)
-    data = bytearray(a.encode(Gossip("a"), T))
-    data[10] ^= 0xFF  # a broken MAC does not matter to an insecure codec
-    assert b.decode(bytes(data), T) == Gossip("a")
+    rejects(b, a.encode(Gossip("a"), T), "unknown_key")
+
+
+def test_a_datagram_shorter_than_its_tag_is_malformed() -> None:
+    a, b = pair([KEY_A], [KEY_A])
+    data = a.encode(Gossip("a"), T)
+    rejects(b, data[: HEADER_SIZE + 5], "malformed")
 
 
 def test_replayed_datagram_is_dropped() -> None:

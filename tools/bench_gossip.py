@@ -8,7 +8,7 @@ test is switched on. Times are virtual seconds read from the cores' events; wall
 used for the simulator's own speed.
 - convergence: a 450-byte `set_record` on a random robot; the time until 99.99 % of the robots
   (the originator included) reported that version; median over trials, per (N, loss);
-- bandwidth: bytes each robot sends per second (`len(packet_body) + HEADER_SIZE`) over 60 virtual
+- bandwidth: bytes each robot sends per second (`len(packet_body) + OVERHEAD`) over 60 virtual
   seconds at N = 1,000 while one robot is killed and the previous one restarted every 10 s;
   robots that took part in the churn are left out of mean and max;
 - failure detection: several robots killed one after another; per death, the time until every

@@ -12,7 +12,7 @@ How it works: each surface gets `--inputs` inputs, a third each of
 - structure mutations: a valid message decoded, one node of its msgpack tree replaced by a
   hostile value (huge, negative or fractional numbers, NaN, long strings, bytes, deep nesting,
   wrong types), removed or duplicated, and encoded again.
-Gossip inputs are signed with the cluster key after mutation (with a fresh sequence number), so
+Gossip inputs are sealed with the cluster key after mutation (with a fresh sequence number), so
 they get past authentication and reach the parser, the replay guard, the membership core (which
 processes them, with its timers run every 64 inputs) and the record decoder. Control inputs go
 to the agent's report decoder and to the host's command decoder; stream inputs to the receiver's
@@ -236,23 +236,23 @@ class GossipSurface:
             return rng.randbytes(rng.randrange(0, 3000))
         body = rng.choice(self.seeds)
         if kind == 1:
-            return self.sign(mutate_bytes(rng, body), fresh=False)
+            return self.seal(mutate_bytes(rng, body), fresh=False)
         values = _values(body)
         k = rng.randrange(len(values))
         values[k] = mutate_tree(rng, values[k])
         packed = pack_all(values)
-        return self.sign(packed if packed is not None else body, fresh=True)
+        return self.seal(packed if packed is not None else body, fresh=True)
 
-    def sign(self, body: bytes, *, fresh: bool) -> bytes:
+    def seal(self, body: bytes, *, fresh: bool) -> bytes:
         if fresh:  # a new seq and a current time in the head, so the replay guard lets it by
             values = _values(body) if body else []
             if values and isinstance(values[0], list) and len(values[0]) >= 4:
                 self.seq += 1
                 values[0][2], values[0][3] = self.seq, int(NOW * 1000)
                 body = pack_all(values) or body
-        prefix = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0]
-        _, mac = self.keyring.sign(prefix + body)
-        return prefix + mac + body
+        nonce = os.urandom(12)
+        header = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0] + nonce
+        return header + self.keyring.seal(nonce, body, header)
 
     def feed(self, data: bytes) -> None:
         packet = self.codec.decode(data, NOW)

@@ -241,9 +241,25 @@ def run_chaos(opts: ChaosOptions, say: Callable[[str], None] = print) -> dict[st
             say=lambda _: None,
         )
         try:
-            return _soak(lab, opts, netns, say)
+            report = _soak(lab, opts, netns, say)
         finally:
             lab.stop(grace=3)
+        report["leaked_processes"] = _reap_leftovers(lab_dir)
+        return report
+
+
+def _reap_leftovers(lab_dir: Path) -> list[str]:
+    """Kill (and name) every process still running from the lab after it was stopped: an agent
+    or host that outlived `lab.stop` is a leak the soak reports."""
+    marker = str(lab_dir)
+    found = []
+    for proc in psutil.process_iter(["pid", "cmdline"]):
+        cmdline = proc.info.get("cmdline") or []
+        if proc.pid != os.getpid() and any(marker in part for part in cmdline):
+            found.append(f"pid {proc.pid}: {' '.join(cmdline)[:200]}")
+            with contextlib.suppress(psutil.Error):
+                proc.kill()
+    return found
 
 
 def _soak(
@@ -349,5 +365,7 @@ def format_report(r: dict[str, Any]) -> str:
         f"{r['agent_rss_growth_mib']} MiB",
         f"violations: {len(r['violations'])} (target 0)",
     ]
+    if r.get("leaked_processes"):
+        lines.append(f"processes left running after the lab stopped: {r['leaked_processes']}")
     lines += [f"  {v}" for v in r["violations"][:20]]
     return "\n".join(lines)

@@ -8,6 +8,13 @@ merges the other's, pushes back the records the other lacks (at most one answer 
 Joining sends the whole table at once. A remote "dead" is merged as a suspicion only, since it may
 be stale. One time in three the partner is the last address of a dead member or a seed instead: that
 is how two halves of a healed partition find each other again.
+
+A robot also *pulls* at once (`_pull`: our table to one peer, answered with the records we lack and
+its table) when it learns it fell behind: a ping carries vitals revising a record newer than the one
+we hold of its sender, or a member tells us we were declared dead (we were cut off: everything the
+fleet decided meanwhile is in records we missed). The periodic exchange would repair both, but only
+after a push-pull interval (5 s on the lan preset): after a partition heals, the side that was cut
+off learns of the fleet's newer plan at once. At most one pull per peer per `SYNC_REPLY_GAP`.
 """
 
 from __future__ import annotations
@@ -68,6 +75,15 @@ class AntiEntropy(CoreState):
         if last is None or self._now - last >= SYNC_REPLY_GAP:
             self._sync_replied[d.sender] = self._now
             self._send_state(src, reply=True)
+
+    def _pull(self, dest: Addr) -> None:
+        """Ask the peer at `dest` for what we lack now (rate-limited per peer)."""
+        last = self._pulled.get(dest)
+        if last is not None and self._now - last < SYNC_REPLY_GAP:
+            return
+        self._pulled[dest] = self._now
+        self._count("pulls")
+        self._send_state(dest, reply=True)
 
     def _retry_join(self, delay: float) -> None:
         if len(self._members) > 1 or not self._seeds:

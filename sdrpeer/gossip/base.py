@@ -117,6 +117,8 @@ class CoreState:
         self._event_seq = 0
         self._seen_events: dict[tuple[str, int], None] = {}
         self._sync_replied: dict[str, float] = {}
+        self._pulled: dict[Addr, float] = {}
+        """Peer address -> when we last pulled from it (`AntiEntropy._pull`)."""
         self._dead_addrs: dict[str, tuple[Addr, float]] = {}
         self._revived: dict[str, float] = {}
         """Member -> when it last came back from the dead (its verdicts may be stale a while)."""

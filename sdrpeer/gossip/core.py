@@ -169,8 +169,8 @@ class Membership(Probing, AntiEntropy):
         if packet.updates:
             self._merge_updates(packet.updates, src)
         if isinstance(packet, Ping):
-            if packet.vitals is not None:
-                self._merge_vitals(sender, packet.vitals)
+            if packet.vitals is not None and self._merge_vitals(sender, packet.vitals):
+                self._pull(src)  # they revise a record we never got: fetch it now
             self._on_ping(src, packet)
         elif isinstance(packet, Ack):
             self._on_ack(packet)
@@ -271,6 +271,8 @@ class Membership(Probing, AntiEntropy):
                     self._merge_dead(u)  # type: ignore[arg-type]
                 if u.name == self.name and not self.leaving:  # type: ignore[union-attr]
                     corrections.append(Alive(self.name, self.addr, self.incarnation))
+                    if t is Dead:
+                        self._pull(src)  # we were cut off: fetch what the fleet decided
             elif t is Record:
                 self._merge_record(u)  # type: ignore[arg-type]
             elif t is Event:
@@ -397,17 +399,20 @@ class Membership(Probing, AntiEntropy):
         self._events.append(EventReceived(e.source, e.seq, e.kind, e.payload, self._now))
         self._enqueue(("e", e.source, e.seq), e)
 
-    def _merge_vitals(self, sender: str, v: VitalsRevision) -> None:
+    def _merge_vitals(self, sender: str, v: VitalsRevision) -> bool:
+        """Take `sender`'s vitals; True when they revise a record newer than the one we hold."""
         if sender not in self._members:
-            return
+            return False
+        rec = self._records.get(sender)
+        behind = rec is None or rec[0] < v.version
         old = self._vitals.get(sender)
         if old is not None and old.key >= v.key:
-            return
-        rec = self._records.get(sender)
+            return behind
         if rec is not None and rec[0] > v.version:
-            return  # a revision of a record older than the one we hold
+            return False  # a revision of a record older than the one we hold
         self._vitals[sender] = v
         self._events.append(VitalsChanged(sender, v.version, v.revision, v.payload, self._now))
+        return behind
 
     def _refute(self, incarnation: int) -> None:
         self.incarnation = max(self.incarnation, incarnation) + 1

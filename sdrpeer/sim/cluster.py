@@ -28,7 +28,7 @@ from sdrpeer.gossip.events import CoreEvent
 from sdrpeer.gossip.messages import Addr, Packet
 from sdrpeer.sim.network import Network
 from sdrpeer.sim.trace import Trace
-from sdrpeer.wire import HEADER_SIZE, packet_body
+from sdrpeer.wire import OVERHEAD, packet_body
 
 if TYPE_CHECKING:
     from sdrpeer.gossip.table import MemberInfo
@@ -69,8 +69,8 @@ def membership_factory(
 
 
 def packet_size(packet: Packet) -> int:
-    """Bytes one datagram takes on the wire: `len(packet_body(p)) + HEADER_SIZE`."""
-    return len(packet_body(packet)) + HEADER_SIZE
+    """Bytes one datagram takes on the wire: `len(packet_body(p)) + OVERHEAD`."""
+    return len(packet_body(packet)) + OVERHEAD
 
 
 class Cluster:
