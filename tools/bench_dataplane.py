@@ -20,7 +20,10 @@ unacknowledged frames for replay; `sdrpeer_tcp_inport`: the same without acknowl
 other sdrpeer rows count frames at the socket), pyzmq
 (PUSH/PULL, REQ/REP; blocking sockets), a plain length-prefixed socket loop (one sendall per
 frame; the receiver parses frames out of a recv_into buffer and makes each a bytes object) and
-the same loop sending frames coalesced by 256. Every cell is the median of --reps runs; the
+the same loop sending frames coalesced by 256. `sdrpeer_tcp_acked_enc` is `sdrpeer_tcp_acked`
+between two ends holding a data key (a random one per run, given to the receiver process as
+SDRPEER_DATA_KEYS, as an agent gives its hosts): authenticated and AES-GCM encrypted, the
+default between robots. Every cell is the median of --reps runs; the
 contenders run interleaved within each rep, and a target's ratio is the median over reps of the
 ratio measured within one rep (the load of this shared machine shifts between reps).
 """
@@ -44,6 +47,7 @@ from dataplane_peers import LEN, Peer, payload
 from dataplane_pings import SMALL, asyncio_pings, plain_pings, sdr_pings, zmq_pings
 
 from sdrpeer.dataplane import Connection
+from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.testing import make_policy
 
@@ -53,6 +57,18 @@ THROUGHPUT_TARGETS = [
     ("100 B >= 1.0x pyzmq", ("small", "sdrpeer_tcp"), ("small", "zmq"), 1.0),
     ("1 MB TCP >= 0.8x plain TCP", ("big", "sdrpeer_tcp"), ("big", "plain_tcp"), 0.8),
     ("1 MB same-robot >= 1.5x plain TCP", ("big", "sdrpeer_shm"), ("big", "plain_tcp"), 1.5),
+    (
+        "100 B encrypted >= 0.8x unencrypted (acked, into the InPort)",
+        ("small", "sdrpeer_tcp_acked_enc"),
+        ("small", "sdrpeer_tcp_acked"),
+        0.8,
+    ),
+    (
+        "1 MB encrypted >= 0.7x unencrypted (acked, into the InPort)",
+        ("big", "sdrpeer_tcp_acked_enc"),
+        ("big", "sdrpeer_tcp_acked"),
+        0.7,
+    ),
 ]
 RTT_TARGET = 1.3  # sdrpeer p50 <= 1.3x plain socket p50
 
@@ -60,11 +76,14 @@ RTT_TARGET = 1.3  # sdrpeer p50 <= 1.3x plain socket p50
 # ---- senders (the parent process) ---------------------------------------------------------
 
 
-async def _sdr_send(to: str, n: int, size: int, shm: bool, acks: bool = True) -> float:
+async def _sdr_send(
+    to: str, n: int, size: int, *, shm: bool, acks: bool = True, keys: list[bytes] | None = None
+) -> float:
     buffer = 4096 if size <= 1024 else 4
     policy = make_policy("fifo", buffer, "block")
     size_shm = DEFAULT_SIZE if shm else 0
-    conn = Connection("bench", to, "sink", "bench.out", policy, shm_size=size_shm)
+    auth = DataAuth(keys) if keys else None
+    conn = Connection("bench", to, "sink", "bench.out", policy, shm_size=size_shm, auth=auth)
     if not acks:
         conn.window = None  # the receiver's InPort would acknowledge: do not ask it to
     conn.start()
@@ -83,15 +102,17 @@ async def _sdr_send(to: str, n: int, size: int, shm: bool, acks: bool = True) ->
 def sdr_throughput(kind: str, n: int, size: int) -> float:
     """Seconds the sdrpeer receiver took for n frames of `size` bytes; kind tcp, unix (the
     socket alone), shm (a Unix socket with the shared-memory ring, the default), tcp_acked
-    (into the SDK's InPort, taken by a consumer: an acknowledged stream) or tcp_inport (the
-    same without acknowledgements: what the acks cost is the difference)."""
+    (into the SDK's InPort, taken by a consumer: an acknowledged stream), tcp_inport (the
+    same without acknowledgements: what the acks cost is the difference) or tcp_acked_enc
+    (tcp_acked between two hosts holding a data key: authenticated and encrypted)."""
     with tempfile.TemporaryDirectory() as tmp:
-        role = "sdr-inport" if kind in ("tcp_acked", "tcp_inport") else "sdr-sink"
-        peer = Peer(role, n, os.path.join(tmp, "rx.sock"))
+        role = "sdr-inport" if kind.startswith(("tcp_acked", "tcp_inport")) else "sdr-sink"
+        keys = [os.urandom(32)] if kind.endswith("_enc") else None
+        peer = Peer(role, n, os.path.join(tmp, "rx.sock"), keys=keys)
         scheme = "unix" if kind in ("unix", "shm") else "tcp"
         to = f"{scheme}://{peer.addresses[scheme]}"
         acks = kind != "tcp_inport"
-        start = asyncio.run(_sdr_send(to, n, size, shm=kind == "shm", acks=acks))
+        start = asyncio.run(_sdr_send(to, n, size, shm=kind == "shm", acks=acks, keys=keys))
         return float(peer.finish()["end"]) - start
 
 
@@ -139,6 +160,7 @@ def measure(
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_small, SMALL),
         "sdrpeer_tcp_inport": lambda: sdr_throughput("tcp_inport", n_small, SMALL),
         "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_small, SMALL),
+        "sdrpeer_tcp_acked_enc": lambda: sdr_throughput("tcp_acked_enc", n_small, SMALL),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_small, SMALL),
         "zmq": lambda: zmq_throughput(n_small, SMALL),
         "plain_tcp": lambda: plain_throughput(n_small, SMALL),
@@ -148,6 +170,7 @@ def measure(
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_big, BIG),
         "sdrpeer_tcp_inport": lambda: sdr_throughput("tcp_inport", n_big, BIG),
         "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_big, BIG),
+        "sdrpeer_tcp_acked_enc": lambda: sdr_throughput("tcp_acked_enc", n_big, BIG),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_big, BIG),
         "sdrpeer_shm": lambda: sdr_throughput("shm", n_big, BIG),
         "plain_tcp": lambda: plain_throughput(n_big, BIG),

@@ -28,7 +28,10 @@ from typing import Any
 
 import zmq
 
+from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
+from sdrpeer.datakeys import keys_from_env, keys_to_env
 from sdrpeer.dataplane import Connection, DataServer
+from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.testing import make_policy
 
 LEN = struct.Struct(">I")
@@ -74,7 +77,9 @@ async def _peer_sdr_inport(n: int, unix: str) -> None:
     from sdrpeer.sdk.policy import ConnectorPolicy  # noqa: PLC0415
 
     port = InPortRuntime("sink", ConnectorPolicy("fifo", 1 << 20, "block"))
-    server = DataServer(lambda name: port, unix_path=unix)
+    keys = keys_from_env(os.environ.get(DATA_KEYS_ENV))  # given: authenticated, encrypted TCP
+    auth = DataAuth(keys) if keys else None
+    server = DataServer(lambda name: port, unix_path=unix, auth=auth)
     await server.start()
     _emit(server.addresses)
     count = 0
@@ -227,9 +232,17 @@ def _run_peer(role: str, n: int, arg: str) -> None:
 class Peer:
     """A peer subprocess: its advertised addresses, then its result."""
 
-    def __init__(self, role: str, n: int = 0, arg: str = "") -> None:
+    def __init__(
+        self, role: str, n: int = 0, arg: str = "", keys: list[bytes] | None = None
+    ) -> None:
         cmd = [sys.executable, os.path.abspath(__file__), role, str(n), arg]
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        env = dict(os.environ)
+        env.pop(DATA_KEYS_ENV, None)
+        if keys:
+            env[DATA_KEYS_ENV] = keys_to_env(keys)
+        self.proc = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env
+        )
         self.addresses: dict[str, str] = self._line()
 
     def _line(self) -> dict[str, Any]:

@@ -11,8 +11,9 @@ are fresh on both sides, so a captured handshake replayed opens nothing. A recei
 refuses a hello without a nonce; a sender with keys refuses a receiver that does not prove
 itself. The MAC is keyed BLAKE2b (16 bytes), which needs no OpenSSL (hosts stay small).
 
-Frames after the handshake are not MACed: this keeps a neighbour without the key from opening
-connections, not an on-path attacker from altering a TCP stream (docs/security.md).
+What follows the handshake on TCP is encrypted and authenticated (sdrpeer.dataplane.seal) under
+keys derived from the data key both proofs used (`check_receiver` and `check_sender` return it);
+same-robot Unix sockets and shared memory stay in clear.
 """
 
 from __future__ import annotations
@@ -91,11 +92,12 @@ class DataAuth:
 
     def check_sender(
         self, nonce: bytes, sender_nonce: bytes, names: Sequence[str], proof: bytes
-    ) -> bool:
-        """True when the sender's proof holds under one of our keys."""
-        return any(
-            _same(self.sender_proof(key, nonce, sender_nonce, names), proof) for key in self.keys
-        )
+    ) -> bytes | None:
+        """The key under which the sender's proof holds, or None."""
+        for key in self.keys:
+            if _same(self.sender_proof(key, nonce, sender_nonce, names), proof):
+                return key
+        return None
 
 
 def proof_names(hello: Hello) -> tuple[str, ...]:

@@ -67,6 +67,8 @@ class Hello:
     """The sender keeps frames until they are acknowledged (sdrpeer.dataplane.retention)."""
     auth: bytes | None = None
     """The sender's nonce when it authenticates (sdrpeer.dataplane.auth)."""
+    enc: bool = False
+    """The sender asks for an encrypted stream (sdrpeer.dataplane.seal; with `auth`, on TCP)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,6 +100,8 @@ def encode_hello(hello: Hello) -> bytes:
         obj["ack"] = hello.ack.to_map()
     if hello.auth is not None:
         obj["auth"] = hello.auth
+    if hello.enc:
+        obj["enc"] = True
     return _packb(obj)
 
 
@@ -128,7 +132,12 @@ def parse_hello(obj: object) -> Hello:
     auth = obj.get("auth")
     if auth is not None and (type(auth) is not bytes or len(auth) != 16):
         raise FrameError("malformed", "hello: 'auth' must be a 16-byte nonce")
-    return Hello(obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"), offer, auth)
+    enc = obj.get("enc", False)
+    if type(enc) is not bool:
+        raise FrameError("malformed", "hello: 'enc' must be true or false")
+    return Hello(
+        obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"), offer, auth, enc
+    )
 
 
 def encode_reply(
@@ -137,6 +146,7 @@ def encode_reply(
     shm: bool = False,
     ack: bool = False,
     auth: tuple[bytes, bytes] | None = None,
+    enc: bool = False,
 ) -> bytes:
     """The receiver's answer to a hello: ok (saying whether it took the offered ring, whether
     it acknowledges, and its nonce and proof when it authenticates), or the error that closes
@@ -150,6 +160,8 @@ def encode_reply(
         reply["ack"] = True
     if auth is not None:
         reply["auth"] = list(auth)
+    if enc:
+        reply["enc"] = True
     return _packb(reply)
 
 
@@ -279,6 +291,13 @@ class FrameDecoder:
     def partial(self) -> int:
         """How many of the bytes fed belong to a frame not complete yet."""
         return self._fed - self._end
+
+    def take_rest(self) -> bytes:
+        """The bytes fed behind the last complete object, taken out (the decoder is then empty):
+        what follows a handshake on an encrypted stream is not msgpack."""
+        rest: bytes = self._unpacker.read_bytes(self.partial)
+        self.drop_partial()
+        return rest
 
     def drop_partial(self) -> None:
         """Forget the incomplete frame (its bytes are the caller's to handle)."""

@@ -18,6 +18,10 @@ A receiver that acknowledges (it said ``"ack": true`` in its reply) writes ``[se
 reverse direction as the credits (a credit is a bare uint): `on_ack` gets each seq. Such a link
 is also only half-closed by `shut`, so the acknowledgements of what the old receiver still takes
 arrive; it closes once it has acknowledged everything or its instance stops.
+
+An authenticated TCP link is encrypted (`encrypt`, on by default; sdrpeer.dataplane.seal): the
+hello asks for it, the receiver agrees in its reply, and after the sender's proof `write` seals
+what it is given into records and what comes back is opened before it is read.
 """
 
 from __future__ import annotations
@@ -41,9 +45,15 @@ from sdrpeer.dataplane.frames import (
     parse_reply,
     reply_auth,
 )
+from sdrpeer.dataplane.seal import Opener, Sealer, stream_keys
 from sdrpeer.dataplane.shm import SenderRing
 
 _SNDBUF: Final = 4 * 1024 * 1024
+RECORD: Final = 256 * 1024
+"""Longest record sealed: a big write is cut into records of this size, so that the receiver
+decrypts the first while the next travels (one 1 MiB record would be decrypted only whole)."""
+MAX_RECORD: Final = 2 * 1024 * 1024
+"""Longest encrypted record accepted from a receiver (acks are a few bytes)."""
 
 
 class Link(asyncio.Protocol):
@@ -73,6 +83,8 @@ class Link(asyncio.Protocol):
         self._decoder: FrameDecoder | None = FrameDecoder(4096)
         self._reverse: msgpack.Unpacker | None = None  # credits and acks, after the reply
         self._early = b""  # bytes that came in the same read as the reply
+        self._opener: Opener | None = None
+        """Opens the receiver's records, when the link is encrypted."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -89,6 +101,22 @@ class Link(asyncio.Protocol):
         """The receiver acknowledges frames: read its `[seq]`s."""
         self.acks = True
         self._listen()
+
+    def encrypt(self, send_key: bytes, receive_key: bytes, max_record: int) -> None:
+        """From now on seal what is written and open what comes back."""
+        seal = Sealer(send_key).seal
+        write = self.transport.write
+
+        def sealed(data: bytes | memoryview) -> None:
+            if len(data) <= RECORD:
+                write(seal(data))
+                return
+            view = memoryview(data)  # records of RECORD bytes: the receiver opens the first
+            for start in range(0, len(view), RECORD):  # while the next is on its way
+                write(seal(view[start : start + RECORD]))
+
+        self.write = sealed
+        self._opener = Opener(receive_key, max_record)
 
     def _listen(self) -> None:
         if self._reverse is None:
@@ -128,6 +156,8 @@ class Link(asyncio.Protocol):
         ring = self.ring
         credited = False
         try:
+            if self._opener is not None:
+                data = b"".join(self._opener.open(data))
             self._reverse.feed(data)
             for obj in self._reverse:
                 if type(obj) is int:
@@ -188,13 +218,16 @@ async def dial(
     shm_size: int,
     on_ack: Callable[[int], None] | None = None,
     auth: DataAuth | None = None,
+    encrypt: bool = True,
+    max_record: int = MAX_RECORD,
 ) -> Link:
     """Open a link to `to` and get the receiver's ok (bound it with `asyncio.timeout`);
     FrameError("refused") with the receiver's error (or when it does not prove it holds a data
-    key, with `auth`), OSError when it cannot be reached."""
+    key, with `auth`, or does not encrypt a TCP link `encrypt` asks for), OSError when it
+    cannot be reached."""
     nonce = auth.nonce() if auth is not None and auth.enabled else None
-    hello = replace(hello, auth=nonce)
     kind, host, port = parse_address(to)
+    hello = replace(hello, auth=nonce, enc=encrypt and nonce is not None and kind == "tcp")
     loop = asyncio.get_running_loop()
     ring: SenderRing | None = None
     link: Link | None = None
@@ -228,7 +261,13 @@ async def dial(
         else:
             ring.close()
     if error is None and auth is not None and nonce is not None:
-        error = _prove(link, auth, nonce, hello, reply)
+        error, keys = _prove(link, auth, nonce, hello, reply)
+        if error is None and hello.enc:
+            if reply.get("enc") is not True:
+                error = "the receiver does not encrypt the stream"
+            else:
+                assert keys is not None
+                link.encrypt(*keys, max_record)
     if error is not None:
         link.transport.close()
         raise FrameError("refused", error)
@@ -240,18 +279,21 @@ async def dial(
 
 def _prove(
     link: Link, auth: DataAuth, nonce: bytes, hello: Hello, reply: dict[str, Any]
-) -> str | None:
-    """Check the receiver's proof and write ours; the error when the receiver's does not hold."""
+) -> tuple[str | None, tuple[bytes, bytes] | None]:
+    """Check the receiver's proof and write ours: (None, the stream's keys, sender's first), or
+    (the error, None) when the receiver's proof does not hold."""
     try:
         theirs = reply_auth(reply)
     except FrameError as exc:
-        return str(exc)
+        return str(exc), None
     if theirs is None:
-        return "the receiver did not authenticate (it has no data key)"
+        return "the receiver did not authenticate (it has no data key)", None
     names = proof_names(hello)
     key = auth.check_receiver(nonce, theirs[0], names, theirs[1])
     if key is None:
-        return "the receiver's proof does not hold under our data keys"
+        return "the receiver's proof does not hold under our data keys", None
     proof = auth.sender_proof(key, theirs[0], nonce, names)
     link.transport.write(msgpack.packb({"auth": proof}))
-    return None
+    if not hello.enc:
+        return None, None
+    return None, stream_keys(key, nonce, theirs[0], names)

@@ -5,7 +5,10 @@ accepted connection; this module is that connection's protocol. It reads into it
 `FrameReader`, answers the hello (and, when the host authenticates, checks the sender's proof
 before any frame: sdrpeer.dataplane.auth), maps an offered shared-memory ring (Unix sockets
 only), delivers every frame at once, writes back ring credits and acknowledgements, and keeps
-the socket open after the sender's end of stream until what it delivered is acknowledged.
+the socket open after the sender's end of stream until what it delivered is acknowledged. On an
+authenticated TCP connection whose sender asks for it, everything after the proof is encrypted
+(sdrpeer.dataplane.seal): the socket then reads into the `Opener`'s buffer, and each record is
+decrypted straight into the `FrameReader`'s buffer, as if its bytes had been read there.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import asyncio
 import contextlib
 import logging
 import socket
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Final, cast
 
 import msgpack
@@ -28,6 +32,7 @@ from sdrpeer.dataplane.frames import (
 )
 from sdrpeer.dataplane.port_api import AckingPort, InPortLike
 from sdrpeer.dataplane.reader import FrameReader
+from sdrpeer.dataplane.seal import TAG, Opener, Sealer, stream_keys
 from sdrpeer.dataplane.shm import ReceiverRing
 
 if TYPE_CHECKING:
@@ -37,6 +42,8 @@ log = logging.getLogger("sdrpeer.dataplane")
 _RCVBUF = 4 * 1024 * 1024
 _packb: Final = msgpack.packb
 _LOWAT_MAX: Final = 512 * 1024
+RECORD_SLACK: Final = 1024 * 1024
+"""A record may carry a whole write of the sender: a frame of the maximum size and more."""
 
 
 class Receiver(asyncio.BufferedProtocol):
@@ -61,10 +68,15 @@ class Receiver(asyncio.BufferedProtocol):
         self._sock: Any = None
         self._lowat = 1
         self._timer: asyncio.TimerHandle | None = None
+        self._opener: Opener | None = None
+        """Opens the sender's records, on an encrypted connection."""
+        self._send: Callable[[bytes], None] | None = None
+        """Writes to the sender (sealed on an encrypted connection), once the transport is up."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
+        self._send = transport.write
         server = self.server
         if len(server._receivers) >= server.max_connections:
             server.counters["rejected"] += 1
@@ -84,9 +96,14 @@ class Receiver(asyncio.BufferedProtocol):
         self._timer = loop.call_later(server.hello_timeout, self._hello_timeout)
 
     def get_buffer(self, sizehint: int) -> memoryview:
-        return self.reader.buffer()
+        opener = self._opener
+        return self.reader.buffer() if opener is None or self.port is None else opener.buffer()
 
     def buffer_updated(self, nbytes: int) -> None:
+        if self._opener is not None and self.port is not None:
+            self._opener.received(nbytes)
+            self._records(nbytes)
+            return
         reader = self.reader
         reader.received(nbytes)
         if self.port is not None:
@@ -94,18 +111,60 @@ class Receiver(asyncio.BufferedProtocol):
         try:
             if self.port is None and not self._hello():
                 return
+            if self._opener is not None:  # encrypted from the proof on: what followed it
+                rest = reader.decoder.take_rest()
+                self._opener.buffer()[: len(rest)] = rest  # (a hello is far below a read)
+                self._opener.received(len(rest))
+                self._records(0)
+                return
             frames = reader.frames()
         except FrameError as exc:
             self._bad(exc)
             return
+        self._after(frames)
+
+    def _records(self, nbytes: int) -> None:
+        """Open the records complete after `nbytes` more were read, each straight into the
+        frame reader's buffer when it fits there (else through a copy), and read their frames."""
+        opener = self._opener
+        assert opener is not None
+        if self.port is not None:
+            self.server.bytes_in[self.in_port] += nbytes
+        reader = self.reader
+        frames: list[list[Any]] = []
+        try:
+            while (record := opener.next_record()) is not None:
+                size = len(record) - TAG
+                space = reader.buffer()
+                if size <= len(space):
+                    opener.open_into(record, space[:size])
+                    reader.received(size)
+                    frames += reader.frames()
+                    continue
+                view, done = memoryview(opener.open_record(record)), 0
+                while done < size:
+                    space = reader.buffer()
+                    n = min(len(space), size - done)
+                    space[:n] = view[done : done + n]
+                    reader.received(n)
+                    done += n
+                    frames += reader.frames()
+        except FrameError as exc:
+            self._bad(exc)
+            return
+        self._after(frames)
+
+    def _after(self, frames: list[list[Any]]) -> None:
+        """Deliver what was read, then ring credits and a stream's pending error."""
+        reader = self.reader
         self._deliver(frames)
         if self._sock is not None and (reader.big_frame or self._lowat != 1):
             self._wake_later(reader.awaiting)
         ring = self.ring
         if ring is not None and ring.consumed != self._credited and self.port is not None:
             self._credited = ring.consumed
-            assert self.transport is not None
-            self.transport.write(_packb(ring.consumed))  # room for the sender
+            assert self._send is not None
+            self._send(_packb(ring.consumed))  # room for the sender
         if reader.failed:
             try:
                 reader.frames()
@@ -197,7 +256,8 @@ class Receiver(asyncio.BufferedProtocol):
         if error is None and authenticating and auth is not None and hello.auth is not None:
             nonce = auth.nonce()
             proof = (nonce, auth.receiver_proof(hello.auth, nonce, proof_names(hello)))
-        reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof)
+        enc = proof is not None and hello.enc and not self._local()
+        reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof, enc=enc)
         self.transport.write(reply)
         if error is not None or port is None:
             self.server.counters["rejected"] += 1
@@ -218,18 +278,31 @@ class Receiver(asyncio.BufferedProtocol):
         assert auth is not None
         proof = obj.get("auth") if isinstance(obj, dict) else None
         names = proof_names(hello)
-        if (
-            type(proof) is not bytes
-            or hello.auth is None
-            or not auth.check_sender(nonce, hello.auth, names, proof)
-        ):
+        key = None
+        if type(proof) is bytes and hello.auth is not None:
+            key = auth.check_sender(nonce, hello.auth, names, proof)
+        if key is None or hello.auth is None:
             self._proving = None
             self.server.counters["refused_auth"] += 1
             self.server.counters["rejected"] += 1
             self.server._report("refused_auth", hello.conn, "the sender's proof does not hold")
             self.abort()
             return False
+        if hello.enc and not self._local():
+            self._encrypt(*stream_keys(key, hello.auth, nonce, names))
         return self._open()
+
+    def _encrypt(self, receive_key: bytes, send_key: bytes) -> None:
+        """Everything after the proof is sealed both ways (sdrpeer.dataplane.seal)."""
+        assert self.transport is not None
+        self._opener = Opener(receive_key, self.server.max_frame + RECORD_SLACK)
+        seal, write = Sealer(send_key).seal, self.transport.write
+
+        def sealed(data: bytes) -> None:
+            write(seal(data))
+
+        self._send = sealed
+        self._sock = None  # records do not line up with frames: no SO_RCVLOWAT tuning
 
     def _open(self) -> bool:
         """The connection is accepted: frames go to the port from now on."""
@@ -250,9 +323,9 @@ class Receiver(asyncio.BufferedProtocol):
     def _ack(self, seq: int) -> None:
         """The port acknowledges every frame up to `seq`."""
         transport = self.transport
-        if transport is None or transport.is_closing():
+        if transport is None or transport.is_closing() or self._send is None:
             return
-        transport.write(_packb([seq]))
+        self._send(_packb([seq]))
         if self._eof and seq >= self._last_seq:
             transport.close()  # the sender left and has heard everything
 

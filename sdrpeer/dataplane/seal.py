@@ -1,0 +1,187 @@
+"""Encrypted data streams: AES-256-GCM records on an authenticated TCP connection.
+
+How it works (docs/protocol.md section 2, "Encryption"): once both ends of a TCP data connection
+proved they hold a data key (sdrpeer.dataplane.auth) and both said ``"enc": true``, everything
+after the sender's proof travels in *records*, both ways (frames one way; acknowledgements the
+other): a 4-byte big-endian length, then AES-256-GCM of the bytes the writer handed the socket in
+one write, with its 16-byte tag. Each direction has its own key, derived with HKDF-SHA256 from the
+data key both proofs used, salted with both handshake nonces (fresh per connection) and bound to
+the connection's names, so no two connections or directions share a key; the nonce is a counter
+of the records sent that way (never reused under a key). A record that does not verify, arrives
+out of order, or is longer than `max_record` breaks the connection (FrameError): an on-path
+attacker can cut it, not read or alter it. A writer joins many small frames into one write, so
+small frames cost one seal per batch, not one per frame.
+
+`cryptography` (OpenSSL) is imported only when a stream is encrypted: a host that only talks over
+Unix sockets or shared memory (same robot) stays without it.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+from typing import Any, Final
+
+from sdrpeer.dataplane.frames import FrameError
+
+__all__ = ["Opener", "Sealer", "stream_keys"]
+
+LENGTH: Final = 4
+TAG: Final = 16
+OVERHEAD: Final = LENGTH + TAG
+"""Bytes a record adds to the bytes it carries."""
+_INFO: Final = b"sdrpeer data stream aes-256-gcm v1"
+_LEN: Final = struct.Struct(">I")
+
+
+def stream_keys(
+    key: bytes, sender_nonce: bytes, receiver_nonce: bytes, names: Sequence[str]
+) -> tuple[bytes, bytes]:
+    """(sender -> receiver key, receiver -> sender key) of one connection."""
+    from cryptography.hazmat.primitives import hashes  # noqa: PLC0415 - only when encrypting
+    from cryptography.hazmat.primitives.kdf.hkdf import HKDF  # noqa: PLC0415
+
+    info = _INFO + b"".join(len(n.encode()).to_bytes(4, "big") + n.encode() for n in names)
+    both = HKDF(hashes.SHA256(), 64, sender_nonce + receiver_nonce, info).derive(key)
+    return both[:32], both[32:]
+
+
+def _cipher(key: bytes) -> Any:
+    from cryptography.hazmat.primitives.ciphers.aead import AESGCM  # noqa: PLC0415
+
+    return AESGCM(key)
+
+
+class Sealer:
+    """One direction's sending side: bytes in, records out."""
+
+    __slots__ = ("_encrypt_into", "_n")
+
+    def __init__(self, key: bytes) -> None:
+        self._encrypt_into = _cipher(key).encrypt_into
+        self._n = 0
+
+    def seal(self, data: bytes | memoryview) -> bytearray:
+        """One record carrying `data` (a new buffer: the transport may keep it)."""
+        self._n += 1
+        size = len(data) + TAG
+        record = bytearray(LENGTH + size)
+        _LEN.pack_into(record, 0, size)
+        with memoryview(record) as view:
+            self._encrypt_into(self._n.to_bytes(12, "big"), data, None, view[LENGTH:])
+        return record
+
+
+class Opener:
+    """One direction's receiving side: records in (in any pieces), the bytes they carry out.
+
+    The socket may read straight into `buffer()` (then `received(n)`); `next_record()` gives the
+    next complete record, which `open_into` decrypts into the caller's buffer (no copy on the
+    way) or `open_record` into new bytes. `open(data)` does all of that for bytes at hand."""
+
+    __slots__ = (
+        "_array",
+        "_decrypt",
+        "_decrypt_into",
+        "_end",
+        "_invalid",
+        "_n",
+        "_start",
+        "_view",
+        "max_record",
+    )
+
+    def __init__(self, key: bytes, max_record: int, read_size: int = 1024 * 1024) -> None:
+        from cryptography.exceptions import InvalidTag  # noqa: PLC0415
+
+        cipher = _cipher(key)
+        self._decrypt = cipher.decrypt
+        self._decrypt_into = cipher.decrypt_into
+        self._invalid = InvalidTag
+        self._n = 0
+        self._array = bytearray(read_size)
+        self._view = memoryview(self._array)
+        self._start = 0  # first byte of the next record
+        self._end = 0  # end of the bytes received
+        self.max_record = max_record
+        """Longest record accepted (ciphertext and tag), in bytes."""
+
+    def buffer(self) -> memoryview:
+        """Free space to receive into (never empty)."""
+        if self._end == len(self._array):
+            self._make_room(self._end - self._start + 1)
+        return self._view[self._end :]
+
+    def received(self, nbytes: int) -> None:
+        """`nbytes` were written into the start of the last `buffer()`."""
+        self._end += nbytes
+
+    def next_record(self) -> memoryview | None:
+        """The next complete record's ciphertext and tag (valid until the next call), or None
+        until it has all arrived; FrameError when its length is impossible."""
+        start, end = self._start, self._end
+        if end - start < LENGTH:
+            self._compact()
+            return None
+        (size,) = _LEN.unpack_from(self._array, start)
+        if size < TAG or size > self.max_record:
+            raise FrameError("malformed", f"encrypted record of {size} bytes")
+        if end - start - LENGTH < size:
+            self._make_room(LENGTH + size)
+            return None
+        self._start = start + LENGTH + size
+        return self._view[start + LENGTH : start + LENGTH + size]
+
+    def open_into(self, record: memoryview, out: memoryview) -> None:
+        """Decrypt `record` into `out` (exactly its size: the record's less the tag)."""
+        self._n += 1
+        try:
+            self._decrypt_into(self._n.to_bytes(12, "big"), record, None, out)
+        except self._invalid:
+            raise FrameError("malformed", "an encrypted record does not verify") from None
+
+    def open_record(self, record: memoryview) -> bytes:
+        """`record` decrypted into new bytes."""
+        self._n += 1
+        try:
+            plain: bytes = self._decrypt(self._n.to_bytes(12, "big"), record, None)
+        except self._invalid:
+            raise FrameError("malformed", "an encrypted record does not verify") from None
+        return plain
+
+    def open(self, data: bytes | memoryview) -> list[bytes]:
+        """The bytes of every record completed by `data`, in order; FrameError when one is too
+        long or does not verify (the stream is then broken)."""
+        view = memoryview(data)
+        out: list[bytes] = []
+        while view:
+            space = self.buffer()
+            n = min(len(space), len(view))
+            space[:n] = view[:n]
+            self.received(n)
+            view = view[n:]
+            while (record := self.next_record()) is not None:
+                out.append(self.open_record(record))
+        return out
+
+    def _compact(self) -> None:
+        """Move what is left of the next record to the front once the buffer ran out."""
+        if self._start == self._end:
+            self._start = self._end = 0
+        elif len(self._array) - self._start < LENGTH + TAG + 16:
+            kept = self._end - self._start
+            self._view[:kept] = self._view[self._start : self._end]
+            self._start, self._end = 0, kept
+
+    def _make_room(self, total: int) -> None:
+        """Make sure a record of `total` bytes (length included) fits from `_start` on."""
+        if len(self._array) - self._start >= total:
+            return
+        kept = self._end - self._start
+        if len(self._array) < total:
+            array = bytearray(max(total, len(self._array)))
+            array[:kept] = self._view[self._start : self._end]
+            self._array, self._view = array, memoryview(array)
+        else:
+            self._view[:kept] = self._view[self._start : self._end]
+        self._start, self._end = 0, kept

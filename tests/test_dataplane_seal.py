@@ -1,0 +1,144 @@
+"""Encrypted data streams: records open only in order and unaltered, and a stream between two
+keyed hosts over TCP carries no payload byte in clear; an altered byte breaks the stream
+instead of delivering a changed value. A TCP relay between sender and receiver is the
+eavesdropper (and, tampering, the on-path attacker)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Callable
+
+import pytest
+
+from sdrpeer.agent_keys import derive_data_key
+from sdrpeer.dataplane import Connection, DataServer
+from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.frames import FrameError
+from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer, stream_keys
+from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+
+K1 = derive_data_key(b"\x01" * 32)
+PATTERN = b"SECRET-FRAME-PAYLOAD-"
+
+
+def test_records_open_in_order_in_any_pieces_and_refuse_changes() -> None:
+    send, back = stream_keys(K1, b"s" * 16, b"r" * 16, ("c", "in", "x.out", "", ""))
+    assert send != back
+    sealer, opener = Sealer(send), Opener(send, 1 << 20)
+    records = b"".join(sealer.seal(m) for m in (b"one", b"", b"three" * 1000))
+    assert len(records) == 3 + 0 + 5000 + 3 * OVERHEAD
+    out: list[bytes] = []
+    for i in range(0, len(records), 7):  # any split of the byte stream
+        out += opener.open(records[i : i + 7])
+    assert out == [b"one", b"", b"three" * 1000]
+    one, two = Sealer(send).seal(b"a"), Sealer(send).seal(b"b")
+    with pytest.raises(FrameError, match="does not verify"):
+        Opener(send, 1 << 20).open(one + two)  # the second reuses counter 1: a replay
+    fresh = Sealer(send)
+    first, second = fresh.seal(b"a"), fresh.seal(b"b")
+    with pytest.raises(FrameError, match="does not verify"):
+        Opener(send, 1 << 20).open(second + first)  # reordered
+    with pytest.raises(FrameError, match="does not verify"):
+        Opener(back, 1 << 20).open(Sealer(send).seal(b"a"))  # the other direction's key
+    with pytest.raises(FrameError, match="record of"):
+        Opener(send, 100).open(Sealer(send).seal(b"x" * 200))  # longer than allowed
+
+
+class Relay:
+    """A TCP relay sender -> receiver that records (and may alter) what passes one way."""
+
+    def __init__(self, to: str, alter: Callable[[int, bytes], bytes] = lambda at, b: b) -> None:
+        self.to = to
+        self.alter = alter
+        self.seen = bytearray()
+        self.server: asyncio.Server | None = None
+        self.writers: list[asyncio.StreamWriter] = []
+        self.handlers: set[asyncio.Task[object]] = set()
+
+    async def start(self) -> str:
+        self.server = await asyncio.start_server(self._relay, "127.0.0.1", 0)
+        host, port = self.server.sockets[0].getsockname()[:2]
+        return f"tcp://{host}:{port}"
+
+    async def _relay(self, r: asyncio.StreamReader, w: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        self.handlers.add(task)
+        self.writers.append(w)
+        host, port = self.to.removeprefix("tcp://").rsplit(":", 1)
+        r2, w2 = await asyncio.open_connection(host, int(port))
+        self.writers.append(w2)
+
+        async def pipe(src: asyncio.StreamReader, dst: asyncio.StreamWriter, tap: bool) -> None:
+            while data := await src.read(65536):
+                if tap:
+                    data = self.alter(len(self.seen), data)
+                    self.seen += data
+                dst.write(data)
+                await dst.drain()
+            dst.close()
+
+        await asyncio.gather(pipe(r, w2, True), pipe(r2, w, False), return_exceptions=True)
+
+    async def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+        for task in self.handlers:
+            task.cancel()
+        await asyncio.gather(*self.handlers, return_exceptions=True)
+        for w in self.writers:
+            w.close()
+            with contextlib.suppress(ConnectionError):
+                await w.wait_closed()
+
+
+async def stream_through(
+    relay_alter: Callable[[int, bytes], bytes] | None = None,
+) -> tuple[RecordingPort, DataServer, Relay, Connection]:
+    port = RecordingPort()
+    server = DataServer(lambda name: port, auth=DataAuth([K1]))
+    await server.start()
+    relay = Relay(f"tcp://{server.addresses['tcp']}", relay_alter or (lambda at, b: b))
+    to = await relay.start()
+    conn = Connection("c", to, "in", "x.out", make_policy("fifo", 256), auth=DataAuth([K1]))
+    conn.start()
+    return port, server, relay, conn
+
+
+async def test_a_keyed_tcp_stream_shows_no_payload_to_an_eavesdropper() -> None:
+    port, server, relay, conn = await stream_through()
+    try:
+        values = [PATTERN + bytes([i]) * 80 for i in range(50)] + [PATTERN * 20_000]
+        for v in values:
+            conn.offer(v)
+        await until(lambda: len(port.frames) == len(values))
+        assert port.values == values
+        assert len(relay.seen) > sum(map(len, values))  # everything passed the relay...
+        assert PATTERN not in relay.seen  # ...and none of it in clear
+        assert b"SECRET" not in relay.seen
+    finally:
+        await conn.close()
+        await relay.close()
+        await server.close()
+
+
+async def test_an_altered_byte_breaks_the_stream_and_delivers_nothing_changed() -> None:
+    def flip(at: int, data: bytes) -> bytes:
+        if at <= 3000 < at + len(data):  # one byte, well after the handshake
+            i = 3000 - at
+            return data[:i] + bytes([data[i] ^ 0x01]) + data[i + 1 :]
+        return data
+
+    port, server, relay, conn = await stream_through(flip)
+    try:
+        values = [PATTERN + bytes([i]) * 200 for i in range(60)]
+        for v in values:
+            conn.offer(v)
+        await until(lambda: server.counters["refused_malformed"] >= 1)
+        assert all(v in values for v in port.values)  # what came is what was sent
+        assert len(port.values) < len(values)  # the broken record was not delivered
+    finally:
+        await conn.close()
+        await relay.close()
+        await server.close()
