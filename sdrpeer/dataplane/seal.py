@@ -61,7 +61,7 @@ class Sealer:
         self._encrypt_into = _cipher(key).encrypt_into
         self._n = 0
 
-    def seal(self, data: bytes | memoryview) -> bytearray:
+    def seal(self, data: bytes | bytearray | memoryview) -> bytearray:
         """One record carrying `data` (a new buffer: the transport may keep it)."""
         self._n += 1
         size = len(data) + TAG
@@ -149,7 +149,7 @@ class Opener:
             raise FrameError("malformed", "an encrypted record does not verify") from None
         return plain
 
-    def open(self, data: bytes | memoryview) -> list[bytes]:
+    def open(self, data: bytes | bytearray | memoryview) -> list[bytes]:
         """The bytes of every record completed by `data`, in order; FrameError when one is too
         long or does not verify (the stream is then broken)."""
         view = memoryview(data)
