@@ -162,23 +162,27 @@ class Soak:
 
     def _kill_host(self, robot: str, pick: int) -> str:
         """SIGKILL an ACTIVE host of `robot`, or, when it runs none (the allocation may gather
-        the actives on a few robots), of the next robot in name order that does; "skipped"
-        when no robot runs one, else the robot whose host was killed."""
+        the actives on a few robots), of the next robot in name order that does (every robot
+        asked at once: a slow one must not stall the soak's looks); "skipped" when no robot
+        runs one, else "" or "on ROBOT"."""
         names = list(self.clients)
         start = names.index(robot)
-        for name in names[start:] + names[:start]:
-            if name in self.down:
-                continue
-            try:
-                rows = self.clients[name].get("/v1/instances")
-            except ApiError:
-                continue
+        order = [n for n in names[start:] + names[:start] if n not in self.down]
+        for name, rows in zip(order, self.pool.map(self._instances, order), strict=True):
             pids = [r["pid"] for r in rows if r.get("state") == "ACTIVE" and r.get("pid")]
             if pids:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(int(pids[pick % len(pids)]), signal.SIGKILL)
                 return "" if name == robot else f"on {name}"
         return "skipped"
+
+    def _instances(self, robot: str) -> list[dict[str, Any]]:
+        """A robot's own list of instances ([] when it does not answer)."""
+        try:
+            rows: list[dict[str, Any]] = self.clients[robot].get("/v1/instances")
+        except ApiError:
+            return []
+        return rows
 
     def _kill_agent(self, robot: str) -> None:
         proc = self.lab.procs[robot]
