@@ -16,7 +16,8 @@ from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import FrameError
 from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer, stream_keys
-from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.dataplane.testing import RecordingPort, until
+from sdrpeer.sdk.policy import ConnectorPolicy
 
 K1 = derive_data_key(b"\x01" * 32)
 PATTERN = b"SECRET-FRAME-PAYLOAD-"
@@ -26,23 +27,23 @@ def test_records_open_in_order_in_any_pieces_and_refuse_changes() -> None:
     send, back = stream_keys(K1, b"s" * 16, b"r" * 16, ("c", "in", "x.out", "", ""))
     assert send != back
     sealer, opener = Sealer(send), Opener(send, 1 << 20)
-    records = b"".join(sealer.seal(m) for m in (b"one", b"", b"three" * 1000))
+    records = b"".join(b"".join(sealer.seal(m)) for m in (b"one", b"", b"three" * 1000))
     assert len(records) == 3 + 0 + 5000 + 3 * OVERHEAD
     out: list[bytes] = []
     for i in range(0, len(records), 7):  # any split of the byte stream
         out += opener.open(records[i : i + 7])
     assert out == [b"one", b"", b"three" * 1000]
-    one, two = Sealer(send).seal(b"a"), Sealer(send).seal(b"b")
+    one, two = b"".join(Sealer(send).seal(b"a")), b"".join(Sealer(send).seal(b"b"))
     with pytest.raises(FrameError, match="does not verify"):
         Opener(send, 1 << 20).open(one + two)  # the second reuses counter 1: a replay
     fresh = Sealer(send)
-    first, second = fresh.seal(b"a"), fresh.seal(b"b")
+    first, second = b"".join(fresh.seal(b"a")), b"".join(fresh.seal(b"b"))
     with pytest.raises(FrameError, match="does not verify"):
         Opener(send, 1 << 20).open(second + first)  # reordered
     with pytest.raises(FrameError, match="does not verify"):
-        Opener(back, 1 << 20).open(Sealer(send).seal(b"a"))  # the other direction's key
+        Opener(back, 1 << 20).open(b"".join(Sealer(send).seal(b"a")))  # the other direction
     with pytest.raises(FrameError, match="record of"):
-        Opener(send, 100).open(Sealer(send).seal(b"x" * 200))  # longer than allowed
+        Opener(send, 100).open(b"".join(Sealer(send).seal(b"x" * 200)))  # longer than allowed
 
 
 class Relay:
@@ -94,14 +95,15 @@ class Relay:
 
 
 async def stream_through(
-    relay_alter: Callable[[int, bytes], bytes] | None = None,
+    relay_alter: Callable[[int, bytes], bytes] | None = None, *, encrypt: bool = True
 ) -> tuple[RecordingPort, DataServer, Relay, Connection]:
     port = RecordingPort()
     server = DataServer(lambda name: port, auth=DataAuth([K1]))
     await server.start()
     relay = Relay(f"tcp://{server.addresses['tcp']}", relay_alter or (lambda at, b: b))
     to = await relay.start()
-    conn = Connection("c", to, "in", "x.out", make_policy("fifo", 256), auth=DataAuth([K1]))
+    policy = ConnectorPolicy(push="fifo", buffer=256, encrypt=encrypt)
+    conn = Connection("c", to, "in", "x.out", policy, auth=DataAuth([K1]))
     conn.start()
     return port, server, relay, conn
 
@@ -138,6 +140,21 @@ async def test_an_altered_byte_breaks_the_stream_and_delivers_nothing_changed() 
         await until(lambda: server.counters["refused_malformed"] >= 1)
         assert all(v in values for v in port.values)  # what came is what was sent
         assert len(port.values) < len(values)  # the broken record was not delivered
+    finally:
+        await conn.close()
+        await relay.close()
+        await server.close()
+
+
+async def test_a_connection_may_turn_encryption_off_and_stays_authenticated() -> None:
+    """`encrypt: false` in a connection's policy (or the system's `streams:`): the stream is in
+    clear (what an operator trades for throughput on a bulk link), still only between keys."""
+    port, server, relay, conn = await stream_through(encrypt=False)
+    try:
+        conn.offer(PATTERN * 10)
+        await until(lambda: len(port.frames) == 1)
+        assert PATTERN in relay.seen
+        assert server.counters["refused_auth"] == 0
     finally:
         await conn.close()
         await relay.close()

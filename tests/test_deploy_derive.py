@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from sdrpeer.deploy.derive import (
@@ -15,7 +16,7 @@ from sdrpeer.deploy.placer import relaxed_for_recovery
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.plan import Placement, Plan, plan_from_json
 from sdrpeer.system.loader import load_system
-from sdrpeer.system.model import ComponentDef, ConnectionDef, StandbySpec, SystemDef
+from sdrpeer.system.model import ComponentDef, ConnectionDef, StandbySpec, StreamsDef, SystemDef
 
 
 def _system(cycle: bool = False) -> SystemDef:
@@ -94,6 +95,24 @@ def test_the_old_side_of_a_heal_yields_to_a_newer_plans_running_copy() -> None:
     spare = {"Ctl-s1": Remote("r2", "active", None, "Ctl", "standby")}
     assert superseded(plan, "r1", spare, newer={"r2"}) == set()  # a standby is not the active
     assert superseded(plan, "r2", new, newer={"r2"}) == set()  # never yields to itself
+
+
+def test_the_systems_streams_switch_reaches_every_connection_unless_it_says_otherwise() -> None:
+    system = replace(
+        _system(),
+        streams=StreamsDef(encrypt=False),
+        connections=(
+            ConnectionDef("Cam", "image", "Det", "image"),
+            ConnectionDef("Det", "alarm", "Ctl", "alarm", (("encrypt", True),)),
+        ),
+    )
+    plan = _plan(system, {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
+    specs = {s.name: s for s in specs_for_robot(plan, "r1", {})}
+    assert specs["Cam"].connections[0].policy == (("encrypt", False),)
+    assert specs["Det"].connections[0].policy == (("encrypt", True),)  # its own word wins
+    default = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
+    (cam,) = [s for s in specs_for_robot(default, "r1", {}) if s.name == "Cam"]
+    assert cam.connections[0].policy == (("buffer", 4),)  # encrypted: the default, unsaid
 
 
 def test_remote_receiver_waits_for_address_then_for_active() -> None:

@@ -17,8 +17,15 @@ def test_policy_defaults_and_maps() -> None:
     assert ConnectorPolicy.from_map({}) == ConnectorPolicy("all", 8, "overwrite", 0)
     assert ConnectorPolicy.from_map(None) == ConnectorPolicy()
     p = ConnectorPolicy.from_map({"push": "skip", "skip": 2, "extra": "ignored"})
-    assert p.to_map() == {"push": "skip", "buffer": 8, "full": "overwrite", "skip": 2}
+    assert p.to_map() == {
+        "push": "skip",
+        "buffer": 8,
+        "full": "overwrite",
+        "skip": 2,
+        "encrypt": True,
+    }
     assert ConnectorPolicy.from_map(p.to_map()) == p
+    assert not ConnectorPolicy.from_map({"encrypt": False}).encrypt
 
 
 @pytest.mark.parametrize(
@@ -28,6 +35,7 @@ def test_policy_defaults_and_maps() -> None:
         ({"full": "explode"}, "policy full: 'explode'"),
         ({"buffer": 0}, "policy buffer: 0"),
         ({"buffer": "8"}, "policy buffer: '8'"),
+        ({"encrypt": "no"}, "policy encrypt: 'no'"),
         ({"buffer": True}, "policy buffer: True"),
         ({"skip": -1}, "policy skip: -1"),
     ],

@@ -264,6 +264,16 @@ CASES: list[tuple[str, str, str]] = [
         "sys.yaml:6: field 'allocation.preempt': expected true or false",
     ),
     (
+        "streams.encrypt not a boolean",
+        HEAD + "streams:\n  encrypt: sometimes\n",
+        "sys.yaml:6: field 'streams.encrypt': expected true or false",
+    ),
+    (
+        "unknown streams key",
+        HEAD + "streams:\n  cipher: aes\n",
+        "sys.yaml:6: field 'streams.cipher': unknown",
+    ),
+    (
         "unknown cause",
         RULES + "    - {cause: flood, actions: [restart]}\n",
         "sys.yaml:7: field 'recovery.rules[0].cause': expected one of memory_shortage",

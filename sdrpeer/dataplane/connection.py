@@ -294,6 +294,7 @@ class Connection:
                         shm_size=self.shm_size,
                         on_ack=self._acked,
                         auth=self.auth,
+                        encrypt=getattr(self.policy, "encrypt", True),
                     )
             except (OSError, TimeoutError, FrameError, ValueError) as exc:
                 self.last_error = f"{to}: {exc}"

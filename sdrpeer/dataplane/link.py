@@ -52,6 +52,8 @@ _SNDBUF: Final = 4 * 1024 * 1024
 RECORD: Final = 256 * 1024
 """Longest record sealed: a big write is cut into records of this size, so that the receiver
 decrypts the first while the next travels (one 1 MiB record would be decrypted only whole)."""
+SMALL_RECORD: Final = 16 * 1024
+"""Records up to this size go out as one write (length and bytes joined)."""
 MAX_RECORD: Final = 2 * 1024 * 1024
 """Longest encrypted record accepted from a receiver (acks are a few bytes)."""
 
@@ -108,12 +110,15 @@ class Link(asyncio.Protocol):
         write = self.transport.write
 
         def sealed(data: bytes | memoryview) -> None:
-            if len(data) <= RECORD:
-                write(seal(data))
+            if len(data) <= SMALL_RECORD:
+                head, body = seal(data)
+                write(head + body)  # one small write: one syscall
                 return
             view = memoryview(data)  # records of RECORD bytes: the receiver opens the first
             for start in range(0, len(view), RECORD):  # while the next is on its way
-                write(seal(view[start : start + RECORD]))
+                head, body = seal(view[start : start + RECORD])
+                write(head)
+                write(body)
 
         self.write = sealed
         self._opener = Opener(receive_key, max_record)

@@ -299,7 +299,8 @@ class Receiver(asyncio.BufferedProtocol):
         seal, write = Sealer(send_key).seal, self.transport.write
 
         def sealed(data: bytes) -> None:
-            write(seal(data))
+            head, body = seal(data)  # acknowledgements and credits: a few bytes
+            write(head + body)
 
         self._send = sealed
         self._sock = None  # records do not line up with frames: no SO_RCVLOWAT tuning

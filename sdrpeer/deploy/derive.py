@@ -124,7 +124,9 @@ def specs_for_robot(
                 receiver = plan.active_of(c.to_component)
                 if receiver is None:
                     continue
-                spec, ok = _connection(c, receiver, robot, remote, reach)
+                spec, ok = _connection(
+                    c, receiver, robot, remote, reach, encrypt=system.streams.encrypt
+                )
                 conns.append(spec)
                 ready = ready and ok
         desired = "active" if ready or p.instance in active_here else "inactive"
@@ -152,14 +154,19 @@ def _connection(
     robot: str,
     remote: Mapping[str, Remote],
     reach: Mapping[str, set[str]],
+    *,
+    encrypt: bool = True,
 ) -> tuple[ConnectionSpec, bool]:
     """(the connection spec, pending while unresolvable; whether the sender may activate)."""
+    policy = c.policy
+    if not encrypt and "encrypt" not in dict(policy):  # the system's `streams: {encrypt: false}`
+        policy = tuple(sorted((*policy, ("encrypt", False))))
     base = ConnectionSpec(
         id=c.id,
         out_port=c.from_port,
         to_instance=receiver.instance,
         in_port=c.to_port,
-        policy=c.policy,
+        policy=policy,
     )
     if receiver.robot == robot:
         return base, True

@@ -198,7 +198,9 @@ def validate_policy(policy: Any, where: str) -> tuple[tuple[str, Any], ...]:
     """Check a connector policy map (docs/protocol.md) and return it as sorted pairs."""
     if not isinstance(policy, Mapping):
         raise SpecError(where, "expected an object")
-    _no_unknown(policy, frozenset({"push", "buffer", "full", "skip"}), where)
+    _no_unknown(policy, frozenset({"push", "buffer", "full", "skip", "encrypt"}), where)
+    if "encrypt" in policy and not isinstance(policy["encrypt"], bool):
+        raise SpecError(f"{where}.encrypt", f"expected true or false, got {policy['encrypt']!r}")
     if "push" in policy:
         _choice(policy["push"], POLICY_PUSH, f"{where}.push")
     if "full" in policy:

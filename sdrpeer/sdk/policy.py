@@ -23,7 +23,7 @@ Full = Literal["overwrite", "drop", "block"]
 
 PUSH_POLICIES: Final = ("all", "fifo", "skip", "new")
 FULL_POLICIES: Final = ("overwrite", "drop", "block")
-_KEYS: Final = ("push", "buffer", "full", "skip")
+_KEYS: Final = ("push", "buffer", "full", "skip", "encrypt")
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,6 +38,8 @@ class ConnectorPolicy:
     """When the buffer is full: overwrite the oldest, drop the newest, or block the sender."""
     skip: int = 0
     """With push="skip": frames skipped after each one kept (>= 0)."""
+    encrypt: bool = True
+    """Between robots (authenticated TCP), the stream is encrypted (sdrpeer.dataplane.seal)."""
 
     def __post_init__(self) -> None:
         if self.push not in PUSH_POLICIES:
@@ -48,6 +50,8 @@ class ConnectorPolicy:
             raise ValueError(f"policy buffer: {self.buffer!r} is not an integer >= 1")
         if type(self.skip) is not int or self.skip < 0:
             raise ValueError(f"policy skip: {self.skip!r} is not an integer >= 0")
+        if type(self.encrypt) is not bool:
+            raise ValueError(f"policy encrypt: {self.encrypt!r} is not true or false")
 
     @classmethod
     def from_map(cls, data: dict[str, Any] | None) -> ConnectorPolicy:
@@ -62,8 +66,15 @@ class ConnectorPolicy:
             buffer=kw.get("buffer", 8),
             full=cast(Full, kw.get("full", "overwrite")),
             skip=kw.get("skip", 0),
+            encrypt=kw.get("encrypt", True),
         )
 
     def to_map(self) -> dict[str, Any]:
         """The protocol policy map (every key written)."""
-        return {"push": self.push, "buffer": self.buffer, "full": self.full, "skip": self.skip}
+        return {
+            "push": self.push,
+            "buffer": self.buffer,
+            "full": self.full,
+            "skip": self.skip,
+            "encrypt": self.encrypt,
+        }

@@ -33,11 +33,11 @@ from sdrpeer.system.components import read_components
 from sdrpeer.system.connections import read_connections
 from sdrpeer.system.model import SystemDef
 from sdrpeer.system.problems import MISSING, Problems, SystemFileError
-from sdrpeer.system.sections import read_allocation, read_recovery
+from sdrpeer.system.sections import read_allocation, read_recovery, read_streams
 
 __all__ = ["SystemFileError", "load_system", "parse_system", "schema_path"]
 
-TOP_KEYS = ("version", "name", "components", "connections", "allocation", "recovery")
+TOP_KEYS = ("version", "name", "components", "connections", "allocation", "recovery", "streams")
 VERSIONS = (1,)
 _LINE = re.compile(r"^.*?:(\d+):")
 
@@ -68,6 +68,7 @@ def _build(f: YamlFile, base_dir: Path) -> SystemDef:
     connections = read_connections(p, top.get("connections"), components)
     allocation = read_allocation(p, top.get("allocation"))
     recovery = read_recovery(p, top.get("recovery"))
+    streams = read_streams(p, top.get("streams"))
     if p.items:
         p.items.sort(key=_line)
         p.check()
@@ -78,6 +79,7 @@ def _build(f: YamlFile, base_dir: Path) -> SystemDef:
         connections=connections,
         allocation=allocation,
         recovery=recovery,
+        streams=streams,
         source=f.name,
     )
 

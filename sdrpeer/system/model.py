@@ -200,6 +200,15 @@ class RecoveryDef:
 
 
 @dataclass(frozen=True, slots=True)
+class StreamsDef:
+    """The system's data streams as a whole (the `streams:` section)."""
+
+    encrypt: bool = True
+    """Port streams between robots are encrypted (a connection's policy may still say
+    `encrypt: false`, or `true` where this is false): docs/security.md gives the cost."""
+
+
+@dataclass(frozen=True, slots=True)
 class SystemDef:
     """A whole system file."""
 
@@ -208,6 +217,7 @@ class SystemDef:
     connections: tuple[ConnectionDef, ...] = ()
     allocation: AllocationDef = field(default_factory=AllocationDef)
     recovery: RecoveryDef = field(default_factory=RecoveryDef)
+    streams: StreamsDef = field(default_factory=StreamsDef)
     source: str | None = field(default=None, compare=False)
     """The file it was read from (messages only; not part of equality or the digest)."""
 
@@ -303,4 +313,5 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
         connections=conns,
         allocation=allocation,
         recovery=recovery,
+        streams=StreamsDef(encrypt=bool(doc.get("streams", {}).get("encrypt", True))),
     )

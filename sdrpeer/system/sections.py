@@ -19,7 +19,14 @@ from typing import Any
 import yaml
 
 from sdrpeer.system.metrics import METRICS, parse_condition
-from sdrpeer.system.model import QUORUMS, AllocationDef, RecoveryDef, RecoveryRule, Thresholds
+from sdrpeer.system.model import (
+    QUORUMS,
+    AllocationDef,
+    RecoveryDef,
+    RecoveryRule,
+    StreamsDef,
+    Thresholds,
+)
 from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.recovery_defaults import ACTIONS, CAUSES, default_recovery
 from sdrpeer.system.values import boolean, bounded, integer
@@ -98,6 +105,16 @@ THRESHOLDS: dict[str, tuple[str, Callable[[object], Any]]] = {
 def installed(group: str) -> list[str]:
     """The names in an entry point group."""
     return sorted({ep.name for ep in entry_points(group=group)})
+
+
+def read_streams(p: Problems, node: yaml.Node | None) -> StreamsDef:
+    """The streams section (defaults when absent): `encrypt` for every port stream."""
+    if node is None:
+        return StreamsDef()
+    fields = p.mapping(node, "streams", ("encrypt",))
+    if fields is None:
+        return StreamsDef()
+    return StreamsDef(encrypt=p.get(fields, "encrypt", "streams", boolean, True))
 
 
 def read_allocation(p: Problems, node: yaml.Node | None) -> AllocationDef:
