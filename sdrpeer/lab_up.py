@@ -75,10 +75,12 @@ class RunningLab:
 
     def restart(self, name: str) -> None:
         """Start robot `name`'s agent again (same data dir, key and token), joining an alive
-        robot; its new pid is recorded in lab.json."""
+        robot; its new pid is recorded in lab.json. Nothing happens while its agent runs."""
         assert self.options is not None
         robot = self.lab.robot(name)
         assert robot is not None
+        if self._alive(name):
+            return  # it runs: a second agent for one robot would be left behind at stop
         seeds = [r.gossip for r in self.lab.robots if r.name != name and self._alive(r.name)]
         command = agent_command(
             robot, self.options, Path(self.lab.key_file), seeds[0] if seeds else None, self.net

@@ -9,8 +9,8 @@ from collections.abc import Mapping
 import pytest
 
 from sdrpeer.chaos.judge import Judge, Look
-from sdrpeer.chaos.run import ChaosOptions, chaos_system, format_report, run_chaos
-from sdrpeer.chaos.schedule import schedule
+from sdrpeer.chaos.run import ChaosOptions, chaos_system, due_events, format_report, run_chaos
+from sdrpeer.chaos.schedule import Fault, schedule
 
 
 def test_the_schedule_is_the_seeds_and_keeps_a_majority_working() -> None:
@@ -128,3 +128,20 @@ def test_a_60_second_soak_ends_without_violations() -> None:
     assert report["recoveries"] >= 1
     assert report["converged_after_s"] is not None
     assert report["converged_after_s"] <= 3.0
+
+
+def test_due_faults_start_and_end_in_the_order_they_fell_due() -> None:
+    """A look stalled the loop: at t=17 the end of the first kill of robot-1 (15) and the
+    second kill (16) are both due. The agent is restarted first, then killed again: the other
+    way round, the second restart left two agents for robot-1 and the first one leaked."""
+    faults = [
+        Fault(10.0, "kill_agent", ("robot-1",), 15.0),
+        Fault(16.0, "kill_agent", ("robot-1",), 20.0),
+    ]
+    ends = sorted((f.until, i) for i, f in enumerate(faults) if f.until is not None)
+    due, started, ended = due_events(faults, ends, 0, 0, 11.0)
+    assert due == [("start", 0)]
+    due, started, ended = due_events(faults, ends, started, ended, 17.0)
+    assert due == [("end", 0), ("start", 1)]
+    assert due_events(faults, ends, started, ended, 18.0)[0] == []
+    assert due_events(faults, ends, started, ended, 25.0)[0] == [("end", 1)]

@@ -18,6 +18,7 @@ plan, stops the lab and returns the judge's report plus what was done.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import signal
 import tempfile
@@ -292,12 +293,12 @@ def _soak(
     next_look = 0.0
     while True:
         t = time.monotonic() - t0
-        while started < len(faults) and faults[started].at <= t:
-            soak.start(faults[started], t)
-            started += 1
-        while ended < len(ends) and ends[ended][0] <= t:
-            soak.end(faults[ends[ended][1]])
-            ended += 1
+        due, started, ended = due_events(faults, ends, started, ended, t)
+        for what, i in due:
+            if what == "end":
+                soak.end(faults[i])
+            else:
+                soak.start(faults[i], t)
         if started == len(faults) and ended == len(ends) and t >= duration:
             break
         if t >= next_look:
@@ -327,6 +328,27 @@ def _soak(
         faults_done=soak.done,
     )
     return report
+
+
+def due_events(
+    faults: list[Fault], ends: list[tuple[float, int]], started: int, ended: int, t: float
+) -> tuple[list[tuple[str, int]], int, int]:
+    """The starts and ends due at `t` ("start"/"end", fault index), in the order they fell due,
+    and the new counts: a slow look may leave several due at once, and a robot whose agent is
+    killed twice must have been restarted in between (else two agents run for one robot and the
+    first outlives the lab)."""
+    out: list[tuple[str, int]] = []
+    while True:
+        next_start = faults[started].at if started < len(faults) else math.inf
+        next_end = ends[ended][0] if ended < len(ends) else math.inf
+        if min(next_start, next_end) > t:
+            return out, started, ended
+        if next_end <= next_start:
+            out.append(("end", ends[ended][1]))
+            ended += 1
+        else:
+            out.append(("start", started))
+            started += 1
 
 
 def _placed(soak: Soak) -> dict[str, int]:
