@@ -18,6 +18,7 @@ plan, stops the lab and returns the judge's report plus what was done.
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import signal
@@ -289,6 +290,7 @@ def _soak(
     ends = sorted(((f.until, i) for i, f in enumerate(faults) if f.until is not None))
     say(f"deployed; {len(faults)} faults over {duration:g} s")
     t0 = soak.t0 = time.monotonic()
+    t0_wall = time.time()
     started = ended = 0
     next_look = 0.0
     while True:
@@ -316,6 +318,8 @@ def _soak(
     else:
         soak.judge.never_converged(time.monotonic() - t0)
     placed = _placed(soak)
+    if opts.lab_dir is not None:
+        _save_events(soak, opts.lab_dir)
     soak.pool.shutdown()
     soak.judge.final_plan(placed)
     report = soak.judge.report()
@@ -325,6 +329,7 @@ def _soak(
         minutes=opts.minutes,
         seed=opts.seed,
         network="namespaces" if netns else "loopback",
+        t0_wall=round(t0_wall, 3),  # unix time of t = 0: events.json entries map onto t
         faults_done=soak.done,
     )
     return report
@@ -349,6 +354,25 @@ def due_events(
         else:
             out.append(("start", started))
             started += 1
+
+
+def _save_events(soak: Soak, lab_dir: Path) -> None:
+    """Every running robot's event log into ROBOT/events.json of a kept lab (`--keep`), to
+    find what happened behind a violation (the agents keep them in memory only)."""
+    for robot, client in soak.clients.items():
+        if robot in soak.down:
+            continue
+        events: list[Any] = []
+        since = 0
+        with contextlib.suppress(ApiError):
+            while len(events) < 100_000:
+                page = client.get(f"/v1/events?since={since}&limit=1000")
+                if not page:
+                    break
+                events += page
+                since = int(page[-1]["id"])
+        (lab_dir / robot).mkdir(parents=True, exist_ok=True)
+        (lab_dir / robot / "events.json").write_text(json.dumps(events))
 
 
 def _placed(soak: Soak) -> dict[str, int]:
