@@ -29,7 +29,7 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     figures = json.loads(out.read_text())
     assert figures["quick"] is True
     small = {"sdrpeer_tcp", "sdrpeer_tcp_acked", "sdrpeer_tcp_inport", "sdrpeer_unix", "zmq"}
-    small |= {"plain_tcp"}
+    small |= {"plain_tcp", "sdrpeer_tcp_acked_enc"}
     assert set(figures["small"]) == small | {"plain_tcp_coalesced"}
     assert set(figures["big"]) == small | {"sdrpeer_shm"}
     assert set(figures["rtt"]) == {"sdrpeer_tcp", "plain_tcp", "zmq", "asyncio_raw"}
@@ -39,7 +39,7 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
             assert len(cell["runs"]) == figures["reps"] == 1
     for name, cell in figures["rtt"].items():
         assert 0 < cell["p50_us"] <= cell["p99_us"], name
-    assert len(figures["targets"]) == 4
+    assert len(figures["targets"]) == 6  # four of the data plane, two of encryption
     for target in figures["targets"]:
         assert _positive(target["ratio"])
         assert isinstance(target["met"], bool)

@@ -234,10 +234,11 @@ class Connection:
             old.transport.abort()
         self._draining.clear()
         if link is not None:
-            if link.ring is None:
+            if link.ring is None and not link.acks:
                 link.transport.close()  # what was written still arrives; no ack is awaited
-            else:
-                link.shut()  # the receiver still needs to credit the ring while it reads
+            else:  # half-closed: the receiver credits the ring, or acknowledges, while it reads
+                link.shut()  # (a closed socket answers its acks with a reset, and the reset
+                # makes the receiver's kernel drop what it has not read yet)
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(linger):
                     await link.closed
