@@ -85,7 +85,7 @@ def load_token(data_dir: Path, token_file: Path | None) -> str:
         return token
     if token_file is not None:
         raise ConfigError(f"{path}: token file not found")
-    token = secrets.token_urlsafe(32)
+    token = secrets.token_hex(32)  # hex: never starts with "-" (as `--token -x...` it was a flag)
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w") as f:
         f.write(token + "\n")

@@ -106,8 +106,8 @@ def new_cluster_key(lab_dir: Path) -> Path:
 
 
 def new_token() -> str:
-    """A fresh API token."""
-    return secrets.token_urlsafe(32)
+    """A fresh API token (hex: one starting with "-" was taken for a flag after `--token`)."""
+    return secrets.token_hex(32)
 
 
 def robot_name(index: int) -> str:
