@@ -45,15 +45,10 @@ from sdrpeer.dataplane.frames import (
     parse_reply,
     reply_auth,
 )
-from sdrpeer.dataplane.seal import Opener, Sealer, stream_keys
+from sdrpeer.dataplane.seal import Opener, sealed_writer, stream_keys
 from sdrpeer.dataplane.shm import SenderRing
 
 _SNDBUF: Final = 4 * 1024 * 1024
-RECORD: Final = 256 * 1024
-"""Longest record sealed: a big write is cut into records of this size, so that the receiver
-decrypts the first while the next travels (one 1 MiB record would be decrypted only whole)."""
-SMALL_RECORD: Final = 16 * 1024
-"""Records up to this size go out as one write (length and bytes joined)."""
 MAX_RECORD: Final = 2 * 1024 * 1024
 """Longest encrypted record accepted from a receiver (acks are a few bytes)."""
 
@@ -106,21 +101,7 @@ class Link(asyncio.Protocol):
 
     def encrypt(self, send_key: bytes, receive_key: bytes, max_record: int) -> None:
         """From now on seal what is written and open what comes back."""
-        seal = Sealer(send_key).seal
-        write = self.transport.write
-
-        def sealed(data: bytes | memoryview) -> None:
-            if len(data) <= SMALL_RECORD:
-                head, body = seal(data)
-                write(head + body)  # one small write: one syscall
-                return
-            view = memoryview(data)  # records of RECORD bytes: the receiver opens the first
-            for start in range(0, len(view), RECORD):  # while the next is on its way
-                head, body = seal(view[start : start + RECORD])
-                write(head)
-                write(body)
-
-        self.write = sealed
+        self.write = sealed_writer(send_key, self.transport.write)
         self._opener = Opener(receive_key, max_record)
 
     def _listen(self) -> None:

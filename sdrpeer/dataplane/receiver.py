@@ -32,7 +32,7 @@ from sdrpeer.dataplane.frames import (
 )
 from sdrpeer.dataplane.port_api import AckingPort, InPortLike
 from sdrpeer.dataplane.reader import FrameReader
-from sdrpeer.dataplane.seal import TAG, Opener, Sealer, stream_keys
+from sdrpeer.dataplane.seal import TAG, Opener, sealed_writer, stream_keys
 from sdrpeer.dataplane.shm import ReceiverRing
 
 if TYPE_CHECKING:
@@ -296,13 +296,7 @@ class Receiver(asyncio.BufferedProtocol):
         """Everything after the proof is sealed both ways (sdrpeer.dataplane.seal)."""
         assert self.transport is not None
         self._opener = Opener(receive_key, self.server.max_frame + RECORD_SLACK)
-        seal, write = Sealer(send_key).seal, self.transport.write
-
-        def sealed(data: bytes) -> None:
-            head, body = seal(data)  # acknowledgements and credits: a few bytes
-            write(head + body)
-
-        self._send = sealed
+        self._send = sealed_writer(send_key, self.transport.write)
         self._sock = None  # records do not line up with frames: no SO_RCVLOWAT tuning
 
     def _open(self) -> bool:

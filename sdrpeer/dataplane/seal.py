@@ -19,12 +19,12 @@ Unix sockets or shared memory (same robot) stays without it.
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Final
 
 from sdrpeer.dataplane.frames import FrameError
 
-__all__ = ["Opener", "Sealer", "stream_keys"]
+__all__ = ["Opener", "Sealer", "sealed_writer", "stream_keys"]
 
 LENGTH: Final = 4
 TAG: Final = 16
@@ -67,6 +67,33 @@ class Sealer:
         self._n += 1
         sealed: bytes = self._encrypt(self._n.to_bytes(12, "big"), data, None)
         return _LEN.pack(len(sealed)), sealed
+
+
+RECORD: Final = 256 * 1024
+"""Longest record sealed: a big write is cut into records of this size, so that the receiver
+decrypts the first while the next travels (one 1 MiB record would be decrypted only whole)."""
+SMALL_RECORD: Final = 16 * 1024
+"""Records up to this size go out as one write (length and bytes joined: one syscall)."""
+
+
+def sealed_writer(
+    key: bytes, write: Callable[[bytes], object]
+) -> Callable[[bytes | bytearray | memoryview], None]:
+    """A `write` that seals what it is given into records (of at most `RECORD` bytes)."""
+    seal = Sealer(key).seal
+
+    def sealed(data: bytes | bytearray | memoryview) -> None:
+        if len(data) <= SMALL_RECORD:
+            head, body = seal(data)
+            write(head + body)
+            return
+        view = memoryview(data)
+        for start in range(0, len(view), RECORD):
+            head, body = seal(view[start : start + RECORD])
+            write(head)  # two writes: joining would copy the sealed bytes once more
+            write(body)
+
+    return sealed
 
 
 class Opener:
