@@ -66,15 +66,25 @@ def handover_waits(
 ) -> set[str]:
     """Active placements on `robot`, not ACTIVE yet, whose component another robot (alive: in
     `remote`) still runs ACTIVE as its active instance (see the module docstring)."""
-    running = {
-        r.component
-        for r in remote.values()
-        if r.robot != robot and r.state == "active" and r.role == "active"
-    }
+    running = _running_elsewhere(robot, remote)
     return {
         p.instance
         for p in plan.on_robot(robot)
         if p.role == "active" and p.component in running and p.instance not in active_here
+    }
+
+
+def _running_elsewhere(
+    robot: str, remote: Mapping[str, Remote], among: Collection[str] | None = None
+) -> set[str]:
+    """Components another robot (of `among`, when given) runs ACTIVE as its active instance."""
+    return {
+        r.component
+        for r in remote.values()
+        if r.robot != robot
+        and r.state == "active"
+        and r.role == "active"
+        and (among is None or r.robot in among)
     }
 
 
@@ -83,11 +93,7 @@ def superseded(
 ) -> set[str]:
     """Active placements on `robot` whose component a robot in `newer` (robots holding a plan
     newer than `plan`) runs ACTIVE as its active instance (see the module docstring)."""
-    running = {
-        r.component
-        for r in remote.values()
-        if r.robot in newer and r.robot != robot and r.state == "active" and r.role == "active"
-    }
+    running = _running_elsewhere(robot, remote, newer)
     return {
         p.instance for p in plan.on_robot(robot) if p.role == "active" and p.component in running
     }
