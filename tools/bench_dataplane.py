@@ -8,6 +8,9 @@ sender and receiver are separate processes on this machine, as two component hos
 - throughput: from the sender's first send (connection set up) to the receiver's last frame,
   both read from CLOCK_MONOTONIC (`time.perf_counter`, one clock for both processes); 100-byte
   frames in frames/s, 1 MB frames in MB/s (10^6 bytes);
+- CPU (1 MB acked rows): `time.process_time` of the sender while sending plus that of the
+  receiver while receiving, per GB carried, and the MB/s all this machine's cores could carry
+  at that cost (the ceiling when both ends share the cores, as here);
 - round trip: the sender times each 100-byte ping until its pong arrives; p50 and p99 in µs.
   `asyncio_raw` (a bare asyncio Protocol echo, no framing at all) is the floor of any design
   on asyncio's event loop, shown for scale.
@@ -78,7 +81,8 @@ RTT_TARGET = 1.3  # sdrpeer p50 <= 1.3x plain socket p50
 
 async def _sdr_send(
     to: str, n: int, size: int, *, shm: bool, acks: bool = True, keys: list[bytes] | None = None
-) -> float:
+) -> tuple[float, float]:
+    """(perf_counter at the first send, CPU seconds this process spent sending)."""
     buffer = 4096 if size <= 1024 else 4
     policy = make_policy("fifo", buffer, "block")
     size_shm = DEFAULT_SIZE if shm else 0
@@ -90,17 +94,23 @@ async def _sdr_send(
     async with asyncio.timeout(10):
         await conn.wait_connected()
     value, offer, drain = payload(size), conn.offer, conn.drain
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(n):
         if not offer(value):
             await drain()
             offer(value)
     await conn.close(linger=60)
-    return start
+    return start, time.process_time() - cpu
 
 
 def sdr_throughput(kind: str, n: int, size: int) -> float:
-    """Seconds the sdrpeer receiver took for n frames of `size` bytes; kind tcp, unix (the
+    """Seconds the sdrpeer receiver took for n frames of `size` bytes (see `sdr_run`)."""
+    return sdr_run(kind, n, size)[0]
+
+
+def sdr_run(kind: str, n: int, size: int) -> tuple[float, float | None]:
+    """(Seconds the sdrpeer receiver took for n frames of `size` bytes, CPU seconds both
+    processes spent on them (acked kinds; else None)); kind tcp, unix (the
     socket alone), shm (a Unix socket with the shared-memory ring, the default), tcp_acked
     (into the SDK's InPort, taken by a consumer: an acknowledged stream), tcp_inport (the
     same without acknowledgements: what the acks cost is the difference) or tcp_acked_enc
@@ -112,8 +122,11 @@ def sdr_throughput(kind: str, n: int, size: int) -> float:
         scheme = "unix" if kind in ("unix", "shm") else "tcp"
         to = f"{scheme}://{peer.addresses[scheme]}"
         acks = kind != "tcp_inport"
-        start = asyncio.run(_sdr_send(to, n, size, shm=kind == "shm", acks=acks, keys=keys))
-        return float(peer.finish()["end"]) - start
+        send = _sdr_send(to, n, size, shm=kind == "shm", acks=acks, keys=keys)
+        start, sender_cpu = asyncio.run(send)
+        result = peer.finish()
+        cpu = sender_cpu + float(result["cpu"]) if "cpu" in result else None
+        return float(result["end"]) - start, cpu
 
 
 def plain_throughput(n: int, size: int, batch: int = 1) -> float:
@@ -166,11 +179,20 @@ def measure(
         "plain_tcp": lambda: plain_throughput(n_small, SMALL),
         "plain_tcp_coalesced": lambda: plain_throughput(n_small, SMALL, batch=256),
     }
+    cpu_runs: dict[str, list[float]] = {}
+
+    def counted(kind: str) -> float:
+        """Seconds of one big run, its CPU seconds per GB (both ends) kept in cpu_runs."""
+        seconds, cpu = sdr_run(kind, n_big, BIG)
+        assert cpu is not None
+        cpu_runs.setdefault(f"sdrpeer_{kind}", []).append(cpu / (n_big * BIG / 1e9))
+        return seconds
+
     big: dict[str, Callable[[], float]] = {
         "sdrpeer_tcp": lambda: sdr_throughput("tcp", n_big, BIG),
         "sdrpeer_tcp_inport": lambda: sdr_throughput("tcp_inport", n_big, BIG),
-        "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_big, BIG),
-        "sdrpeer_tcp_acked_enc": lambda: sdr_throughput("tcp_acked_enc", n_big, BIG),
+        "sdrpeer_tcp_acked": lambda: counted("tcp_acked"),
+        "sdrpeer_tcp_acked_enc": lambda: counted("tcp_acked_enc"),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_big, BIG),
         "sdrpeer_shm": lambda: sdr_throughput("shm", n_big, BIG),
         "plain_tcp": lambda: plain_throughput(n_big, BIG),
@@ -182,7 +204,15 @@ def measure(
         "zmq": lambda: zmq_pings(m),
         "asyncio_raw": lambda: asyncio.run(asyncio_pings(m)),
     }
-    out: dict[str, Any] = {"quick": quick, "reps": reps, "small": {}, "big": {}, "rtt": {}}
+    out: dict[str, Any] = {
+        "quick": quick,
+        "reps": reps,
+        "cores": os.cpu_count(),
+        "small": {},
+        "big": {},
+        "rtt": {},
+        "cpu_per_gb": {},
+    }
     runs: dict[tuple[str, str], list[float]] = {}
     for rep in range(reps):  # interleaved, so slow phases of the machine hit every contender
         log(f"rep {rep + 1}/{reps}")
@@ -208,6 +238,14 @@ def measure(
             cell[f"{section}_us"] = statistics.median(values)
             cell[f"{section}_runs"] = values
 
+    for name, values in cpu_runs.items():
+        ceiling = (out["cores"] or 1) / statistics.median(values) * 1e3  # MB/s, cores all busy
+        out["cpu_per_gb"][name] = {
+            "median": statistics.median(values),
+            "runs": values,
+            "ceiling_mb_s": ceiling,
+        }
+
     def paired(a: tuple[str, str], b: tuple[str, str]) -> float:
         """Median over reps of the ratio within each rep (the machine's load shifts cancel)."""
         return statistics.median(x / y for x, y in zip(runs[a], runs[b], strict=True))
@@ -231,6 +269,15 @@ def render(out: dict[str, Any]) -> str:
     lines += [f"  {k:<22} {v['median']:>12,.0f}" for k, v in out["small"].items()]
     lines.append("1 MB frames, MB/s")
     lines += [f"  {k:<22} {v['median']:>12,.0f}" for k, v in out["big"].items()]
+    if out["cpu_per_gb"]:
+        lines.append(
+            "1 MB, CPU seconds per GB of both ends (sender + receiver) and the most MB/s "
+            f"{out['cores']} cores could carry at that cost"
+        )
+        lines += [
+            f"  {k:<22} {v['median']:>9.3f} s/GB  ceiling {v['ceiling_mb_s']:>7,.0f} MB/s"
+            for k, v in out["cpu_per_gb"].items()
+        ]
     lines.append("100-byte round trip, µs        p50      p99")
     lines += [f"  {k:<22} {v['p50_us']:>9.1f} {v['p99_us']:>8.1f}" for k, v in out["rtt"].items()]
     lines.append("Targets (median of per-rep ratios)")
