@@ -1,8 +1,8 @@
 """Plan sync. Against a robot whose API does not answer (restarting: gossip is back before the
-API): the coordinator waits FETCH_RETRY before it asks that robot again, instead of fetching in
-a tight loop (it did, hundreds of times a second, on every agent of a 10-robot soak). And the old
-side of a heal: gossip of a newer plan's running copy stands its own copy down at once. And a
-plan placing what this robot's launch policy refuses launches nothing."""
+API): the coordinator waits `DeployConfig.fetch_retry` before it asks that robot again, instead
+of fetching in a tight loop (it did, hundreds of times a second, on every agent of a 10-robot
+soak). And the old side of a heal: gossip of a newer plan's running copy stands its own copy
+down at once. And a plan placing what this robot's launch policy refuses launches nothing."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.deploy import peers
-from sdrpeer.deploy.coordinator import FETCH_RETRY
+from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import Placement, Plan
@@ -44,11 +44,11 @@ async def test_a_failed_fetch_is_not_retried_at_once(
         c.start()
         loop = asyncio.get_running_loop()
         async with asyncio.timeout(30):
-            while not calls or loop.time() - calls[0] < FETCH_RETRY * 2.5:  # noqa: ASYNC110
+            while not calls or loop.time() - calls[0] < DeployConfig().fetch_retry * 2.5:  # noqa: ASYNC110
                 await asyncio.sleep(0.01)
-        assert 2 <= len(calls) <= 4, len(calls)  # one now, then one per FETCH_RETRY
+        assert 2 <= len(calls) <= 4, len(calls)  # one now, then one per fetch_retry
         gaps = [b - a for a, b in itertools.pairwise(calls)]
-        assert min(gaps) >= FETCH_RETRY
+        assert min(gaps) >= DeployConfig().fetch_retry
     finally:
         await c.stop()
         await manager.stop()

@@ -14,6 +14,7 @@ from pathlib import Path
 import psutil
 import pytest
 
+from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.coordinator import Coordinator
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.eventlog import EventLog
@@ -39,8 +40,7 @@ async def coordinator_with(
         token="t" * 32,
         events=EventLog(),
         on_change=lambda: None,
-        tick=0.01,
-        idle_tick=0.01,
+        config=DeployConfig(tick=0.01, idle_tick=0.01),
     )
     return coordinator, manager
 

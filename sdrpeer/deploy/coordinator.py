@@ -36,6 +36,7 @@ from typing import Any
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.allocator_role import AllocatorRole
+from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot, superseded
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
@@ -58,17 +59,6 @@ from sdrpeer.system.model import SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
 
-HANDOVER_WAIT = 10.0
-"""Seconds an active placement waits for the component's old copy on another alive robot to
-stand down before it activates anyway. The component runs meanwhile (the old copy is ACTIVE); a
-robot cut off drops out of the view at its death and is not waited for, so this bound is only a
-safety valve (a robot alive in gossip whose plan never arrives: a lossy link in a 10-robot soak
-took more than 2.5 s)."""
-
-FETCH_RETRY = 1.0
-"""Seconds before a plan is fetched again from a robot a fetch failed from (a robot restarting
-answers gossip before its API: retrying at once made every agent fetch in a tight loop)."""
-
 
 class Coordinator:
     """Plans in, instance specs out; allocates when this robot holds the role."""
@@ -83,10 +73,7 @@ class Coordinator:
         token: str,
         events: EventLog,
         on_change: Callable[[], None],
-        tick: float = 0.2,
-        idle_tick: float = 2.0,
-        adopt_after: float = 1.0,
-        retry_every: float = 5.0,
+        config: DeployConfig | None = None,
         election: ElectionConfig | None = None,
         recovery: RecoveryConfig | None = None,
     ) -> None:
@@ -96,8 +83,9 @@ class Coordinator:
         self.token = token
         self.events = events
         self.on_change = on_change
-        self.tick = tick
-        self.idle_tick = idle_tick
+        self.config = config = config or DeployConfig()
+        self.tick = config.tick
+        self.idle_tick = config.idle_tick
         self.local = LocalShell(
             name, manager, lambda: self.store.plan, self.request_recovery, events
         )
@@ -135,7 +123,7 @@ class Coordinator:
             wake=self.wake,
         )
         """Whether this robot is in touch with the fleet (quorum, cut off, rejoining)."""
-        self.role = AllocatorRole(self, adopt_after, retry_every)
+        self.role = AllocatorRole(self, config.adopt_after, config.retry_every)
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
@@ -250,7 +238,7 @@ class Coordinator:
         self, state: ClusterState, now: float | None = None
     ) -> tuple[str, tuple[int, str, int]] | None:
         """The robot gossiping the newest plan we would take (with `now`: leaving out robots a
-        fetch just failed from, for `FETCH_RETRY` seconds)."""
+        fetch just failed from, for `config.fetch_retry` seconds)."""
         best: tuple[str, tuple[int, str, int]] | None = None
         for robot, rec in state.alive.items():
             p = rec.plan
@@ -282,7 +270,7 @@ class Coordinator:
             self.accept(plan, source=robot)
         except ApiError as e:
             log.info("cannot fetch the plan from %s: %s", robot, e)
-            self._fetch_failed[robot] = asyncio.get_running_loop().time() + FETCH_RETRY
+            self._fetch_failed[robot] = asyncio.get_running_loop().time() + self.config.fetch_retry
         finally:
             self._fetching = None
             self.wake()
@@ -334,7 +322,11 @@ class Coordinator:
         waits = handover_waits(plan, self.name, remote, active_here)
         for gone in self._handover_since.keys() - waits:
             del self._handover_since[gone]
-        hold = {n for n in waits if now - self._handover_since.setdefault(n, now) < HANDOVER_WAIT}
+        hold = {
+            n
+            for n in waits
+            if now - self._handover_since.setdefault(n, now) < self.config.handover_wait
+        }
         newer = {
             robot
             for robot, rec in state.alive.items()

@@ -12,7 +12,7 @@ to be ACTIVE, except inside a cycle of connections, where no order can be respec
 A component moving between alive robots is handed over break-before-make: `handover_waits`
 names the active placements here whose component another alive robot still runs ACTIVE as its
 active instance; the caller holds them INACTIVE (`hold`) until that copy stands down, or for a
-bounded time (the coordinator's `HANDOVER_WAIT`: the old robot may never hear of the plan).
+bounded time (`DeployConfig.handover_wait`: the old robot may never hear of the plan).
 The old side yields at once: `superseded` names the active placements here whose component a
 robot holding a newer plan (one this robot's store would take) already runs ACTIVE as its active
 instance. That is the old side of a healed partition, or of a move whose plan reached the new robot
