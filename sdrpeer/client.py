@@ -176,3 +176,19 @@ def wait_for(
             last = value
         time.sleep(poll)
     raise SdrpeerError(f"timed out after {timeout:g} s waiting for {what}; last: {last!r:.400}")
+
+
+ELECTION_WAIT = 15.0
+"""Seconds a state-changing call waits at most for an allocator to be elected."""
+
+
+def post_when_elected(client: AgentClient, path: str, body: Any, timeout: float) -> Any:
+    """POST, retrying while the agents answer 503 (no allocator yet), for at most `timeout` s."""
+    deadline = time.monotonic() + min(timeout, ELECTION_WAIT)
+    while True:
+        try:
+            return client.post(path, body)
+        except ApiError as e:
+            if e.status != 503 or time.monotonic() > deadline:
+                raise
+        time.sleep(0.2)

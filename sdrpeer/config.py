@@ -17,8 +17,8 @@ from typing import Any
 
 from sdrpeer.errors import ConfigError
 from sdrpeer.gossip.config import PRESETS
-from sdrpeer.launch_policy import DEFAULT_TARGETS, LaunchPolicy
-from sdrpeer.limits import check_int
+from sdrpeer.launch.policy import DEFAULT_TARGETS, LaunchPolicy
+from sdrpeer.record.limits import check_int
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
 LOG_LEVELS = ("debug", "info", "warning", "error")
@@ -50,7 +50,7 @@ class AgentConfig:
     insecure: bool = False
     """Run without a cluster key (unauthenticated; not for real robots)."""
     allow_launchers: tuple[str, ...] = ()
-    """Launchers this robot's hosts may use besides python (`sdrpeer.launch_policy`): exec and
+    """Launchers this robot's hosts may use besides python (`sdrpeer.launch.policy`): exec and
     script run anything the agent's user can, so they are off unless named here."""
     allow_targets: tuple[str, ...] = DEFAULT_TARGETS
     """Shell patterns a python target (package.module:Class) must match one of."""
@@ -201,7 +201,7 @@ def load_agent_config(path: Path | str) -> ConfigValues:
     """Read an agent config file into typed field values; relative paths are file-relative."""
     import yaml  # noqa: PLC0415 - only --config FILE needs it (keeps the agent's start light)
 
-    from sdrpeer.monitor.yamlfile import compose, read_text, yaml_problem  # noqa: PLC0415
+    from sdrpeer.yamlfile import compose, read_text, yaml_problem  # noqa: PLC0415
 
     path = Path(path)
     loader, root = compose(read_text(path), str(path))
@@ -282,7 +282,7 @@ def _validate(values: dict[str, Any], origin: dict[str, str]) -> None:
         except ValueError as exc:
             raise fail("join", str(exc)) from None
     if "allow_launchers" in values:
-        from sdrpeer.launchers import known_launchers  # noqa: PLC0415 - plugins: entry points
+        from sdrpeer.launch.launchers import known_launchers  # noqa: PLC0415 - plugins: entry points
 
         known = known_launchers()
         for name in values["allow_launchers"]:

@@ -29,7 +29,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from sdrpeer.wire import Keyring, format_key
+from sdrpeer.gossip.wire import Keyring, format_key
 
 REPO = Path(__file__).resolve().parents[1]
 POLL = 0.1

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.gossip.messages import Gossip
-from sdrpeer.wire import Codec, Keyring
+from sdrpeer.gossip.wire import Codec, Keyring
 from tests.realnet import REPO, Agent, RealCluster, http, send_udp
 
 pytestmark = pytest.mark.realnet

@@ -25,7 +25,7 @@ from sdrpeer.alloc.registry import Registry
 from sdrpeer.alloc.strategies import STRATEGIES, FirstFit, Objective
 from sdrpeer.alloc.view import RobotView
 from sdrpeer.errors import ConfigError
-from sdrpeer.record import LinkStats, Metrics
+from sdrpeer.record.robot import LinkStats, Metrics
 from sdrpeer.system.model import ComponentDef, Thresholds
 
 MB = 1000**2

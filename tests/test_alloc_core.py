@@ -12,9 +12,9 @@ from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.result import AllocationResult
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.errors import ConfigError
-from sdrpeer.launch_policy import LaunchPolicy
+from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.plan import Plan
-from sdrpeer.record import InstanceInfo, LinkStats, LinkSummary, Metrics
+from sdrpeer.record.robot import InstanceInfo, LinkStats, LinkSummary, Metrics
 from sdrpeer.system.loader import load_system
 from sdrpeer.system.model import (
     AllocationDef,

@@ -20,7 +20,7 @@ from sdrpeer.alloc.scores import (
 from sdrpeer.alloc.strategies import Context, Objective, Peer, weights_of
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.errors import ConfigError
-from sdrpeer.record import Metrics
+from sdrpeer.record.robot import Metrics
 from sdrpeer.system.model import (
     AllocationDef,
     ComponentDef,

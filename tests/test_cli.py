@@ -11,12 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.agent_cli import agent_flag_values
-from sdrpeer.cli import build_parser, main, parse_assignment
+from sdrpeer.cli.agent import agent_flag_values
+from sdrpeer.cli.common import parse_assignment
+from sdrpeer.cli.main import build_parser, main
 from sdrpeer.client import AgentClient, resolve_endpoint
 from sdrpeer.config import FIELDS, flag_name
 from sdrpeer.errors import ApiError, ConfigError
-from sdrpeer.lab import Lab, LabRobot, write_lab
+from sdrpeer.lab.files import Lab, LabRobot, write_lab
 
 
 def test_every_config_field_has_its_flag() -> None:

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from sdrpeer.cli_format import (
+from sdrpeer.cli.format import (
     format_agent,
     format_event,
     format_link,

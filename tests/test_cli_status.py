@@ -12,8 +12,8 @@ import pytest
 from aiohttp import web
 
 from sdrpeer.api.app import build_app
-from sdrpeer.cli_status import format_status, format_top
-from sdrpeer.cli_top import read_stream, run_top
+from sdrpeer.cli.status import format_status, format_top
+from sdrpeer.cli.top import read_stream, run_top
 from sdrpeer.dashboard.routes import ROUTES
 from tests.test_dashboard_stream import Source
 

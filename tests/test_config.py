@@ -16,7 +16,7 @@ from sdrpeer.config import (
     parse_hostport,
 )
 from sdrpeer.errors import ConfigError
-from sdrpeer.launch_policy import LaunchPolicy
+from sdrpeer.launch.policy import LaunchPolicy
 
 
 def write(tmp_path: Path, text: str, name: str = "agent.yaml") -> Path:

@@ -18,7 +18,7 @@ from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
 from sdrpeer.plan import Placement, Plan
-from sdrpeer.record import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
+from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.loader import parse_system
 from tests.test_shutdown import coordinator_with
 

@@ -8,15 +8,15 @@ from collections.abc import AsyncIterator
 import msgpack
 import pytest
 
-from sdrpeer.agent_keys import derive_data_key
-from sdrpeer.datakeys import keys_from_env, keys_to_env
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello
 from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.keys.datakeys import keys_from_env, keys_to_env
+from sdrpeer.keys.derive import data_key
 
-K1 = derive_data_key(b"\x01" * 32)
-K2 = derive_data_key(b"\x02" * 32)
+K1 = data_key(b"\x01" * 32)
+K2 = data_key(b"\x02" * 32)
 
 
 def test_keys_travel_as_hex_and_bad_ones_are_named() -> None:

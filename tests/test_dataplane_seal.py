@@ -11,15 +11,15 @@ from collections.abc import Callable
 
 import pytest
 
-from sdrpeer.agent_keys import derive_data_key
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import FrameError
-from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer, stream_keys
+from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer
 from sdrpeer.dataplane.testing import RecordingPort, until
+from sdrpeer.keys.derive import data_key, stream_keys
 from sdrpeer.sdk.policy import ConnectorPolicy
 
-K1 = derive_data_key(b"\x01" * 32)
+K1 = data_key(b"\x01" * 32)
 PATTERN = b"SECRET-FRAME-PAYLOAD-"
 
 

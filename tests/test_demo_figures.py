@@ -135,7 +135,7 @@ def test_summary_table_tells_the_story_in_time_order() -> None:
 def test_sdrpeer_does_not_import_matplotlib_until_figures_are_drawn() -> None:
 
     code = (
-        "import sys, sdrpeer.cli, sdrpeer.demo.timeline, sdrpeer.demo.figures; "
+        "import sys, sdrpeer.cli.main, sdrpeer.demo.timeline, sdrpeer.demo.figures; "
         "print('matplotlib' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.cli import main
+from sdrpeer.cli.main import main
 from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import load_timeline
 

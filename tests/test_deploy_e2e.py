@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from sdrpeer.cli import main as cli_main
+from sdrpeer.cli.main import main as cli_main
 from tests.realnet import Agent, RealCluster, http
 
 pytestmark = pytest.mark.realnet

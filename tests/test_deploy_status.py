@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from sdrpeer.cli_status import format_status
+from sdrpeer.cli.status import format_status
 from sdrpeer.deploy.status import SinceTracker, all_active, status_doc
 from sdrpeer.plan import Placement, Plan
-from sdrpeer.record import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
+from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.model import ComponentDef, SystemDef
 
 SYSTEM = SystemDef(

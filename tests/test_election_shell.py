@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.election.config import lan
-from sdrpeer.record import ElectionInfo, LinkSummary, Metrics, RobotRecord
+from sdrpeer.record.robot import ElectionInfo, LinkSummary, Metrics, RobotRecord
 from sdrpeer.system.model import Thresholds
 
 GB = 1000**3

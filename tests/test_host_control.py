@@ -5,7 +5,7 @@ from __future__ import annotations
 import msgpack
 import pytest
 
-from sdrpeer.control_parts import parts
+from sdrpeer.control.parts import parts
 from sdrpeer.host import control
 from sdrpeer.host.control import Command, ControlDecoder, ControlProtocolError
 

@@ -13,9 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.cli_lab import watch
+from sdrpeer.cli.lab import watch
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.lab import (
+from sdrpeer.gossip.wire import Keyring
+from sdrpeer.lab.files import (
     Lab,
     LabRobot,
     is_agent_process,
@@ -29,9 +30,8 @@ from sdrpeer.lab import (
     write_lab,
     write_robot_file,
 )
-from sdrpeer.lab_up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
+from sdrpeer.lab.up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
-from sdrpeer.wire import Keyring
 
 # A stand-in whose command line looks like `python -m sdrpeer agent --data-dir D`.
 FAKE_AGENT = "import signal, sys, time\n{setup}\nprint('ready', flush=True)\ntime.sleep(60)\n"

@@ -7,11 +7,11 @@ from pathlib import Path
 import psutil
 import pytest
 
-from sdrpeer.cli import main
+from sdrpeer.cli.main import main
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.lab import lab_path, read_lab
-from sdrpeer.lab_up import UpOptions, start_lab
+from sdrpeer.lab.files import lab_path, read_lab
+from sdrpeer.lab.up import UpOptions, start_lab
 
 FAKE_AGENT = Path(__file__).parent / "fake_agent"
 

@@ -8,8 +8,8 @@ from typing import Any
 
 import pytest
 
-from sdrpeer import launchers
-from sdrpeer.launchers import (
+from sdrpeer.launch import launchers
+from sdrpeer.launch.launchers import (
     Launcher,
     LauncherError,
     get_launcher,

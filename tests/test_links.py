@@ -7,7 +7,7 @@ import math
 import pytest
 
 from sdrpeer.monitor.links import LinkEstimator, LinkTable, distance, majority_worst, summarize
-from sdrpeer.record import MAX_LISTED, LinkBounds, LinkStats
+from sdrpeer.record.robot import MAX_LISTED, LinkBounds, LinkStats
 
 
 def test_no_stats_before_first_ack() -> None:

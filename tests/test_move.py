@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from components.ledger import ledger_system, read_ledgers
-from sdrpeer.cli import main
+from sdrpeer.cli.main import main
 from sdrpeer.deploy.move import MoveError, move_inputs
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.system.loader import parse_system

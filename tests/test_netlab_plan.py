@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from sdrpeer.cli.netlab import parse_groups
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.netlab.commands import parse_groups
 from sdrpeer.netlab.plan import FAULT_CHAIN, PART_CHAIN, NetPlan, parse_rate
 
 PLAN = NetPlan(7, 3)

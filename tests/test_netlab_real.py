@@ -13,7 +13,7 @@ from typing import TypeVar
 import pytest
 
 from sdrpeer.client import AgentClient, wait_for
-from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from tests.realnet import NETNS_ONLY
 

@@ -10,8 +10,8 @@ import msgpack
 import pytest
 import yaml
 
-from sdrpeer.cli import main
-from sdrpeer.profile import (
+from sdrpeer.cli.main import main
+from sdrpeer.profiling.measure import (
     ProfileError,
     ProfileRequest,
     make_source,

@@ -16,7 +16,7 @@ from sdrpeer.monitor.publish import (
     boundaries,
     link_bounds,
 )
-from sdrpeer.record import (
+from sdrpeer.record.robot import (
     ElectionInfo,
     InstanceInfo,
     LinkBounds,

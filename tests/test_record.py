@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sdrpeer.errors import WireError
-from sdrpeer.launch_policy import LaunchPolicy
-from sdrpeer.record import (
+from sdrpeer.launch.policy import LaunchPolicy
+from sdrpeer.record.robot import (
     MAX_LISTED,
     ElectionInfo,
     InstanceInfo,
@@ -341,7 +341,7 @@ def test_any_metrics_encode_and_decode_on_every_peer(  # noqa: PLR0917 - hypothe
     priority: int,
 ) -> None:
     """Whatever a robot file, the API or a measurement said, the record encodes, and every
-    peer decodes it, inside sdrpeer.limits' ranges (the live-API bug: rssi=-1000dBm made
+    peer decodes it, inside sdrpeer.record.limits' ranges (the live-API bug: rssi=-1000dBm made
     robot-2's record unencodable and its /v1/members answer 500)."""
     m = Metrics(cpu, mem, mem, battery, rssi, (x, y))
     r = decode_record(encode_record(replace(big_record(), metrics=m, priority=priority)))

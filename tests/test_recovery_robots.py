@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from sdrpeer.monitor.links import summarize
-from sdrpeer.record import LinkBounds, LinkStats
+from sdrpeer.record.robot import LinkBounds, LinkStats
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Cleared, RobotCondition, RobotEvent
 from sdrpeer.recovery.robot_conditions import RobotMonitor

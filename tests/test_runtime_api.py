@@ -13,7 +13,7 @@ import pytest
 from aiohttp.test_utils import TestClient, TestServer
 
 from sdrpeer.api.app import build_app
-from sdrpeer.launch_policy import LaunchPolicy
+from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.supervisor import SupervisorConfig
 

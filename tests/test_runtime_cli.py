@@ -9,11 +9,11 @@ from typing import Any
 
 import pytest
 
-from sdrpeer.cli import build_parser
-from sdrpeer.cli_format import format_instances
+from sdrpeer.cli.format import format_instances
+from sdrpeer.cli.instances import instance_doc
+from sdrpeer.cli.main import build_parser
 from sdrpeer.deploy.one_robot import load_on_one_robot
 from sdrpeer.errors import ConfigError
-from sdrpeer.runtime.commands import instance_doc
 from sdrpeer.runtime.logfile import Follower, tail
 
 GOOD = """\

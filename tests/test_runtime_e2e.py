@@ -12,7 +12,7 @@ from typing import Any
 import psutil
 import pytest
 
-from sdrpeer.cli import main as cli_main
+from sdrpeer.cli.main import main as cli_main
 from tests.realnet import Agent, RealCluster, http
 
 pytestmark = pytest.mark.realnet

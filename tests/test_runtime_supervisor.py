@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.launch_policy import LaunchPolicy
-from sdrpeer.procstats import ProcessTreeMeter
+from sdrpeer.launch.policy import LaunchPolicy
+from sdrpeer.monitor.procstats import ProcessTreeMeter
 from sdrpeer.runtime.backoff import RestartConfig
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.spec import InstanceSpec

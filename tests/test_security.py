@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.agent_files import SEQ_RESERVE, seq_start
+from sdrpeer.agent.files import SEQ_RESERVE, seq_start
 from sdrpeer.config import AgentConfig
-from sdrpeer.keyring import Keyring
-from sdrpeer.wire import format_key
+from sdrpeer.gossip.wire import format_key
+from sdrpeer.keys.keyring import Keyring
 from tests.realnet import Agent, RealCluster, http
 from tests.test_recovery_e2e import CRASHY, deploy
 

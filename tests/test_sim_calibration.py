@@ -20,7 +20,7 @@ import pytest
 
 from sdrpeer.client import AgentClient
 from sdrpeer.gossip.config import lan
-from sdrpeer.lab_up import UpOptions, start_lab
+from sdrpeer.lab.up import UpOptions, start_lab
 from sdrpeer.sim.agents import AgentFleet, Churn
 
 WINDOW = 20.0

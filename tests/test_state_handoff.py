@@ -19,7 +19,7 @@ import pytest
 
 from components.position_estimation import Estimator, PositionEstimation
 from components.red_controller import Odometry, REDController
-from sdrpeer.control_parts import PART_SIZE, PartAssembler, PartError, parts
+from sdrpeer.control.parts import PART_SIZE, PartAssembler, PartError, parts
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.handoff import StateError
 from sdrpeer.runtime.spec import InstanceSpec

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.cli import main
+from sdrpeer.cli.main import main
 
 REPO = Path(__file__).resolve().parent.parent
 

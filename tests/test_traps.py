@@ -16,7 +16,7 @@ from sdrpeer.monitor.traps import (
     default_rules,
     encode_trap,
 )
-from sdrpeer.record import Metrics
+from sdrpeer.record.robot import Metrics
 
 MB = 1_000_000
 

@@ -31,8 +31,8 @@ from sdrpeer.gossip.messages import (
     Sync,
     Update,
 )
-from sdrpeer.replay import MAX_TS_MS
-from sdrpeer.wire import (
+from sdrpeer.gossip.replay import MAX_TS_MS
+from sdrpeer.gossip.wire import (
     HEADER_SIZE,
     OVERHEAD,
     PROTOCOL_VERSION,

@@ -16,8 +16,8 @@ from sdrpeer.config import load_agent_config
 from sdrpeer.errors import ConfigError
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.virtual import RobotFile
-from sdrpeer.monitor.yamlfile import MAX_BYTES
 from sdrpeer.system.loader import load_system
+from sdrpeer.yamlfile import MAX_BYTES
 
 
 def _bomb(levels: int = 12) -> str:

@@ -2,7 +2,7 @@
 
 Usage: python tools/bench_agent.py [--json out.json] [--seconds 30] [--settle 5] [--robots 3]
 
-How it works: starts a lab of real `sdrpeer agent` processes on loopback (`sdrpeer.lab_up`, the
+How it works: starts a lab of real `sdrpeer agent` processes on loopback (`sdrpeer.lab.up`, the
 `lan` preset, the lab's default robot files from examples/robots), waits until every agent sees
 every robot alive, lets it settle, then measures each agent over the window:
 - RSS: psutil `memory_info().rss` sampled once a second; max and median (USS once at the end);
@@ -12,8 +12,8 @@ every robot alive, lets it settle, then measures each agent over the window:
   and end of the window, divided by its wall time (datagram bytes, header included);
 - records: each agent's own `record_version` at both ends (versions published per second), the
   encoded size of each live record (rebuilt from `/v1/members` and passed through
-  `sdrpeer.record.encode_record`), and the encoded size of a synthetic record with 10 peers and
-  10 instances.
+  `sdrpeer.record.robot.encode_record`), and the encoded size of a synthetic record with 10
+  peers and 10 instances.
 The lab is always stopped (SIGTERM, then SIGKILL), also on error or Ctrl-C.
 """
 
@@ -32,9 +32,9 @@ import psutil
 
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.lab import default_robot_files
-from sdrpeer.lab_up import RunningLab, UpOptions, log_tail, start_lab
-from sdrpeer.record import (
+from sdrpeer.lab.files import default_robot_files
+from sdrpeer.lab.up import RunningLab, UpOptions, log_tail, start_lab
+from sdrpeer.record.robot import (
     LinkStats,
     LinkSummary,
     Metrics,
@@ -258,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     print(table(report["agents"]))
     print(
         f"\nrecord with 10 peers + 10 instances: {report['record_bytes_10_peers_10_instances']} "
-        "bytes encoded (sdrpeer.record.encode_record)"
+        "bytes encoded (sdrpeer.record.robot.encode_record)"
     )
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")

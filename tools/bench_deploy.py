@@ -3,7 +3,7 @@
 Usage: python tools/bench_deploy.py [--json out.json] [--runs 5] [--reserve 0,500] [--kills 3]
                                     [--preset lan]
 
-How it works: a local lab of three real agents (`sdrpeer.lab_up`, robot files with 2000MB of
+How it works: a local lab of three real agents (`sdrpeer.lab.up`, robot files with 2000MB of
 memory so that Table V — free memory above 500MB after adding a 500MB component — splits the
 paper's five components 2 + 2 + 1, as in the paper's Fig. 3). For each `reserve_mb` value the
 paper's system (the five components of `components/`, wired as in Fig. 3, `requires: memory:
@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.client import AgentClient, wait_for
-from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 TARGET_DEPLOY_S = 1.0

@@ -279,7 +279,7 @@ class SdrpeerFleet(Fleet):
 
     def __init__(self, n: int, workdir: Path) -> None:
         super().__init__(n, workdir)
-        from sdrpeer.wire import Keyring  # noqa: PLC0415 - the benchmark's own import
+        from sdrpeer.gossip.wire import Keyring  # noqa: PLC0415 - the benchmark's own import
 
         self.key = workdir / "cluster.key"
         self.key.write_text(Keyring.format_key(Keyring.generate()) + "\n")

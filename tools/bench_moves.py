@@ -34,9 +34,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from components.ledger import ledger_system, read_ledgers  # noqa: E402
-from sdrpeer.client import AgentClient, wait_for  # noqa: E402
-from sdrpeer.deploy.commands import post_when_elected  # noqa: E402
-from sdrpeer.lab_up import RunningLab, UpOptions, start_lab  # noqa: E402
+from sdrpeer.client import (  # noqa: E402
+    AgentClient,
+    post_when_elected,
+    wait_for,
+)
+from sdrpeer.lab.up import RunningLab, UpOptions, start_lab  # noqa: E402
 from sdrpeer.system.loader import parse_system  # noqa: E402
 
 

@@ -25,7 +25,7 @@ from typing import Any
 
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError
-from sdrpeer.lab_up import UpOptions, start_lab
+from sdrpeer.lab.up import UpOptions, start_lab
 from sdrpeer.netlab import net
 
 

@@ -26,7 +26,7 @@ from typing import Any
 
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.view import ClusterView, RobotView
-from sdrpeer.record import LinkBounds, LinkStats, LinkSummary, Metrics
+from sdrpeer.record.robot import LinkBounds, LinkStats, LinkSummary, Metrics
 from sdrpeer.system.model import (
     AllocationDef,
     ComponentDef,

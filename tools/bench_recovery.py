@@ -36,10 +36,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.client import AgentClient, wait_for
-from sdrpeer.deploy.commands import post_when_elected
+from sdrpeer.client import AgentClient, post_when_elected, wait_for
 from sdrpeer.errors import ApiError, SdrpeerError
-from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 REPO = Path(__file__).resolve().parent.parent

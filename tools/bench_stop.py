@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.lab_up import UpOptions, start_lab
+from sdrpeer.lab.up import UpOptions, start_lab
 
 
 def _spin() -> None:

@@ -28,11 +28,11 @@ from typing import Any
 
 import zmq
 
-from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
-from sdrpeer.datakeys import keys_from_env, keys_to_env
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.testing import make_policy
+from sdrpeer.keys.datakeys import ENV as DATA_KEYS_ENV
+from sdrpeer.keys.datakeys import keys_from_env, keys_to_env
 
 LEN = struct.Struct(">I")
 """The plain socket loop's frame header: the payload's length."""

@@ -47,7 +47,7 @@ from typing import Any
 import msgpack
 import yaml
 
-from sdrpeer.control_stream import ControlProtocolError, encode
+from sdrpeer.control.stream import ControlProtocolError, encode
 from sdrpeer.dataplane.frames import (
     AckOffer,
     FrameDecoder,
@@ -77,14 +77,14 @@ from sdrpeer.gossip.messages import (
     Suspect,
     Sync,
 )
+from sdrpeer.gossip.wire import MAGIC, PROTOCOL_VERSION, Codec, format_key, packet_body
 from sdrpeer.host.control import ControlDecoder as HostDecoder
-from sdrpeer.keyring import Keyring
+from sdrpeer.keys.keyring import Keyring
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.virtual import RobotFile
-from sdrpeer.record import decode_record, encode_record, reference_record
+from sdrpeer.record.robot import decode_record, encode_record, reference_record
 from sdrpeer.runtime.control import ControlDecoder as AgentDecoder
 from sdrpeer.system.loader import parse_system
-from sdrpeer.wire import MAGIC, PROTOCOL_VERSION, Codec, format_key, packet_body
 
 NOW = 1_800_000_000.0
 REPO = Path(__file__).resolve().parent.parent
@@ -536,7 +536,7 @@ class HttpSurface:
         import asyncio  # noqa: PLC0415 - only this surface runs a loop
         import tempfile  # noqa: PLC0415
 
-        from sdrpeer.agent import Agent  # noqa: PLC0415 - the agent is heavy to import
+        from sdrpeer.agent.agent import Agent  # noqa: PLC0415 - the agent is heavy to import
         from sdrpeer.config import AgentConfig  # noqa: PLC0415
 
         self.rng = rng

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 from sdrpeer.alloc.registry import Registry
 from sdrpeer.alloc.view import RobotView
-from sdrpeer.record import LinkStats
+from sdrpeer.record.robot import LinkStats
 from sdrpeer.system.model import ComponentDef, Thresholds
 from sdrpeer.units import format_size
 

@@ -40,7 +40,7 @@ from sdrpeer.alloc.result import AllocationResult, Infeasible, Unplaced
 from sdrpeer.alloc.strategies import STRATEGIES, Context, Peer
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.plan import Placement, Plan
-from sdrpeer.record import InstanceInfo
+from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.system.model import ComponentDef, SystemDef
 
 NOT_IN_VIEW = "not in view (dead, left or unknown)"

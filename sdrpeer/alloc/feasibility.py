@@ -7,7 +7,7 @@ index pair, so a placement costs a dictionary lookup per placed peer, never a re
 load constraints (CPU, memory) run per candidate, against `RobotLoad`, which the core updates as
 instances land.
 
-A robot whose launch policy (`sdrpeer.launch_policy`, gossiped in its record) refuses the
+A robot whose launch policy (`sdrpeer.launch.policy`, gossiped in its record) refuses the
 component's launcher or target never takes it, a cold standby included (it would be launched
 there on a failover).
 
@@ -24,7 +24,7 @@ from collections.abc import Collection, Mapping, Sequence
 from sdrpeer.alloc.constraints import Need, RobotLoad, active_constraints
 from sdrpeer.alloc.strategies import Peer
 from sdrpeer.alloc.view import RobotView
-from sdrpeer.record import InstanceInfo
+from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.system.model import AllocationDef, ComponentDef
 
 GONE_STATES = frozenset({"finalized", "stopping", "stopped", "failed"})

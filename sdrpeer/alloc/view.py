@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from sdrpeer.launch_policy import DEFAULT_POLICY, LaunchPolicy
-from sdrpeer.record import InstanceInfo, LinkStats, LinkSummary, Metrics
+from sdrpeer.launch.policy import DEFAULT_POLICY, LaunchPolicy
+from sdrpeer.record.robot import InstanceInfo, LinkStats, LinkSummary, Metrics
 
 
 @dataclass(frozen=True, slots=True)
@@ -26,7 +26,7 @@ class RobotView:
     name: str
     metrics: Metrics
     links: LinkSummary = field(default_factory=LinkSummary)
-    """This robot's summary of the links it measures (`sdrpeer.record.LinkSummary`)."""
+    """This robot's summary of the links it measures (`sdrpeer.record.robot.LinkSummary`)."""
     instances: tuple[InstanceInfo, ...] = ()
     """Instances it hosts now (their measured RSS is already part of `metrics.mem_free`)."""
     launch: LaunchPolicy = DEFAULT_POLICY

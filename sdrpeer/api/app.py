@@ -22,7 +22,7 @@ from aiohttp import web
 
 from sdrpeer.api.view import AgentView, InstancesView
 from sdrpeer.errors import ConfigError
-from sdrpeer.launch_policy import LaunchRefused
+from sdrpeer.launch.policy import LaunchRefused
 from sdrpeer.runtime import logfile
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec

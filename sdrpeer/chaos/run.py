@@ -34,10 +34,9 @@ import psutil
 
 from sdrpeer.chaos.judge import Judge, Look
 from sdrpeer.chaos.schedule import Fault, schedule
-from sdrpeer.client import AgentClient, wait_for
-from sdrpeer.deploy.commands import post_when_elected
+from sdrpeer.client import AgentClient, post_when_elected, wait_for
 from sdrpeer.errors import ApiError, SdrpeerError
-from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from sdrpeer.netlab.plan import PART_CHAIN
 from sdrpeer.system.loader import parse_system

@@ -1,7 +1,7 @@
 """Authenticated data connections: both ends prove they hold a data key of the cluster.
 
 How it works (docs/protocol.md section 2, "Authentication"): the agent derives one data key
-from each key of its cluster keyring (sdrpeer.datakeys) and gives them to its hosts
+from each key of its cluster keyring (sdrpeer.keys.datakeys) and gives them to its hosts
 (SDRPEER_DATA_KEYS, hex, the signing key first; a running host gets new ones with the
 `data_keys` command when the agent's keys rotate). A sender with keys puts a fresh random nonce
 in its hello; the receiver answers with its own nonce and a MAC over both (proving it holds a

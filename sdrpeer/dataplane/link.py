@@ -45,8 +45,9 @@ from sdrpeer.dataplane.frames import (
     parse_reply,
     reply_auth,
 )
-from sdrpeer.dataplane.seal import Opener, sealed_writer, stream_keys
+from sdrpeer.dataplane.seal import Opener, sealed_writer
 from sdrpeer.dataplane.shm import SenderRing
+from sdrpeer.keys.derive import stream_keys
 
 _SNDBUF: Final = 4 * 1024 * 1024
 MAX_RECORD: Final = 2 * 1024 * 1024

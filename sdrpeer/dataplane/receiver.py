@@ -18,7 +18,7 @@ import contextlib
 import logging
 import socket
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 import msgpack
 
@@ -32,11 +32,14 @@ from sdrpeer.dataplane.frames import (
 )
 from sdrpeer.dataplane.port_api import AckingPort, InPortLike
 from sdrpeer.dataplane.reader import FrameReader
-from sdrpeer.dataplane.seal import TAG, Opener, sealed_writer, stream_keys
+from sdrpeer.dataplane.seal import TAG, Opener, sealed_writer
 from sdrpeer.dataplane.shm import ReceiverRing
+from sdrpeer.keys.derive import stream_keys
 
 if TYPE_CHECKING:
-    from sdrpeer.dataplane.server import DataServer
+    from collections import Counter
+
+    from sdrpeer.dataplane.auth import DataAuth
 
 log = logging.getLogger("sdrpeer.dataplane")
 _RCVBUF = 4 * 1024 * 1024
@@ -46,10 +49,36 @@ RECORD_SLACK: Final = 1024 * 1024
 """A record may carry a whole write of the sender: a frame of the maximum size and more."""
 
 
+class Intake(Protocol):
+    """What a `Receiver` needs of the server that accepted it (`DataServer` is one)."""
+
+    max_frame: int
+    max_connections: int
+    hello_timeout: float
+    shm: bool
+    """Take the shared-memory rings senders on this machine offer."""
+    auth: DataAuth | None
+    quiesced: bool
+    """The component takes no frames (not ACTIVE)."""
+    counters: Counter[str]
+    bytes_in: Counter[str]
+    resolve: Callable[[str], InPortLike | None]
+    """The in-port a hello names, None when there is no such port."""
+
+    def admit(self, receiver: Receiver) -> bool:
+        """Count `receiver` among the open connections; False when no more are allowed."""
+
+    def forget(self, receiver: Receiver) -> None:
+        """`receiver` closed."""
+
+    def report(self, reason: str, conn: str, detail: str) -> None:
+        """Log a refused or failed connection (rate-limited per reason)."""
+
+
 class Receiver(asyncio.BufferedProtocol):
     """One accepted data connection."""
 
-    def __init__(self, server: DataServer) -> None:
+    def __init__(self, server: Intake) -> None:
         self.server = server
         self.reader = FrameReader(server.max_frame)
         self.transport: asyncio.Transport | None = None
@@ -78,13 +107,12 @@ class Receiver(asyncio.BufferedProtocol):
         self.transport = transport
         self._send = transport.write
         server = self.server
-        if len(server._receivers) >= server.max_connections:
+        if not server.admit(self):
             server.counters["rejected"] += 1
-            server._report("rejected", "?", f"over {server.max_connections} connections")
+            server.report("rejected", "?", f"over {server.max_connections} connections")
             transport.write(encode_reply(f"too many connections (max {server.max_connections})"))
             transport.close()
             return
-        server._receivers.add(self)
         server.counters["accepted"] += 1
         sock = transport.get_extra_info("socket")
         if sock is not None and sock.family != socket.AF_UNIX:
@@ -195,7 +223,7 @@ class Receiver(asyncio.BufferedProtocol):
                 deliver(value, seq, conn)
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
-                self.server._report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
+                self.server.report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
         if frames and self.acking is not None:
             self._last_seq = max(self._last_seq, frames[-1][0])
 
@@ -220,7 +248,7 @@ class Receiver(asyncio.BufferedProtocol):
                 port.deliver(value, frame[0], conn)
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
-                self.server._report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
+                self.server.report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
             del value  # the next value may reuse its memory
         if frames and self.acking is not None:
             self._last_seq = max(self._last_seq, frames[-1][0])
@@ -261,7 +289,7 @@ class Receiver(asyncio.BufferedProtocol):
         self.transport.write(reply)
         if error is not None or port is None:
             self.server.counters["rejected"] += 1
-            self.server._report("rejected", hello.conn, error or "")
+            self.server.report("rejected", hello.conn, error or "")
             self.transport.close()
             return False
         self._proving = (hello, port, acks, proof[0] if proof is not None else b"")
@@ -285,7 +313,7 @@ class Receiver(asyncio.BufferedProtocol):
             self._proving = None
             self.server.counters["refused_auth"] += 1
             self.server.counters["rejected"] += 1
-            self.server._report("refused_auth", hello.conn, "the sender's proof does not hold")
+            self.server.report("refused_auth", hello.conn, "the sender's proof does not hold")
             self.abort()
             return False
         if hello.enc and not self._local():
@@ -377,12 +405,12 @@ class Receiver(asyncio.BufferedProtocol):
         else:  # a bad hello: tell the sender why before closing
             assert self.transport is not None
             self.transport.write(encode_reply(f"bad hello: {exc}"))
-        server._report(reason, self.conn, str(exc))
+        server.report(reason, self.conn, str(exc))
         self.abort(graceful=self.port is None)
 
     def _hello_timeout(self) -> None:
         self.server.counters["rejected"] += 1
-        self.server._report("rejected", self.conn, "no hello in time")
+        self.server.report("rejected", self.conn, "no hello in time")
         self.abort()
 
     def abort(self, *, graceful: bool = False) -> None:
@@ -404,7 +432,7 @@ class Receiver(asyncio.BufferedProtocol):
             self.acking.detach_stream(self.key, self._ack)
             self.acking = None
         self.port = None
-        self.server._receivers.discard(self)
+        self.server.forget(self)
         if self.ring is not None:
             self.ring.close()
             self.ring = None

@@ -19,31 +19,18 @@ Unix sockets or shared memory (same robot) stays without it.
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any, Final
 
 from sdrpeer.dataplane.frames import FrameError
 
-__all__ = ["Opener", "Sealer", "sealed_writer", "stream_keys"]
+__all__ = ["Opener", "Sealer", "sealed_writer"]
 
 LENGTH: Final = 4
 TAG: Final = 16
 OVERHEAD: Final = LENGTH + TAG
 """Bytes a record adds to the bytes it carries."""
-_INFO: Final = b"sdrpeer data stream aes-256-gcm v1"
 _LEN: Final = struct.Struct(">I")
-
-
-def stream_keys(
-    key: bytes, sender_nonce: bytes, receiver_nonce: bytes, names: Sequence[str]
-) -> tuple[bytes, bytes]:
-    """(sender -> receiver key, receiver -> sender key) of one connection."""
-    from cryptography.hazmat.primitives import hashes  # noqa: PLC0415 - only when encrypting
-    from cryptography.hazmat.primitives.kdf.hkdf import HKDF  # noqa: PLC0415
-
-    info = _INFO + b"".join(len(n.encode()).to_bytes(4, "big") + n.encode() for n in names)
-    both = HKDF(hashes.SHA256(), 64, sender_nonce + receiver_nonce, info).derive(key)
-    return both[:32], both[32:]
 
 
 def _cipher(key: bytes) -> Any:

@@ -132,7 +132,19 @@ class DataServer:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(self.unix_path)
 
-    def _report(self, reason: str, conn: str, detail: str) -> None:
+    def admit(self, receiver: Receiver) -> bool:
+        """Count `receiver` among the open connections; False when no more are allowed."""
+        if len(self._receivers) >= self.max_connections:
+            return False
+        self._receivers.add(receiver)
+        return True
+
+    def forget(self, receiver: Receiver) -> None:
+        """`receiver` closed."""
+        self._receivers.discard(receiver)
+
+    def report(self, reason: str, conn: str, detail: str) -> None:
+        """Log a refused or failed connection (at most once per `_LOG_EVERY` s per reason)."""
         now = asyncio.get_running_loop().time()
         last = self._last_log.get(reason)
         if last is None or now - last >= _LOG_EVERY:

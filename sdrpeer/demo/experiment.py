@@ -25,12 +25,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.client import AgentClient, wait_for
+from sdrpeer.client import AgentClient, post_when_elected, wait_for
 from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import TimelineRecorder, load_timeline
-from sdrpeer.deploy.commands import post_when_elected
 from sdrpeer.errors import ApiError
-from sdrpeer.lab_up import UpOptions, start_lab
+from sdrpeer.lab.up import UpOptions, start_lab
 from sdrpeer.system.loader import parse_system
 
 REPO = Path(__file__).resolve().parent.parent.parent

@@ -24,7 +24,7 @@ from sdrpeer.election.config import ElectionConfig, lan
 from sdrpeer.election.core import Election
 from sdrpeer.election.health import eligible, health_bucket
 from sdrpeer.election.state import Candidate, ElectionState
-from sdrpeer.record import ElectionInfo, RobotRecord
+from sdrpeer.record.robot import ElectionInfo, RobotRecord
 from sdrpeer.system.model import Thresholds
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from sdrpeer.record import RobotRecord
+from sdrpeer.record.robot import RobotRecord
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import RobotEvent
 from sdrpeer.recovery.robot_conditions import RobotMonitor

@@ -1,47 +1,18 @@
 """Agent-to-agent HTTP calls: fetch a plan, push a plan, hand a system to the allocator.
 
 How it works: agents authenticate to each other with a *peer token* derived from the cluster
-key (HMAC-SHA256 of a fixed label), so no per-agent API token has to be shared; every key of the
-keyring yields one, and an agent accepts the token of its signing key (peers rotate keys in
-step with gossip). Without a key (`--insecure`) there is no secret the robots share: an agent
-accepts no peer token, and presents a random one of its own that no other agent takes, so no
-token is a public constant (an insecure robot works alone: plans, recoveries and states do not
-travel between robots). Each call has a short timeout and turns every failure into `ApiError`.
+key (`sdrpeer.keys.derive.peer_token`), so no per-agent API token has to be shared. Without a
+key (`--insecure`) an insecure robot works alone: plans, recoveries and states do not travel
+between robots. Each call has a short timeout and turns every failure into `ApiError`.
 """
 
 from __future__ import annotations
 
-import hashlib
-import hmac
-import secrets
 from typing import Any
 
 from sdrpeer.api.peer_client import call
 from sdrpeer.errors import ApiError
-from sdrpeer.keyring import Keyring
 from sdrpeer.plan import Plan, plan_from_json
-
-_LABEL = b"sdrpeer peer api v1"
-
-
-_UNKEYED = secrets.token_hex(32)
-"""The token of an agent without a key: random per process, accepted by no agent."""
-
-
-def peer_token(keyring: Keyring | None) -> str:
-    """The bearer token agents present to each other (derived from the signing key)."""
-    if keyring is None:
-        return _UNKEYED
-    return hmac.new(keyring.signing_key, _LABEL, hashlib.sha256).hexdigest()
-
-
-def peer_tokens(keyring: Keyring | None) -> list[str]:
-    """The tokens an agent accepts from its peers: one per key of its ring, so that during a key
-    rotation a peer that already signs with the new key (or still with the old) gets in; none
-    without a key."""
-    if keyring is None:
-        return []
-    return [hmac.new(k, _LABEL, hashlib.sha256).hexdigest() for k in keyring.keys]
 
 
 async def fetch_plan(api: str, token: str) -> Plan:

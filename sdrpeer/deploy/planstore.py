@@ -18,7 +18,7 @@ from pathlib import Path
 
 from sdrpeer.election.fence import Fence
 from sdrpeer.plan import Plan, plan_from_json
-from sdrpeer.record import PlanInfo
+from sdrpeer.record.robot import PlanInfo
 
 log = logging.getLogger(__name__)
 

@@ -27,7 +27,7 @@ from sdrpeer.runtime.handoff import MAX_STATE
 from sdrpeer.system.model import SystemDef, system_from_json
 from sdrpeer.system.recovery_defaults import ACTIONS
 
-if TYPE_CHECKING:  # the deployment stack loads after the API is up (sdrpeer.agent)
+if TYPE_CHECKING:  # the deployment stack loads after the API is up (sdrpeer.agent.agent)
     from sdrpeer.deploy.coordinator import Coordinator
 
 

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from sdrpeer.plan import Plan
-from sdrpeer.record import RobotRecord
+from sdrpeer.record.robot import RobotRecord
 
 
 class SinceTracker:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from sdrpeer.record import RobotRecord
+from sdrpeer.record.robot import RobotRecord
 
 
 @dataclass

@@ -11,8 +11,8 @@ How it works:
   claim itself carries, so every robot orders claims (and the plans they issue) the same way even
   while their views of priority and health differ;
 - on the wire a state is the msgpack array `[epoch, leader|nil, claiming]`, the same layout as
-  the `election` field of `sdrpeer.record`; `state_to_wire`/`state_from_wire` give the array for
-  embedding, `encode_state`/`decode_state` the standalone bytes.
+  the `election` field of `sdrpeer.record.robot`; `state_to_wire`/`state_from_wire` give the array
+  for embedding, `encode_state`/`decode_state` the standalone bytes.
 """
 
 from __future__ import annotations

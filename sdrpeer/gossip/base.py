@@ -36,7 +36,7 @@ from sdrpeer.gossip.messages import (
 )
 from sdrpeer.gossip.queue import BroadcastQueue
 from sdrpeer.gossip.table import Member, PeerSet, ProbeRing
-from sdrpeer.wire import encoded_size
+from sdrpeer.gossip.wire import encoded_size
 
 # Timer kinds.
 PROBE, PROBE_TIMEOUT, PROBE_END, GOSSIP, SYNC, SUSPICION, FWD_END, REAP, JOIN, RECHECK = range(10)

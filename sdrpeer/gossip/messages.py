@@ -1,4 +1,4 @@
-"""Gossip messages: frozen, slotted dataclasses. The codec for them lives in `sdrpeer.wire`.
+"""Gossip messages: frozen, slotted dataclasses. The codec for them lives in `sdrpeer.gossip.wire`.
 
 Two layers:
 - *updates* are facts that spread epidemically (piggybacked on any packet): a member is alive,
@@ -54,7 +54,8 @@ class Dead:
 
 @dataclass(frozen=True, slots=True)
 class Record:
-    """The versioned record owned by robot `name` (opaque bytes to gossip; see `sdrpeer.record`)."""
+    """The versioned record owned by robot `name` (opaque bytes to gossip; see
+    `sdrpeer.record.robot`)."""
 
     name: str
     version: int
@@ -77,7 +78,7 @@ Update = Alive | Suspect | Dead | Record | Event
 @dataclass(frozen=True, slots=True)
 class VitalsRevision:
     """Revision `revision` (1, 2, ...) of the measured part of record `version` of the sender
-    (opaque bytes to gossip; see `sdrpeer.record`). Ordered by (version, revision)."""
+    (opaque bytes to gossip; see `sdrpeer.record.robot`). Ordered by (version, revision)."""
 
     version: int
     revision: int

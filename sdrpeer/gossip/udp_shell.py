@@ -6,7 +6,7 @@ encoded and sent, its events are passed to `on_event`, and a single `call_at` ti
 at the core's next deadline. A datagram that fails authentication or parsing is dropped and
 counted by reason, with at most one log line per reason every ten seconds: a hostile peer can
 cost us a few microseconds per datagram, never a crash or a stall. An authenticated datagram
-refused as stale comes from a robot whose clock is behind the cluster time (sdrpeer.wire): it
+refused as stale comes from a robot whose clock is behind the cluster time (sdrpeer.gossip.wire): it
 gets an empty gossip back, at most every 5 s per address, so it catches up even when nobody
 else talks to it (a robot joining with a wrong clock).
 """
@@ -24,7 +24,7 @@ from sdrpeer.errors import WireError
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent
 from sdrpeer.gossip.messages import Addr, Gossip, Packet
-from sdrpeer.wire import Codec
+from sdrpeer.gossip.wire import Codec
 
 log = logging.getLogger("sdrpeer.gossip")
 _LOG_EVERY = 10.0

@@ -2,10 +2,10 @@
 
 How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CONTROL_FD`. Bytes
 read from it go through `ControlDecoder`, a pure core: the shared framing
-(`sdrpeer.control_stream`, the same code the agent uses) cuts the msgpack stream into values and
+(`sdrpeer.control.stream`, the same code the agent uses) cuts the msgpack stream into values and
 enforces the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
 `ControlProtocolError`); maps carrying an integer `"id"` become `Command`s. `part` maps (a big
-value cut up, `sdrpeer.control_parts`) are collected, and the command they belong to (it says
+value cut up, `sdrpeer.control.parts`) are collected, and the command they belong to (it says
 `"size"`) gets their bytes as `Command.blob`, or `blob_error`. The report builders (`hello`,
 `state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs, `now` included.
 `ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a callback,
@@ -29,8 +29,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sdrpeer.control_parts import MAX_BLOB, PartAssembler, PartError, check_part
-from sdrpeer.control_stream import (
+from sdrpeer.control.parts import MAX_BLOB, PartAssembler, PartError, check_part
+from sdrpeer.control.stream import (
     MAX_MESSAGE,
     PROTOCOL,
     ControlProtocolError,

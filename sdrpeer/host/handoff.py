@@ -11,7 +11,7 @@ what the runner raised) and becomes `reply ok=false`: none of them ends the host
 
 from __future__ import annotations
 
-from sdrpeer.control_parts import PartError, decode_value, encode_value
+from sdrpeer.control.parts import PartError, decode_value, encode_value
 from sdrpeer.errors import SdrpeerError
 from sdrpeer.host.control import Command
 from sdrpeer.sdk import ComponentRunner

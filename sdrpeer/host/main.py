@@ -13,83 +13,18 @@ not be loaded or the command line is wrong. Everything is logged to stderr.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import logging
 import os
 import shutil
-import signal
 import sys
-import time
-from dataclasses import dataclass, field
 
-from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
-from sdrpeer.datakeys import keys_from_env
 from sdrpeer.errors import SdrpeerError
 from sdrpeer.host import control
+from sdrpeer.host.config import parse_args
 from sdrpeer.host.loader import LoadError, load_component_class
 
 log = logging.getLogger("sdrpeer.host")
-
-FINALIZE_TIMEOUT = 5.0
-"""Seconds `on_deactivated` + `on_finalize` may take when no `exit` timeout was given."""
-STANDALONE_REPORT_INTERVAL = 1.0
-"""Seconds between two counter lines in standalone mode."""
-
-
-@dataclass(frozen=True)
-class HostConfig:
-    """Everything a host needs to start, from its command line and environment."""
-
-    target: str
-    """`pkg.mod:Class` or `path/to/file.py[:Class]`."""
-    params: dict[str, str] = field(default_factory=dict)
-    """Initial parameter values as given on the command line."""
-    name: str = ""
-    """The instance name (`--name`, else `SDRPEER_INSTANCE`, else the class name)."""
-    control_fd: int | None = None
-    """The inherited control socket (`SDRPEER_CONTROL_FD`), None when standalone."""
-    data_host: str = "127.0.0.1"
-    """Where the data server listens for TCP (`SDRPEER_DATA_HOST`)."""
-    run_dir: str | None = None
-    """Directory for the Unix data socket (`SDRPEER_RUN_DIR`), None for a temporary one."""
-    data_keys: tuple[bytes, ...] = ()
-    """Keys data connections are authenticated with (`SDRPEER_DATA_KEYS`); none: open."""
-
-
-def parse_args(argv: list[str], env: dict[str, str]) -> HostConfig:
-    """Build a HostConfig from argv and the environment (SystemExit(2) on a bad command line)."""
-    parser = argparse.ArgumentParser(prog="python -m sdrpeer.host", description=__doc__)
-    parser.add_argument("target", help="pkg.module:Class or path/to/file.py[:Class]")
-    parser.add_argument("--param", action="append", default=[], metavar="K=V")
-    parser.add_argument("--name", default="")
-    args = parser.parse_args(argv)
-    params: dict[str, str] = {}
-    for item in args.param:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            parser.error(f"--param {item!r}: expected NAME=VALUE")
-        params[key] = value
-    fd_text = env.get("SDRPEER_CONTROL_FD")
-    control_fd = None
-    if fd_text:
-        try:
-            control_fd = int(fd_text)
-        except ValueError:
-            parser.error(f"SDRPEER_CONTROL_FD={fd_text!r} is not a file descriptor number")
-    try:
-        data_keys = tuple(keys_from_env(env.get(DATA_KEYS_ENV)))
-    except ValueError as exc:
-        parser.error(str(exc))
-    return HostConfig(
-        data_keys=data_keys,
-        target=args.target,
-        params=params,
-        name=args.name or env.get("SDRPEER_INSTANCE", ""),
-        control_fd=control_fd,
-        data_host=env.get("SDRPEER_DATA_HOST") or "127.0.0.1",
-        run_dir=env.get("SDRPEER_RUN_DIR") or None,
-    )
 
 
 def setup_logging(name: str) -> None:
@@ -138,22 +73,3 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if host.tmp_dir is not None:
             shutil.rmtree(host.tmp_dir, ignore_errors=True)
-
-
-def install_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
-    """SIGTERM/SIGINT ask for a clean exit; a second one forces it (signal handlers only queue)."""
-
-    def on_signal(signum: int) -> None:
-        if stop.is_set():
-            log.warning("second %s: exiting now", signal.Signals(signum).name)
-            os._exit(1)
-        log.info("%s: finalizing", signal.Signals(signum).name)
-        stop.set()
-
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(sig, on_signal, sig)
-
-
-def now() -> float:
-    """Unix seconds, for reports."""
-    return time.time()

@@ -19,20 +19,16 @@ import contextlib
 import logging
 import os
 import re
+import signal
+import time
 from typing import Any
 
-from sdrpeer.control_parts import parts
+from sdrpeer.control.parts import parts
 from sdrpeer.dataplane import DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.host import control
+from sdrpeer.host.config import FINALIZE_TIMEOUT, STANDALONE_REPORT_INTERVAL, HostConfig
 from sdrpeer.host.instance import HostedInstance, Report, maybe_await
-from sdrpeer.host.main import (
-    FINALIZE_TIMEOUT,
-    STANDALONE_REPORT_INTERVAL,
-    HostConfig,
-    install_signals,
-    now,
-)
 from sdrpeer.sdk import Component, ComponentRunner
 
 log = logging.getLogger("sdrpeer.host")
@@ -221,3 +217,22 @@ def _compact(counters: dict[str, dict[str, Any]]) -> str:
         shown = " ".join(f"{k}={v}" for k, v in values.items() if v)
         parts.append(f"{port}: {shown or '-'}")
     return "; ".join(parts) or "(no ports)"
+
+
+def install_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
+    """SIGTERM/SIGINT ask for a clean exit; a second one forces it (signal handlers only queue)."""
+
+    def on_signal(signum: int) -> None:
+        if stop.is_set():
+            log.warning("second %s: exiting now", signal.Signals(signum).name)
+            os._exit(1)
+        log.info("%s: finalizing", signal.Signals(signum).name)
+        stop.set()
+
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, on_signal, sig)
+
+
+def now() -> float:
+    """Unix seconds, for reports."""
+    return time.time()

@@ -21,7 +21,7 @@ import math
 from collections import deque
 from collections.abc import Collection
 
-from sdrpeer.record import MAX_LISTED, LinkBounds, LinkStats, LinkSummary
+from sdrpeer.record.robot import MAX_LISTED, LinkBounds, LinkStats, LinkSummary
 
 SRTT_GAIN = 1 / 8
 """Weight of a new RTT sample in the smoothed RTT (TCP's alpha)."""

@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from sdrpeer.record import (
+from sdrpeer.record.robot import (
     LinkBounds,
     LinkStats,
     LinkSummary,

@@ -31,7 +31,7 @@ import yaml
 from sdrpeer import units
 from sdrpeer.errors import ScenarioError
 from sdrpeer.monitor.virtual import SETTABLE, RobotFile, parse_name, parse_position
-from sdrpeer.monitor.yamlfile import YamlFile, line_of
+from sdrpeer.yamlfile import YamlFile, line_of
 
 RAMPABLE = ("rssi", "memory")
 """Fields a ramp may change."""

@@ -22,7 +22,7 @@ from pathlib import Path, PurePosixPath
 
 import psutil
 
-from sdrpeer.record import Metrics
+from sdrpeer.record.robot import Metrics
 
 CGROUP = PurePosixPath("sys/fs/cgroup")
 

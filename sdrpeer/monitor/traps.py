@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import msgpack
 
 from sdrpeer.errors import WireError
-from sdrpeer.record import Metrics
+from sdrpeer.record.robot import Metrics
 
 METRICS = ("cpu_pct", "mem_free", "battery_pct", "rssi_dbm")
 """Metrics a rule may watch (fields of `Metrics`)."""

@@ -25,9 +25,9 @@ from typing import Any
 
 from sdrpeer import units
 from sdrpeer.errors import ConfigError
-from sdrpeer.limits import check, check_int
-from sdrpeer.monitor.yamlfile import YamlFile
-from sdrpeer.record import Metrics
+from sdrpeer.record.limits import check, check_int
+from sdrpeer.record.robot import Metrics
+from sdrpeer.yamlfile import YamlFile
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
 

@@ -1,13 +1,13 @@
 """The agent's end of a host's control channel (docs/protocol.md, section 1).
 
 How it works: `ControlDecoder` is the pure part: bytes in, validated messages out (msgpack maps
-with a string "t", at most 1 MiB each, framed by `sdrpeer.control_stream` exactly as the host does;
+with a string "t", at most 1 MiB each, framed by `sdrpeer.control.stream` exactly as the host does;
 anything else raises `ProtocolError`). `ControlChannel` is
 its asyncio shell over the agent's end of a `socket.socketpair()`: `command(t, **fields)` sends a
 map with a fresh integer id and awaits the matching `reply` (timeout -> `CommandError` "timeout",
 ok=false -> "refused", channel gone -> "closed"); reports (`hello`, `state`, `heartbeat`,
 `fault`) go to the handler registered for their type. A value too big for one message travels as
-`part` messages (`sdrpeer.control_parts`): `command(..., blob=b)` writes b's parts and the command
+`part` messages (`sdrpeer.control.parts`): `command(..., blob=b)` writes b's parts and the command
 (with `"size"`) in one write; `command(..., accept=n)` collects up to n bytes of parts sent before
 the reply and returns them as `reply["blob"]` (parts that do not add up refuse the command). A
 protocol error closes the channel, is counted in `counters["protocol_errors"]`, and `on_close`
@@ -23,8 +23,8 @@ import socket
 from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
-from sdrpeer.control_parts import PartAssembler, PartError, check_part, parts
-from sdrpeer.control_stream import (
+from sdrpeer.control.parts import PartAssembler, PartError, check_part, parts
+from sdrpeer.control.stream import (
     MAX_MESSAGE,
     PROTOCOL,
     ControlProtocolError,

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from typing import Any, Final
 
-from sdrpeer.control_parts import PartError, decode_value, encode_value
+from sdrpeer.control.parts import PartError, decode_value, encode_value
 from sdrpeer.runtime.control import CommandError, Report
 
 __all__ = ["MAX_STATE", "StateError", "give_state", "take_snapshot"]

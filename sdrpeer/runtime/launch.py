@@ -1,6 +1,7 @@
 """Starting one host process: its argv, its environment, its log file, and dying with the agent.
 
-How it works: `host_argv(spec)` asks the spec's launcher (`sdrpeer.launchers`: python, script,
+How it works: `host_argv(spec)` asks the spec's launcher (`sdrpeer.launch.launchers`: python,
+script,
 exec, or a plugin) for the command; `host_env` adds the SDRPEER_* variables of docs/protocol.md
 (and SDRPEER_PARAMS for exec hosts) to the agent's environment.
 `open_log` appends a start banner to `DATA_DIR/instances/NAME.log` and returns the file the host's
@@ -26,10 +27,10 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-from sdrpeer import launchers
-from sdrpeer.datakeys import ENV as DATA_KEYS_ENV
-from sdrpeer.datakeys import keys_to_env
-from sdrpeer.launchers import get_launcher
+from sdrpeer.keys.datakeys import ENV as DATA_KEYS_ENV
+from sdrpeer.keys.datakeys import keys_to_env
+from sdrpeer.launch import launchers
+from sdrpeer.launch.launchers import get_launcher
 from sdrpeer.runtime.spec import InstanceSpec
 
 _PR_SET_PDEATHSIG = 1
@@ -37,7 +38,7 @@ _SIGKILL = 9
 
 
 def host_argv(spec: InstanceSpec) -> list[str]:
-    """The command that starts the host of `spec` (launcher plugins: sdrpeer.launchers)."""
+    """The command that starts the host of `spec` (launcher plugins: sdrpeer.launch.launchers)."""
     target = list(spec.target) if isinstance(spec.target, tuple) else spec.target
     launcher = get_launcher(spec.launcher)
     return launcher.command(target, spec.params_map(), python=sys.executable)

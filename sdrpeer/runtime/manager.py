@@ -2,7 +2,7 @@
 
 How it works: `set_desired` / `remove` change the desired set and wake the loop; `set_desired`
 refuses (LaunchRefused, nothing changed) a spec the robot's launch policy does not let run
-(`sdrpeer.launch_policy`), so no host starts that the agent's configuration did not allow. The loop
+(`sdrpeer.launch.policy`), so no host starts that the agent's configuration did not allow. The loop
 runs on every change (a supervisor's state, a hello, a finished action) and at least every
 `interval` seconds: it turns each supervisor into an `Observed`, asks the pure `Reconciler` for
 actions at `loop.time()`, and runs each action as its own task (start/stop through the supervisor,
@@ -28,8 +28,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.launch_policy import LaunchPolicy, LaunchRefused
-from sdrpeer.record import InstanceInfo
+from sdrpeer.launch.policy import LaunchPolicy, LaunchRefused
+from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec, connection_to_json

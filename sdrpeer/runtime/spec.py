@@ -17,7 +17,7 @@ from pathlib import PurePath
 from typing import Any
 
 from sdrpeer.errors import ConfigError
-from sdrpeer.launchers import known_launchers
+from sdrpeer.launch.launchers import known_launchers
 
 LAUNCHERS = ("python", "script", "exec")
 DESIRED = ("active", "inactive")

@@ -30,7 +30,7 @@ import random
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from sdrpeer.agent_files import RECORD_RESERVE
+from sdrpeer.agent.files import RECORD_RESERVE
 from sdrpeer.gossip.config import GossipConfig
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent, ProbeOutcome
@@ -42,7 +42,7 @@ from sdrpeer.monitor.publish import (
     link_bounds,
     publish,
 )
-from sdrpeer.record import ElectionInfo, LinkSummary, Metrics, RobotRecord, encode_record
+from sdrpeer.record.robot import ElectionInfo, LinkSummary, Metrics, RobotRecord, encode_record
 from sdrpeer.sim.cluster import Cluster
 from sdrpeer.sim.trace import Trace
 

@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 from sdrpeer.gossip.config import GossipConfig
 from sdrpeer.gossip.events import CoreEvent
 from sdrpeer.gossip.messages import Addr, Packet
+from sdrpeer.gossip.wire import OVERHEAD, packet_body
 from sdrpeer.sim.network import Network
 from sdrpeer.sim.trace import Trace
-from sdrpeer.wire import OVERHEAD, packet_body
 
 if TYPE_CHECKING:
     from sdrpeer.gossip.table import MemberInfo

@@ -27,13 +27,13 @@ from pathlib import Path
 
 import yaml
 
-from sdrpeer.monitor.yamlfile import YamlFile
 from sdrpeer.runtime.spec import SpecError, _name
 from sdrpeer.system.components import read_components
 from sdrpeer.system.connections import read_connections
 from sdrpeer.system.model import SystemDef
 from sdrpeer.system.problems import MISSING, Problems, SystemFileError
 from sdrpeer.system.sections import read_allocation, read_recovery, read_streams
+from sdrpeer.yamlfile import YamlFile
 
 __all__ = ["SystemFileError", "load_system", "parse_system", "schema_path"]
 

@@ -18,7 +18,7 @@ from typing import Any, NoReturn, TypeVar, cast
 import yaml
 
 from sdrpeer.errors import ConfigError
-from sdrpeer.monitor.yamlfile import YamlFile
+from sdrpeer.yamlfile import YamlFile
 
 T = TypeVar("T")
 

@@ -1,4 +1,5 @@
-"""Read what a system file needs from a profile written by `sdrpeer profile` (sdrpeer.profile).
+"""Read what a system file needs from a profile written by `sdrpeer profile`
+(sdrpeer.profiling.measure).
 
 How it works: the profile is composed with `YamlFile`, so a broken profile is reported with its
 own file and line. Only four things are taken: `target`, `cpu.mean_pct` (percent of one core),
@@ -16,8 +17,8 @@ from pathlib import Path
 import yaml
 
 from sdrpeer.errors import ConfigError
-from sdrpeer.monitor.yamlfile import YamlFile
 from sdrpeer.system.values import MAX_RATE
+from sdrpeer.yamlfile import YamlFile
 
 
 class ProfileError(ValueError):

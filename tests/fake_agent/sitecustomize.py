@@ -1,4 +1,4 @@
-"""Test helper: a stand-in `sdrpeer.agent_main` for lab failure tests
+"""Test helper: a stand-in `sdrpeer.agent.main` for lab failure tests
 (PYTHONPATH=tests/fake_agent).
 
 `run_agent` exits with code 3 at once when $FAKE_AGENT_FAIL names this robot; otherwise it writes
@@ -27,6 +27,6 @@ def run_agent(config: Any) -> int:
         time.sleep(60)
 
 
-_module = types.ModuleType("sdrpeer.agent_main")
+_module = types.ModuleType("sdrpeer.agent.main")
 _module.run_agent = run_agent  # type: ignore[attr-defined]
-sys.modules["sdrpeer.agent_main"] = _module
+sys.modules["sdrpeer.agent.main"] = _module

@@ -19,8 +19,9 @@ import urllib.request
 from collections.abc import Iterator
 from typing import IO, Any
 
-from sdrpeer.cli_format import want_color
-from sdrpeer.cli_status import format_top
+from sdrpeer.cli.common import endpoint
+from sdrpeer.cli.format import want_color
+from sdrpeer.cli.status import format_top
 from sdrpeer.client import unreachable_message
 from sdrpeer.errors import ApiError
 
@@ -90,6 +91,5 @@ def add_top_parser(sub: Any, client: argparse.ArgumentParser) -> None:
 
 def cmd_top(args: argparse.Namespace) -> int:
     """Show the fleet live."""
-    from sdrpeer.cli import endpoint  # noqa: PLC0415 - cli imports this module
 
     return run_top(endpoint(args).api, args.iterations, args.reconnect, sys.stdout)

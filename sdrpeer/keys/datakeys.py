@@ -1,7 +1,7 @@
 """The data keys hosts authenticate their data connections with (sdrpeer.dataplane.auth).
 
 How it works: one data key per cluster key, derived one way by the agent
-(`sdrpeer.agent_keys.data_keys`: BLAKE2b with a fixed personalisation), so a host never holds a
+(`sdrpeer.keys.derive.data_keys`: BLAKE2b with a fixed personalisation), so a host never holds a
 cluster key and a data key cannot sign gossip. This module imports nothing heavy: hosts read
 their keys with it. The
 agent hands them to each host in SDRPEER_DATA_KEYS (hex, comma-separated, the signing key first)

@@ -13,7 +13,7 @@ points) run only when named too.
 `LaunchPolicy.refusal(launcher, target)` is None when the policy lets the spec run, else the
 reason, naming the setting to change. The agent checks it where a spec comes in (the API answers
 403), where the coordinator applies a plan (an event, nothing runs) and again before it spawns a
-host. Robots gossip their policy (`sdrpeer.record`) so that the allocator never places a
+host. Robots gossip their policy (`sdrpeer.record.robot`) so that the allocator never places a
 component on a robot that would refuse it.
 """
 

@@ -12,7 +12,7 @@ Layout of a lab directory (default `.sdrpeer-lab`):
 lab.json is written as soon as a process is started (pids first, addresses later), so
 `sdrpeer lab down` can stop the agents even when the `lab up` command itself crashed. Before
 signalling a pid, `lab down` checks with psutil that it still is the sdrpeer agent of that robot.
-Starting agents lives in `sdrpeer.lab_up`.
+Starting agents lives in `sdrpeer.lab.up`.
 """
 
 from __future__ import annotations

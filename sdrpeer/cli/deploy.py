@@ -19,27 +19,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.cli_format import want_color
-from sdrpeer.cli_status import format_status
-from sdrpeer.client import AgentClient
+from sdrpeer.cli.common import client_for
+from sdrpeer.cli.format import want_color
+from sdrpeer.cli.status import format_status
+from sdrpeer.client import ELECTION_WAIT, AgentClient, post_when_elected
 from sdrpeer.deploy.status import all_active
-from sdrpeer.errors import ApiError, SdrpeerError
+from sdrpeer.errors import SdrpeerError
 
 WAIT_POLL = 0.1
-ELECTION_WAIT = 15.0
 """How long deploy/undeploy retry while no allocator is elected yet (a lab just started)."""
-
-
-def post_when_elected(client: AgentClient, path: str, body: Any, timeout: float) -> Any:
-    """POST, retrying while the agents answer 503 (no allocator yet), for at most `timeout` s."""
-    deadline = time.monotonic() + min(timeout, ELECTION_WAIT)
-    while True:
-        try:
-            return client.post(path, body)
-        except ApiError as e:
-            if e.status != 503 or time.monotonic() > deadline:
-                raise
-        time.sleep(0.2)
 
 
 def add_deploy_parsers(
@@ -66,7 +54,6 @@ def add_deploy_parsers(
 
 
 def _client(args: argparse.Namespace) -> AgentClient:
-    from sdrpeer.cli import client_for  # noqa: PLC0415 - cli imports this module
 
     return client_for(args)
 

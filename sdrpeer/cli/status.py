@@ -13,7 +13,7 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from sdrpeer.cli_format import (
+from sdrpeer.cli.format import (
     MISSING,
     STATE_COLORS,
     human_bytes,

@@ -7,8 +7,10 @@ scenario), raises traps on threshold crossings at once, and builds its record (m
 summary, API address, priority, instances, election, plan). The `Publisher`
 (sdrpeer.monitor.publish) decides whether the sample makes a new record (spread to every robot), a
 vitals revision (carried on our probes) or nothing. Everything the API shows comes from the gossip
-core's view plus the records decoded here, each with its newest vitals laid over it. SIGINT/SIGTERM:
-graceful leave; a second signal: immediate exit.
+core's view plus the records decoded here, each with its newest vitals laid over it (the views
+of AgentView are methods here: they read the agent's own state). `reload_keys` (SIGHUP) hands a
+new keyring to every part that holds a key. SIGINT/SIGTERM: graceful leave; a second signal:
+immediate exit.
 """
 
 from __future__ import annotations
@@ -23,13 +25,13 @@ from collections import Counter
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from sdrpeer import agent_files, agent_keys, agent_views
-from sdrpeer.agent_files import load_token, write_agent_json
+from sdrpeer import __version__
+from sdrpeer.agent import files as agent_files
+from sdrpeer.agent.files import load_token, write_agent_json
 from sdrpeer.api.server import BoundedSite, serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
 from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
-from sdrpeer.deploy.peers import peer_token, peer_tokens
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError, WireError
@@ -47,7 +49,10 @@ from sdrpeer.gossip.events import (
 )
 from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
-from sdrpeer.monitor.links import LinkTable
+from sdrpeer.gossip.wire import REASONS, Codec, Keyring
+from sdrpeer.keys.derive import data_keys, peer_token, peer_tokens
+from sdrpeer.monitor.links import LinkTable, distance
+from sdrpeer.monitor.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.monitor.publish import (
     RECORD,
     Average,
@@ -58,8 +63,7 @@ from sdrpeer.monitor.publish import (
 )
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
-from sdrpeer.procstats import ProcessTreeMeter, trim_heap
-from sdrpeer.record import (
+from sdrpeer.record.robot import (
     InstanceInfo,
     LinkBounds,
     Metrics,
@@ -68,9 +72,10 @@ from sdrpeer.record import (
     apply_vitals,
     decode_record,
     decode_vitals,
+    link_to_json,
     metrics_to_json,
+    record_to_json,
 )
-from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
@@ -80,7 +85,7 @@ if TYPE_CHECKING:
     from sdrpeer.monitor.virtual import VirtualRobot
     from sdrpeer.runtime.manager import InstanceManager
 
-log = logging.getLogger("sdrpeer.agent")
+log = logging.getLogger("sdrpeer.agent.agent")
 
 INSECURE_WARNING = (
     "running INSECURE (no cluster key): gossip on %s is neither authenticated, encrypted nor "
@@ -128,7 +133,7 @@ class Agent:
         self._cpu = Average()
         """The CPU average the record carries (`sdrpeer.monitor.publish.CPU_AVERAGE_S`)."""
         self.record_json: dict[str, tuple[RobotRecord, dict[str, Any]]] = {}
-        """Each robot's record as JSON, with the record it was made of (`agent_views`)."""
+        """Each robot's record as JSON, with the record it was made of (`members_view`)."""
         self.published: Counter[str] = Counter()
         """Records and vitals revisions published by this robot (`GET /v1/agent`)."""
         self._bounds_for: object = ()
@@ -173,7 +178,7 @@ class Agent:
         else:
             assert cfg.key_file is not None
             self.keyring = Keyring.from_file(cfg.key_file)
-        self.peer_tokens[:] = peer_tokens(self.keyring)
+        self.peer_tokens[:] = peer_tokens(self.keyring.keys if self.keyring else ())
         token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
             # Only virtual robots read YAML files: real ones start without the parser.
@@ -256,13 +261,13 @@ class Agent:
             on_instance_problem=self._on_fault,
             policy=cfg.launch_policy,
         )
-        instances.data_keys = agent_keys.data_keys(self.keyring)
+        instances.data_keys = data_keys(self.keyring.keys) if self.keyring else ()
         self.coordinator = Coordinator(
             cfg.name,
             cfg.data_dir,
             instances,
             self._cluster_state,
-            token=peer_token(self.keyring),
+            token=peer_token(self.keyring.signing_key if self.keyring else None),
             events=self.events,
             on_change=lambda: self._publish(force=True),
         )
@@ -444,8 +449,34 @@ class Agent:
 
     # ----------------------------------------------------------------- component instances
     def reload_keys(self) -> bool:
-        """Read the key file again (SIGHUP): rotate keys with no restart (`agent_keys`)."""
-        return agent_keys.reload_keys(self)
+        """Read the key file again (SIGHUP) and use its keys, True when they are in use: the first
+        seals, all open. On each reload the gossip codec takes the new keyring, the API accepts the
+        peer token of every key in it, the agent presents the token of the sealing key, and every
+        component host gets the new data keys (sdrpeer.dataplane.auth). A file that cannot be read
+        changes nothing (`keys.reload_failed` in the event log). docs/security.md tells the
+        procedure: add the new key second everywhere, put it first, remove the old one."""
+        key_file = self.config.key_file
+        if self.keyring is None or key_file is None:
+            log.warning("key reload asked, but this agent runs without a key file")
+            return False
+        try:
+            ring = Keyring.from_file(key_file)
+        except (ConfigError, OSError, ValueError) as exc:
+            log.error("key reload failed, the old keys stay: %s", exc)
+            self.events.add(time.time(), "keys.reload_failed", self.name, error=str(exc))
+            return False
+        self.keyring = ring
+        if self.shell is not None:
+            self.shell.codec.keyring = ring
+        self.peer_tokens[:] = peer_tokens(ring.keys)
+        if self.coordinator is not None:
+            self.coordinator.token = self.coordinator.handoff.token = peer_token(ring.signing_key)
+        if self.instances is not None:  # else the stack takes the new ring's keys when it starts
+            self.instances.set_data_keys(data_keys(ring.keys))
+        ids = [k.hex() for k in ring.key_ids]
+        log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
+        self.events.add(time.time(), "keys.reloaded", self.name, key_ids=ids)
+        return True
 
     def _on_fault(self, name: str, kind: str, detail: str) -> None:
         """A component fault, an instance in ERROR, or a host that died: to local recovery."""
@@ -578,21 +609,144 @@ class Agent:
             log.info("%s is %s (incarnation %d)", event.name, kind[7:], event.incarnation)
 
     # ----------------------------------------------------------------- AgentView
+    @staticmethod
+    def _wall_of(t: float) -> float:
+        return round(time.time() - (asyncio.get_running_loop().time() - t), 3)
+
     def members_view(self) -> list[dict[str, Any]]:
-        """Every known member with its metrics and links (see AgentView)."""
-        return agent_views.members_view(self)
+        """Every known member with its metrics and links (see AgentView): this robot's own links
+        are all listed, another robot's only those its record lists (past the bounds); every
+        member's `link_summary` sums up all of its links. A dead or departed member's instances are
+        shown `lost` (with their `last_state`) from the moment it is declared so: its last record
+        still lists them until it is reaped."""
+        if self.core is None:
+            return []
+        out = []
+        positions = {n: r.metrics.pos for n, (_, r) in self.records.items()}
+        positions[self.name] = self.metrics.pos if self.metrics else None
+        for m in sorted(self.core.members(), key=lambda m: m.name):
+            rec: RobotRecord | None
+            if m.name == self.name:
+                own = self.core.record_of(self.name)
+                rec = self.current
+                version = own[0] if own else 0
+            else:
+                version, rec = self.records.get(m.name, (0, None))
+            doc = self._record_json(m.name, rec)
+            if m.name == self.name:
+                now = asyncio.get_running_loop().time()
+                doc["links"] = {p: link_to_json(s) for p, s in self.links.snapshot(now).items()}
+            for peer, link in doc["links"].items():
+                d = distance(positions.get(m.name), positions.get(peer))
+                link["distance_m"] = None if d is None else round(d, 2)
+            state = STATE_NAMES.get(m.state, str(m.state))
+            instances = doc.get("instances", [])
+            if state in ("dead", "left"):  # its last record still lists them: they are gone
+                instances = [
+                    {**i, "state": "lost", "last_state": i.get("state")} for i in instances
+                ]
+            out.append(
+                {
+                    "name": m.name,
+                    "addr": f"{m.addr[0]}:{m.addr[1]}",
+                    "state": state,
+                    "incarnation": m.incarnation,
+                    "since": self._wall_of(m.since),
+                    "api": rec.api if rec is not None else None,
+                    "record_version": version,
+                    "vitals_revision": self._revision(m.name, version),
+                    "metrics": doc["metrics"],
+                    "links": doc["links"],
+                    "link_summary": doc.get("link_summary"),
+                    "instances": instances,
+                    "launch": doc.get("launch"),
+                }
+            )
+        return out
+
+    def _record_json(self, name: str, rec: RobotRecord | None) -> dict[str, Any]:
+        """`record_to_json(rec)`, made once per record (records are immutable: most robots'
+        records do not change between two dashboard frames), copied where the view adds to it."""
+        if rec is None:
+            return {"metrics": None, "links": {}}
+        cached = self.record_json.get(name)
+        if cached is None or cached[0] is not rec:
+            cached = (rec, record_to_json(rec))
+            self.record_json[name] = cached
+        doc = dict(cached[1])
+        doc["links"] = {peer: dict(link) for peer, link in doc["links"].items()}
+        return doc
+
+    def _revision(self, name: str, version: int) -> int:
+        """The vitals revision of record `version` that `name`'s entry shows (0: the record's
+        own)."""
+        if self.core is None:
+            return 0
+        vitals = self.core.vitals_of(name)
+        return vitals.revision if vitals is not None and vitals.version == version else 0
 
     def agent_view(self) -> dict[str, Any]:
         """This agent's counters and settings (see AgentView)."""
-        return agent_views.agent_view(self)
+        assert self.core is not None
+        assert self.shell is not None
+        c = self.shell.counters
+        codec = self.shell.codec.counters
+        site = self.api_site
+        states = dict.fromkeys(STATE_NAMES.values(), 0)
+        for m in self.core.members():
+            states[STATE_NAMES[m.state]] += 1
+        return {
+            "name": self.name,
+            "addr": f"{self.core.addr[0]}:{self.core.addr[1]}",
+            "api": self.api_url,
+            "version": __version__,
+            "uptime_s": round(time.time() - self._started_wall, 3),
+            "insecure": self.keyring is None,
+            "preset": self.config.preset,
+            "health_score": self.core.health_score,
+            "messages": {
+                "in": c["messages_in"],
+                "out": c["messages_out"],
+                "bytes_in": c["bytes_in"],
+                "bytes_out": c["bytes_out"],
+                "bytes_in_per_s": round(self._rate["in_s"], 1),
+                "bytes_out_per_s": round(self._rate["out_s"], 1),
+                "sent_by_kind": dict(sorted(self.shell.sent_by_kind.items())),
+            },
+            "rejected": {r: codec.get(r, 0) for r in REASONS},
+            "api_connections": {
+                "open": 0 if site is None else len(site.connections()),
+                "refused": 0 if site is None else site.refused,
+            },
+            "clock": {
+                "offset_ms": self.shell.codec.clock.offset_ms,
+                "advanced": codec.get("clock_advanced", 0),
+                "nudges": c["clock_nudges"],
+            },
+            "members": states,
+            "gossip": dict(self.core.counters),
+            "published": {k: self.published[k] for k in ("record", "vitals")},
+        }
+
+    def deploy_view(self) -> dict[str, Any]:
+        """Election, recovery and handoff counters, event counts (the Prometheus families)."""
+        coord = self.coordinator
+        info = None if coord is None else coord.election.info()
+        return {
+            "election": {
+                "epoch": 0 if info is None else info.epoch,
+                "leader": None if info is None else info.leader,
+            },
+            "recovery_actions": dict(self.recovery.actions),
+            "recovery_moves": dict(self.recovery.moves),
+            "handoff": {} if coord is None else dict(coord.handoff.counters),
+            "events": dict(self.events.counts),
+            "dashboard_streams": self.dashboard.hub.clients,
+        }
 
     def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
         """Event log entries after `since` (see AgentView)."""
         return self.events.since(since, limit)
-
-    def deploy_view(self) -> dict[str, Any]:
-        """Election, recovery and handoff counters, event counts (the Prometheus families)."""
-        return agent_views.deploy_view(self)
 
     def status_view(self) -> dict[str, Any] | None:
         """The deployment status (GET /v1/status), for the dashboard."""

@@ -5,7 +5,8 @@ returning an argv (docs/protocol.md, section 3). Three are built in: `python` (`
 and `script` (`path/to/file.py[:Class]`), both `python -m sdrpeer.host TARGET --param k=v ...`,
 and `exec` (an argv list run as is; it must speak the control channel itself, and gets its
 params as `SDRPEER_PARAMS`, a JSON map, in its environment). Plugins come from the entry point group
-`sdrpeer.launchers`; each entry point loads a launcher class (instantiated with no arguments) or
+`sdrpeer.launch.launchers`; each entry point loads a launcher class (instantiated with no
+arguments) or
 instance. `get_launcher(name)` looks in the built-ins first, then the plugins, and fails with the
 list of known names. `host_env` builds the environment of docs/protocol.md for one host.
 """
@@ -19,9 +20,9 @@ from typing import Any, Protocol, runtime_checkable
 
 from sdrpeer.errors import ConfigError
 
-log = logging.getLogger("sdrpeer.launchers")
+log = logging.getLogger("sdrpeer.launch.launchers")
 
-ENTRY_POINT_GROUP = "sdrpeer.launchers"
+ENTRY_POINT_GROUP = "sdrpeer.launch.launchers"
 
 
 class LauncherError(ConfigError):
@@ -122,7 +123,7 @@ BUILTIN: dict[str, Callable[[], Launcher]] = {
 
 
 def _plugins() -> dict[str, Any]:
-    """Entry points of the `sdrpeer.launchers` group, by name."""
+    """Entry points of the `sdrpeer.launch.launchers` group, by name."""
     from importlib.metadata import entry_points  # noqa: PLC0415 - slow-ish, only when needed
 
     return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}

@@ -57,8 +57,8 @@ from typing import Any
 import msgpack
 
 from sdrpeer.errors import WireError
-from sdrpeer.launch_policy import DEFAULT_POLICY, LaunchPolicy
-from sdrpeer.limits import LIMITS, MAX_COORD_M
+from sdrpeer.launch.policy import DEFAULT_POLICY, LaunchPolicy
+from sdrpeer.record.limits import LIMITS, MAX_COORD_M
 
 FORMAT = 3
 """Version of the wire layout above; a decoder refuses any other."""
@@ -226,7 +226,7 @@ class RobotRecord:
     election: ElectionInfo | None = None
     plan: PlanInfo | None = None
     launch: LaunchPolicy = DEFAULT_POLICY
-    """What this robot lets its hosts run (`sdrpeer.launch_policy`)."""
+    """What this robot lets its hosts run (`sdrpeer.launch.policy`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -286,8 +286,8 @@ def _common_prefix(a: str, b: str) -> int:
 
 
 def _clamped(name: str, x: float, scale: float) -> int:
-    """`x` inside `sdrpeer.limits.LIMITS[name]`, on its grid: whatever a robot file, the API or
-    a measurement said, the record encodes (and decodes on every peer)."""
+    """`x` inside `sdrpeer.record.limits.LIMITS[name]`, on its grid: whatever a robot file, the API
+    or a measurement said, the record encodes (and decodes on every peer)."""
     return _fix(LIMITS[name].clamp(x), scale)
 
 

@@ -9,8 +9,8 @@ it then moves `SEQ_RESERVE` past what it returns — so seqs keep rising across 
 the clock went back (receivers would refuse lower ones as replays). `record.floor` does the
 same for the versions of this robot's gossip record (`record_versions`): a new life starts past
 every version an old one may have spread, so no robot keeps an old life's bytes under a version
-the new life reuses. `clock.offset` keeps the gossip codec's cluster-time offset (sdrpeer.wire)
-across restarts.
+the new life reuses. `clock.offset` keeps the gossip codec's cluster-time offset
+(sdrpeer.gossip.wire) across restarts.
 """
 
 from __future__ import annotations

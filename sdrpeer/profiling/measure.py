@@ -2,8 +2,8 @@
 
 How it works: `run_profile` drives a `_Session` through start, wire, measure and stop. It starts
 the component the way an agent does: the `python` launcher
-(sdrpeer.launchers) builds the `python -m sdrpeer.host` command, the host inherits one end of a
-socket pair as its control channel (sdrpeer.runtime.control.ControlChannel on our end) and
+(sdrpeer.launch.launchers) builds the `python -m sdrpeer.host` command, the host inherits one end
+of a socket pair as its control channel (sdrpeer.runtime.control.ControlChannel on our end) and
 reports `hello` and `state INACTIVE`. Every OutPort is then connected (a `connect` command) to
 an in-process `DataServer` that counts and discards, so frames really cross a socket; every
 InPort is fed by an in-process data-plane `Connection` at `input_rate` Hz with values from an
@@ -40,7 +40,6 @@ human size uses sdrpeer.units (powers of 1000), so `parse_size` reads it back.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import datetime as dt
@@ -58,10 +57,10 @@ import psutil
 import yaml
 
 from sdrpeer.dataplane import Connection, DataServer
-from sdrpeer.errors import ConfigError, SdrpeerError
-from sdrpeer.launchers import get_launcher, host_env
-from sdrpeer.procstats import ProcessTreeMeter
-from sdrpeer.profile_inputs import GENERATORS, ProfileError, Source, make_source
+from sdrpeer.errors import SdrpeerError
+from sdrpeer.launch.launchers import get_launcher, host_env
+from sdrpeer.monitor.procstats import ProcessTreeMeter
+from sdrpeer.profiling.inputs import GENERATORS, ProfileError, Source, make_source
 from sdrpeer.runtime.control import ControlChannel, Report
 from sdrpeer.runtime.launch import private_dir
 from sdrpeer.sdk.policy import ConnectorPolicy
@@ -71,7 +70,6 @@ __all__ = [
     "GENERATORS",
     "ProfileError",
     "ProfileRequest",
-    "add_profile_parser",
     "make_source",
     "run_profile",
     "write_profile",
@@ -354,46 +352,3 @@ def write_profile(profile: Mapping[str, Any], out: Path | None) -> str:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text)
     return text
-
-
-def _pairs(items: list[str], flag: str) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ConfigError(f"{flag} {item!r}: expected NAME=VALUE")
-        out[key] = value
-    return out
-
-
-def add_profile_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """`sdrpeer profile TARGET [--seconds N] [--param k=v] [--input port=gen] [--out FILE]`."""
-    p = sub.add_parser("profile", help="measure a component's CPU, memory and port rates")
-    p.add_argument("target", help="package.module:Class")
-    p.add_argument("--seconds", type=float, default=10.0, help="measured window (default 10)")
-    p.add_argument("--param", action="append", default=[], metavar="K=V", help="a param")
-    p.add_argument(
-        "--input",
-        action="append",
-        default=[],
-        metavar="PORT=GEN",
-        help=f"feed an in-port from a generator ({', '.join(GENERATORS)}, image:WxH) or a "
-        "msgpack file",
-    )
-    p.add_argument("--input-rate", type=float, default=10.0, help="Hz per in-port (default 10)")
-    p.add_argument("--out", type=Path, help="write the YAML here (also printed)")
-    p.set_defaults(func=cmd_profile)
-
-
-def cmd_profile(args: argparse.Namespace) -> int:
-    """Run `sdrpeer profile`."""
-    req = ProfileRequest(
-        target=args.target,
-        seconds=args.seconds,
-        params=_pairs(args.param, "--param"),
-        inputs=_pairs(args.input, "--input"),
-        input_rate=args.input_rate,
-    )
-    profile = asyncio.run(run_profile(req))
-    print(write_profile(profile, args.out), end="")
-    return 0

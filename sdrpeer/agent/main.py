@@ -5,7 +5,7 @@ signal and stops it gracefully (leaving the cluster) within `STOP_DEADLINE`; pas
 SIGKILLs its component hosts and exits anyway, logging what it was waiting for. A second
 SIGINT/SIGTERM does the same at once. The API answers before the deployment stack has loaded; if it
 cannot load, the agent leaves and exits with 2. SIGHUP re-reads the key file
-(`sdrpeer.agent_keys`). Exit codes: 0 after a clean stop, 1 after a forced or overdue one, 2 when
+(`Agent.reload_keys`). Exit codes: 0 after a clean stop, 1 after a forced or overdue one, 2 when
 the agent cannot start (configuration, address in use, key file).
 """
 
@@ -15,12 +15,12 @@ import asyncio
 import logging
 import signal
 
-from sdrpeer.agent import Agent
+from sdrpeer.agent.agent import Agent
+from sdrpeer.agent.logs import setup_logging
 from sdrpeer.config import AgentConfig
 from sdrpeer.errors import ConfigError
-from sdrpeer.logs import setup_logging
 
-log = logging.getLogger("sdrpeer.agent")
+log = logging.getLogger("sdrpeer.agent.agent")
 
 STOP_DEADLINE = 2.5
 """Seconds a graceful stop may take (leave, component hosts' on_finalize, API close); past it the

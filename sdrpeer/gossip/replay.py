@@ -2,7 +2,7 @@
 
 How it works (as IPsec's anti-replay window): for each sender we keep its highest seq and a
 bitmap of the `REPLAY_WINDOW` seqs below it. A datagram is refused as "stale" when its timestamp
-is older than the freshness window before `now` (the cluster time: sdrpeer.wire's codec keeps
+is older than the freshness window before `now` (the cluster time: sdrpeer.gossip.wire's codec keeps
 it at the newest authenticated timestamp it has seen, so a datagram dated *later* than now is
 not refused — a replay can only be older), and as "replayed" when its seq was seen already or
 is older than the window. Time is passed in; at most `max_senders` senders are tracked (the least

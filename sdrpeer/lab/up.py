@@ -24,7 +24,7 @@ from typing import Any
 import sdrpeer
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError, SdrpeerError
-from sdrpeer.lab import (
+from sdrpeer.lab.files import (
     Lab,
     LabRobot,
     default_robot_files,

@@ -18,8 +18,8 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.cli import _print_json, client_for, endpoint, parse_assignment, robot_client
-from sdrpeer.cli_format import format_instances, want_color
+from sdrpeer.cli.common import client_for, endpoint, parse_assignment, print_json, robot_client
+from sdrpeer.cli.format import format_instances, want_color
 from sdrpeer.client import unreachable_message
 from sdrpeer.errors import ApiError
 from sdrpeer.runtime.spec import LAUNCHERS, InstanceSpec
@@ -29,7 +29,7 @@ def cmd_instances(args: argparse.Namespace) -> int:
     """Print the instances table (or the raw list with --json)."""
     instances = client_for(args).get("/v1/instances")
     if args.json:
-        _print_json(instances)
+        print_json(instances)
     else:
         color = want_color(sys.stdout.isatty(), os.environ)
         print(format_instances(instances, now=time.time(), color=color))
@@ -75,7 +75,7 @@ def cmd_start_instance(args: argparse.Namespace) -> int:
     """Add one instance to the agent's desired set."""
     answer = client_for(args).post("/v1/instances", {"instances": [instance_doc(args)]})
     if args.json:
-        _print_json(answer)
+        print_json(answer)
     else:
         print(f"{args.name}: desired; now: {', '.join(answer.get('desired', []))}")
     return 0
@@ -89,7 +89,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     body = {"instances": [s.to_json() for s in specs], "replace": True}
     answer = robot_client(args).post("/v1/instances", body)
     if args.json:
-        _print_json(answer)
+        print_json(answer)
     else:
         names = ", ".join(s.name for s in specs)
         print(f"{args.robot}: running {args.file} ({names}); watch with: sdrpeer instances")

@@ -3,7 +3,7 @@
 How it works: robot files, scenarios and the live API (`POST /v1/robot`, `sdrpeer robot set`)
 parse a value with `sdrpeer.units`, then `check(name, value)` refuses anything outside its
 `LIMITS` entry with a message in the project's words ("rssi: -1000dBm is out of range (-150dBm to
-0dBm)"). The record codec (`sdrpeer.record`) clamps to the same table when it encodes, so a
+0dBm)"). The record codec (`sdrpeer.record.robot`) clamps to the same table when it encodes, so a
 record can never fail to encode whatever a measurement says, and its decoder's ranges contain
 these. Values are in base units: percent, dBm, metres, bytes, percent per second, seconds.
 """

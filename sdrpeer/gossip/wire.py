@@ -72,7 +72,8 @@ from sdrpeer.gossip.messages import (
     Update,
     VitalsRevision,
 )
-from sdrpeer.keyring import (
+from sdrpeer.gossip.replay import REPLAY_WINDOW, ClusterClock, ReplayGuard
+from sdrpeer.keys.keyring import (
     INSECURE_KEY_ID,
     KEY_ID_SIZE,
     MIN_KEY_SIZE,
@@ -83,7 +84,6 @@ from sdrpeer.keyring import (
     key_id,
     parse_key,
 )
-from sdrpeer.replay import REPLAY_WINDOW, ClusterClock, ReplayGuard
 
 __all__ = [  # the keyring and replay guard live in their own modules; re-exported here
     "HEADER_SIZE",

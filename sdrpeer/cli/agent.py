@@ -3,7 +3,7 @@
 `sdrpeer agent` flags map one-to-one onto `AgentConfig` fields (`--key-file` -> `key_file`);
 `--config FILE` supplies the same fields from YAML and flags override it. This module imports
 only what parsing needs: `python -m sdrpeer agent ...` (see `sdrpeer.__main__`) comes here without
-loading the client commands, and the agent itself (`sdrpeer.agent_main`) is imported once the
+loading the client commands, and the agent itself (`sdrpeer.agent.main`) is imported once the
 flags are read.
 """
 
@@ -72,7 +72,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     """Build the configuration and run the agent until it is told to stop."""
     file_values = load_agent_config(args.config) if args.config else None
     config = build_config(file_values, agent_flag_values(args))
-    from sdrpeer.agent_main import run_agent  # noqa: PLC0415 - heavy; only `agent` needs it
+    from sdrpeer.agent.main import run_agent  # noqa: PLC0415 - heavy; only `agent` needs it
 
     return run_agent(config)
 
@@ -93,7 +93,7 @@ def main(argv: Sequence[str]) -> int:
 
 def _priority(text: str) -> int:
     """--priority: an integer within the record's range."""
-    from sdrpeer.limits import check_int  # noqa: PLC0415 - the fast path imports little
+    from sdrpeer.record.limits import check_int  # noqa: PLC0415 - the fast path imports little
 
     try:
         n = int(text)

@@ -23,13 +23,14 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.errors import ConfigError
+from sdrpeer.keys.derive import gossip_key
 
 KEY_ID_SIZE = 4
 NONCE_SIZE = 12
-"""AES-GCM's nonce: unique per datagram under one key (the codec makes it; see sdrpeer.wire)."""
+"""AES-GCM's nonce: unique per datagram under one key (the codec makes it; see
+sdrpeer.gossip.wire)."""
 TAG_SIZE = 16
 """AES-GCM's authentication tag, at the end of every sealed body."""
-GOSSIP_INFO = b"sdrpeer gossip aes-256-gcm v1"
 """HKDF's `info` for the gossip key derived from a cluster key (other uses derive their own)."""
 INSECURE_KEY_ID = b"\0" * KEY_ID_SIZE
 MIN_KEY_SIZE = 16
@@ -105,14 +106,11 @@ class Keyring:
 
     def _ciphers(self) -> dict[bytes, list[Any]]:
         if self._aeads is None:
-            from cryptography.hazmat.primitives import hashes  # noqa: PLC0415 - on first use
             from cryptography.hazmat.primitives.ciphers.aead import AESGCM  # noqa: PLC0415
-            from cryptography.hazmat.primitives.kdf.hkdf import HKDF  # noqa: PLC0415
 
             aeads: dict[bytes, list[Any]] = {}
             for kid, key in zip(self._ids, self._keys, strict=True):
-                derived = HKDF(hashes.SHA256(), 32, None, GOSSIP_INFO).derive(key)
-                aeads.setdefault(kid, []).append(AESGCM(derived))
+                aeads.setdefault(kid, []).append(AESGCM(gossip_key(key)))
             self._aeads = aeads
         return self._aeads
 

@@ -2,7 +2,7 @@
 
 Without `--detach`, `lab up` stays in the foreground and redraws the members table once a second
 (in place on a terminal, appended when piped) until `--seconds` pass or Ctrl-C, then stops every
-agent. `demo` (the paper's experiment) lives in `sdrpeer.demo.command`.
+agent. `demo` (the paper's experiment) lives in `sdrpeer.cli.demo`.
 """
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ from pathlib import Path
 from types import FrameType
 from typing import TextIO
 
-from sdrpeer.cli_format import format_members, render_table, want_color
+from sdrpeer.cli.format import format_members, render_table, want_color
+from sdrpeer.cli.netlab import add_fault_parsers
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError, SdrpeerError
-from sdrpeer.lab import DEFAULT_DIR, lab_down, lab_status
-from sdrpeer.lab_up import RunningLab, UpOptions, start_lab
+from sdrpeer.lab.files import DEFAULT_DIR, lab_down, lab_status
+from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
-from sdrpeer.netlab.commands import add_fault_parsers
 
 REFRESH = 1.0
 
@@ -69,7 +69,7 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     status = lab_sub.add_parser("status", parents=[where], help="the lab's agents")
     status.add_argument("--json", action="store_true", help="print JSON")
     status.set_defaults(func=cmd_lab_status)
-    from sdrpeer.demo.command import add_demo_parser  # noqa: PLC0415 - only when parsing
+    from sdrpeer.cli.demo import add_demo_parser  # noqa: PLC0415 - only when parsing
 
     add_demo_parser(sub)
 

@@ -1,0 +1,2 @@
+"""A robot's gossip record: its codec (robot.py) and the ranges of every fact it carries
+(limits.py)."""
