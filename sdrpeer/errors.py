@@ -1,22 +1,95 @@
 """One error hierarchy for everything a user or a peer can get wrong.
 
 Our own mistakes are ordinary exceptions (bugs); these are the errors that carry a message meant
-for a person: what was wrong and where.
+for a person: what was wrong and where. Every one is defined here, except the component SDK's
+own family (`sdrpeer.sdk.errors`: LifecycleError, CallbackError, ParamError, PortError, NoData,
+ComponentError), which component authors import from the SDK.
+
+```
+SdrpeerError
+├── ConfigError                a file, flag or robot file is wrong (file, line, field)
+│   ├── ScenarioError, SpecError, SystemFileError, ProfileFileError
+│   └── LauncherError, LaunchRefused
+├── MalformedError             bytes from a peer that are not accepted; `reason` is the counter
+│   ├── WireError              a gossip datagram
+│   ├── RecordError            a robot record, vitals, trap or election state
+│   └── FrameError             a data-stream hello, reply or frame
+├── ControlError               the control channel between an agent and a host
+│   ├── ProtocolError          the peer broke the channel's contract (the channel closes)
+│   ├── PartError              the parts of a transfer do not add up
+│   ├── CommandError           agent side: a command did not succeed (refused/timeout/closed)
+│   │   └── StateError         a state cannot be handed over
+│   └── CommandRefused         host side: a command cannot be carried out as given
+├── ApiError                   a call to an agent's HTTP API failed
+├── NotAllocator               this robot is not the allocator
+├── MoveError                  a planned move cannot be asked for
+├── LoadError, HandoffError    a host cannot load its target / hand over a state
+├── ProfileError               a component could not be profiled
+└── ElectionError              the election core tried a move its table forbids
+```
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 
 class SdrpeerError(Exception):
     """Base of every error sdrpeer raises on purpose."""
 
 
+# --- configuration ----------------------------------------------------------------------------
+
+
 class ConfigError(SdrpeerError):
     """A configuration file, flag or robot file is wrong (the message names file, line, field)."""
 
 
-class WireError(SdrpeerError):
-    """A datagram or frame could not be accepted; `reason` is the counter it is filed under."""
+class ScenarioError(ConfigError):
+    """A scenario file is wrong."""
+
+
+class SpecError(ConfigError):
+    """An instance or connection spec is wrong; `field` is the dotted name of the culprit."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"field '{field}': {message}")
+        self.field = field
+
+
+class SystemFileError(ConfigError):
+    """A system file is wrong; `.problems` lists every problem (`file:line: field 'x': ...`)."""
+
+    def __init__(self, message: str, problems: Sequence[str] | None = None) -> None:
+        super().__init__(message)
+        self.problems: list[str] = list(problems) if problems is not None else [message]
+
+    @classmethod
+    def collect(cls, name: str, problems: Sequence[str]) -> SystemFileError:
+        """One error for several problems: a count line, then one problem per line."""
+        if len(problems) == 1:
+            return cls(problems[0], problems)
+        head = f"{name}: {len(problems)} problems"
+        return cls("\n".join([head, *problems]), problems)
+
+
+class ProfileFileError(ConfigError, ValueError):
+    """A profile file a system file names is missing, unreadable or lacks a figure we need."""
+
+
+class LauncherError(ConfigError):
+    """An instance names an unknown launcher or gives it a target it cannot use."""
+
+
+class LaunchRefused(ConfigError):
+    """A spec this robot's launch policy does not let run (the API answers 403)."""
+
+
+# --- bytes from peers -------------------------------------------------------------------------
+
+
+class MalformedError(SdrpeerError):
+    """Bytes a peer sent that are not accepted; `reason` is the counter it is filed under."""
 
     def __init__(self, reason: str, detail: str = "") -> None:
         super().__init__(f"{reason}: {detail}" if detail else reason)
@@ -24,8 +97,61 @@ class WireError(SdrpeerError):
         self.detail = detail
 
 
-class ScenarioError(ConfigError):
-    """A scenario file is wrong."""
+class WireError(MalformedError):
+    """A gossip datagram was not accepted. `sender_behind`: it was authenticated (its sender holds
+    a cluster key) and refused as older than the freshness window: the sender's cluster time is
+    behind ours, not an attack (the shell tells it so)."""
+
+    def __init__(self, reason: str, detail: str = "", *, sender_behind: bool = False) -> None:
+        super().__init__(reason, detail)
+        self.sender_behind = sender_behind
+
+
+class RecordError(MalformedError):
+    """A robot record, its vitals, a trap or an election state does not decode (`malformed`)."""
+
+
+class FrameError(MalformedError):
+    """A hello, reply or frame could not be accepted; `reason` is oversized or malformed."""
+
+
+# --- the control channel ----------------------------------------------------------------------
+
+
+class ControlError(SdrpeerError):
+    """Something went wrong on the control channel between an agent and a component host."""
+
+
+class ProtocolError(ControlError):
+    """The peer sent something the control channel contract forbids; the channel is closed."""
+
+
+class PartError(ControlError):
+    """The parts of a transfer do not add up (missing, too many bytes, or over the limit)."""
+
+
+class CommandError(ControlError):
+    """The agent's side: a command did not succeed; `reason` is refused, timeout or closed."""
+
+    def __init__(self, command: str, reason: str, detail: str = "") -> None:
+        super().__init__(f"{command}: {reason}" + (f" ({detail})" if detail else ""))
+        self.command = command
+        self.reason = reason
+        self.detail = detail
+
+
+class StateError(CommandError):
+    """A state cannot be handed over: too big, or not one msgpack value."""
+
+    def __init__(self, command: str, detail: str) -> None:
+        super().__init__(command, "refused", detail)
+
+
+class CommandRefused(ControlError):
+    """The host's side: a command cannot be carried out as given (the message names the field)."""
+
+
+# --- everything else --------------------------------------------------------------------------
 
 
 class ApiError(SdrpeerError):
@@ -43,3 +169,23 @@ class NotAllocator(SdrpeerError):
     def __init__(self, leader: str | None) -> None:
         super().__init__(leader)
         self.leader = leader
+
+
+class MoveError(SdrpeerError, ValueError):
+    """The move cannot be asked for (no system, unknown component, bad destination)."""
+
+
+class LoadError(SdrpeerError):
+    """The host's target could not be loaded (the message names the target and the reason)."""
+
+
+class HandoffError(SdrpeerError):
+    """A snapshot or restore command cannot be carried out (the message says why)."""
+
+
+class ProfileError(SdrpeerError):
+    """The component could not be profiled (did not start, went to ERROR, ...)."""
+
+
+class ElectionError(SdrpeerError):
+    """The election core tried a move its table does not allow (a bug in the core)."""

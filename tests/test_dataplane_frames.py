@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 from sdrpeer.dataplane.frames import (
     INCOMPLETE,
     FrameDecoder,
-    FrameError,
     Hello,
     big_frame_header,
     encode_frame,
@@ -21,6 +20,7 @@ from sdrpeer.dataplane.frames import (
     parse_hello,
     parse_reply,
 )
+from sdrpeer.errors import FrameError
 
 HELLO = Hello("c1", "in", "cam.out", {"push": "all", "buffer": 8, "full": "overwrite", "skip": 0})
 

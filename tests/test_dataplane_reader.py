@@ -9,8 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sdrpeer.dataplane.frames import FrameError, encode_frame
+from sdrpeer.dataplane.frames import encode_frame
 from sdrpeer.dataplane.reader import BIG, READ_SIZE, FrameReader
+from sdrpeer.errors import FrameError
 
 
 def receive(reader: FrameReader, data: bytes, chunks: list[int]) -> list[list[object]]:

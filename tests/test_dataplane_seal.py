@@ -13,9 +13,9 @@ import pytest
 
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
-from sdrpeer.dataplane.frames import FrameError
 from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer
 from sdrpeer.dataplane.testing import RecordingPort, until
+from sdrpeer.errors import FrameError
 from sdrpeer.keys.derive import data_key, stream_keys
 from sdrpeer.sdk.policy import ConnectorPolicy
 

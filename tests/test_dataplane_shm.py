@@ -15,9 +15,10 @@ import msgpack
 import pytest
 
 from sdrpeer.dataplane import Connection, DataServer
-from sdrpeer.dataplane.frames import FrameError, Hello, encode_hello
+from sdrpeer.dataplane.frames import Hello, encode_hello
 from sdrpeer.dataplane.shm import ReceiverRing, SenderRing, ref_frame, sweep
 from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.errors import FrameError
 
 ROOT = Path(__file__).resolve().parent.parent
 SHM = Path("/dev/shm")

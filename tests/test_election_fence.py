@@ -15,7 +15,7 @@ from sdrpeer.election import (
     state_from_wire,
     state_to_wire,
 )
-from sdrpeer.errors import WireError
+from sdrpeer.errors import RecordError
 from sdrpeer.system.model import Thresholds
 
 
@@ -79,14 +79,14 @@ def test_state_round_trips_in_the_record_layout(state: ElectionState) -> None:
     ],
 )
 def test_malformed_states_raise_wire_errors(wire: object) -> None:
-    with pytest.raises(WireError) as err:
+    with pytest.raises(RecordError) as err:
         state_from_wire(wire)
     assert err.value.reason == "malformed"
 
 
 def test_undecodable_bytes_raise_wire_errors() -> None:
     for data in (b"", b"\xc1", b"\x93\x01"):
-        with pytest.raises(WireError):
+        with pytest.raises(RecordError):
             decode_state(data)
 
 

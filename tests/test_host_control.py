@@ -6,8 +6,9 @@ import msgpack
 import pytest
 
 from sdrpeer.control.parts import parts
+from sdrpeer.errors import ProtocolError
 from sdrpeer.host import control
-from sdrpeer.host.control import Command, ControlDecoder, ControlProtocolError
+from sdrpeer.host.control import Command, ControlDecoder
 
 
 def pack(value: object) -> bytes:
@@ -35,12 +36,12 @@ def test_commands_across_arbitrary_cuts() -> None:
     ],
 )
 def test_not_a_map_with_str_t_is_a_protocol_error(value: object, why: str) -> None:
-    with pytest.raises(ControlProtocolError, match=why):
+    with pytest.raises(ProtocolError, match=why):
         ControlDecoder().feed(pack(value))
 
 
 def test_garbage_is_a_protocol_error() -> None:
-    with pytest.raises(ControlProtocolError, match="undecodable"):
+    with pytest.raises(ProtocolError, match="undecodable"):
         ControlDecoder().feed(b"\xc1" * 4)
 
 
@@ -53,13 +54,13 @@ def test_exactly_the_limit_passes_one_byte_more_fails() -> None:
     assert len(msg) == limit
     assert len(ControlDecoder(max_message=limit).feed(msg)) == 1
     bigger = pack({"t": "set_params", "id": 1, "params": {"blob": blob + b"x" * (pad + 1)}})
-    with pytest.raises(ControlProtocolError, match="limit 1000"):
+    with pytest.raises(ProtocolError, match="limit 1000"):
         ControlDecoder(max_message=limit).feed(bigger)
 
 
 def test_a_huge_message_fails_before_it_is_buffered() -> None:
     header = b"\xc6" + (50 << 20).to_bytes(4, "big")  # bin32 of 50 MiB
-    with pytest.raises(ControlProtocolError, match="over"):
+    with pytest.raises(ProtocolError, match="over"):
         ControlDecoder().feed(header + bytes(control.MAX_MESSAGE + 100_000))
 
 
@@ -150,5 +151,5 @@ def test_parts_that_do_not_add_up_are_the_commands_error(stream: list[object], e
 
 
 def test_a_malformed_part_is_a_protocol_error() -> None:
-    with pytest.raises(ControlProtocolError, match="'of' must be an integer"):
+    with pytest.raises(ProtocolError, match="'of' must be an integer"):
         ControlDecoder().feed(pack({"t": "part", "of": "x", "data": b""}))

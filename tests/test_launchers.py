@@ -8,15 +8,9 @@ from typing import Any
 
 import pytest
 
+from sdrpeer.errors import LauncherError
 from sdrpeer.launch import launchers
-from sdrpeer.launch.launchers import (
-    Launcher,
-    LauncherError,
-    get_launcher,
-    host_env,
-    known_launchers,
-    param_arg,
-)
+from sdrpeer.launch.launchers import Launcher, get_launcher, host_env, known_launchers, param_arg
 
 PY = "/usr/bin/python3"
 

@@ -10,7 +10,8 @@ import pytest
 
 from components.ledger import ledger_system, read_ledgers
 from sdrpeer.cli.main import main
-from sdrpeer.deploy.move import MoveError, move_inputs
+from sdrpeer.deploy.move import move_inputs
+from sdrpeer.errors import MoveError
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.system.loader import parse_system
 from tests.realnet import RealCluster, http

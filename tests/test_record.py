@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sdrpeer.errors import WireError
+from sdrpeer.errors import RecordError
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import (
     MAX_LISTED,
@@ -225,7 +225,7 @@ def test_wire_helper_is_valid() -> None:
     ],
 )
 def test_malformed_fields_are_named(changes: dict[str, object], detail: str) -> None:
-    with pytest.raises(WireError) as info:
+    with pytest.raises(RecordError) as info:
         decode_record(wire(**changes))
     assert info.value.reason == "malformed"
     assert detail in info.value.detail
@@ -236,7 +236,7 @@ def test_malformed_fields_are_named(changes: dict[str, object], detail: str) -> 
     [b"", b"\xc1", b"\x93\x01\x02", msgpack.packb({"a": 1}), msgpack.packb([1] * 9)],
 )
 def test_garbage_is_malformed(data: bytes) -> None:
-    with pytest.raises(WireError, match=r"^malformed"):
+    with pytest.raises(RecordError, match=r"^malformed"):
         decode_record(data)
 
 
@@ -245,7 +245,7 @@ def test_garbage_is_malformed(data: bytes) -> None:
 def test_random_bytes_never_raise_anything_but_wire_error(data: bytes) -> None:
     try:
         decode_record(data)
-    except WireError as e:
+    except RecordError as e:
         reason = e.reason
     else:
         reason = "malformed"
@@ -260,10 +260,10 @@ def _mutations(data: bytes) -> st.SearchStrategy[bytes]:
 
 
 def _decodes_or_fails_cleanly(data: bytes, decode: Callable[[bytes], object]) -> None:
-    """`decode(data)` raises only WireError("malformed"), or returns what encodes back to it."""
+    """`decode(data)` raises only RecordError("malformed"), or returns what encodes back to it."""
     try:
         value = decode(data)
-    except WireError as e:
+    except RecordError as e:
         assert e.reason == "malformed"  # noqa: PT017 - the reason is the point
         return
     encode = encode_record if isinstance(value, RobotRecord) else encode_vitals
@@ -300,7 +300,7 @@ def test_election_plan_and_data_address_round_trip() -> None:
 
 def test_first_format_is_refused_by_name() -> None:
     old = [1, [100, 4, 2, None, None, None], [], None, 0, [], [], 1.0]
-    with pytest.raises(WireError, match="format 1 not understood"):
+    with pytest.raises(RecordError, match="format 1 not understood"):
         decode_record(msgpack.packb(old, use_bin_type=True))
 
 
@@ -311,7 +311,7 @@ def test_first_format_is_refused_by_name() -> None:
 def test_malformed_election_refused(election: list[object]) -> None:
     wire = msgpack.unpackb(encode_record(big_record()), raw=False)
     wire[7] = election
-    with pytest.raises(WireError, match="malformed"):
+    with pytest.raises(RecordError, match="malformed"):
         decode_record(msgpack.packb(wire, use_bin_type=True))
 
 

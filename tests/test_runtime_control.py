@@ -14,13 +14,8 @@ from typing import Any
 import msgpack
 import pytest
 
-from sdrpeer.runtime.control import (
-    MAX_MESSAGE,
-    CommandError,
-    ControlChannel,
-    ControlDecoder,
-    ProtocolError,
-)
+from sdrpeer.errors import CommandError
+from sdrpeer.runtime.control import MAX_MESSAGE, ControlChannel, ControlDecoder, ProtocolError
 
 FAKE_HOST = Path(__file__).with_name("fake_host.py")
 WAIT = 5.0

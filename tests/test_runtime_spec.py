@@ -6,7 +6,8 @@ from typing import Any
 
 import pytest
 
-from sdrpeer.runtime.spec import InstanceSpec, SpecError
+from sdrpeer.errors import SpecError
+from sdrpeer.runtime.spec import InstanceSpec
 
 FULL: dict[str, Any] = {
     "name": "Cam1",

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
+from sdrpeer.errors import CommandError
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.monitor.procstats import ProcessTreeMeter
 from sdrpeer.runtime.backoff import RestartConfig
-from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
 

@@ -19,9 +19,8 @@ import pytest
 
 from components.position_estimation import Estimator, PositionEstimation
 from components.red_controller import Odometry, REDController
-from sdrpeer.control.parts import PART_SIZE, PartAssembler, PartError, parts
-from sdrpeer.runtime.control import CommandError
-from sdrpeer.runtime.handoff import StateError
+from sdrpeer.control.parts import PART_SIZE, PartAssembler, parts
+from sdrpeer.errors import CommandError, PartError, StateError
 from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
 from sdrpeer.sdk import (

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import ConfigError, SystemFileError
 from sdrpeer.system.loader import load_system, parse_system
-from sdrpeer.system.problems import SystemFileError
 
 CAM = "components.camera:Camera"
 DET = "components.anomaly_detection:AnomalyDetection"

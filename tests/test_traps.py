@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sdrpeer.errors import WireError
+from sdrpeer.errors import RecordError
 from sdrpeer.monitor.traps import (
     Trap,
     TrapDetector,
@@ -123,7 +123,7 @@ def test_trap_round_trip() -> None:
     ],
 )
 def test_malformed_traps(wire: object, detail: str) -> None:
-    with pytest.raises(WireError) as info:
+    with pytest.raises(RecordError) as info:
         decode_trap(msgpack.packb(wire))
     assert info.value.reason == "malformed"
     assert detail in info.value.detail
@@ -134,7 +134,7 @@ def test_malformed_traps(wire: object, detail: str) -> None:
 def test_random_bytes_only_wire_error(data: bytes) -> None:
     try:
         decode_trap(data)
-    except WireError as e:
+    except RecordError as e:
         reason = e.reason
     else:
         reason = "malformed"

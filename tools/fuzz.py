@@ -23,7 +23,7 @@ the document loaded, one node replaced by a hostile value and dumped again; they
 loader's parser. HTTP inputs (random bytes, byte and tree mutations of valid bodies, hostile
 names and queries) go to a real agent's routes in this process (see `HTTP_ROUTES`); a 4xx is a
 refusal, a 5xx other than 503 or no answer within 5 s a crash. An input may be refused only
-with the surface's own error (WireError, ControlProtocolError, FrameError, ConfigError,
+with the surface's own error (WireError, RecordError, ProtocolError, FrameError, ConfigError,
 HttpRefused), which is counted by reason; any other exception is a crash (reported with the
 input). Also reported: the slowest input (a hang would show) and the peak RSS of this process.
 """
@@ -47,11 +47,10 @@ from typing import Any
 import msgpack
 import yaml
 
-from sdrpeer.control.stream import ControlProtocolError, encode
+from sdrpeer.control.stream import encode
 from sdrpeer.dataplane.frames import (
     AckOffer,
     FrameDecoder,
-    FrameError,
     Hello,
     encode_frame,
     encode_hello,
@@ -61,7 +60,7 @@ from sdrpeer.dataplane.frames import (
     reply_auth,
 )
 from sdrpeer.deploy.handoff_rules import StateMsg
-from sdrpeer.errors import ConfigError, WireError
+from sdrpeer.errors import ConfigError, FrameError, ProtocolError, RecordError, WireError
 from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import RecordChanged
@@ -205,7 +204,7 @@ def pack_all(values: list[Any]) -> bytes | None:
 class GossipSurface:
     """Signed datagrams -> Codec.decode -> Membership.receive -> decode_record."""
 
-    errors = (WireError,)
+    errors = (WireError, RecordError)
 
     def __init__(self, rng: random.Random) -> None:
         self.rng = rng
@@ -272,7 +271,7 @@ class GossipSurface:
 class ControlSurface:
     """Byte streams -> the agent's report decoder, and -> the host's command decoder."""
 
-    errors = (ControlProtocolError,)
+    errors = (ProtocolError,)
 
     def __init__(self, rng: random.Random) -> None:
         self.rng = rng
@@ -306,11 +305,11 @@ class ControlSurface:
         return pack_all(values) or b""
 
     def feed(self, data: bytes) -> None:
-        failures: list[ControlProtocolError] = []
+        failures: list[ProtocolError] = []
         for side, decoder in (("agent", AgentDecoder()), ("host", HostDecoder())):
             try:
                 decoder.feed(data)
-            except ControlProtocolError as error:
+            except ProtocolError as error:
                 failures.append(error)
                 self.reasons[f"{side}: {type(error).__name__}"] += 1
         if failures:

@@ -34,7 +34,7 @@ from sdrpeer.dashboard.feed import Feed
 from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.deploy.view import ClusterState
-from sdrpeer.errors import ConfigError, WireError
+from sdrpeer.errors import ConfigError, RecordError
 from sdrpeer.eventlog import EventLog, RecoveryTally
 from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
@@ -538,7 +538,7 @@ class Agent:
                 return
             try:
                 record = decode_record(event.payload)
-            except WireError as e:
+            except RecordError as e:
                 self.events.add(wall, "record.malformed", event.name, error=str(e))
                 return
             old = self.records.get(event.name)
@@ -550,7 +550,7 @@ class Agent:
         elif isinstance(event, VitalsChanged):
             try:
                 vitals = decode_vitals(event.payload)
-            except WireError as e:
+            except RecordError as e:
                 self.events.add(wall, "vitals.malformed", event.name, error=str(e))
                 return
             self._vitals[event.name] = (event.version, event.revision, vitals)
@@ -560,7 +560,7 @@ class Agent:
         elif isinstance(event, EventReceived) and event.kind == "trap":
             try:
                 trap = decode_trap(event.payload)
-            except WireError as e:
+            except RecordError as e:
                 self.events.add(wall, "trap.malformed", event.source, error=str(e))
                 return
             self.events.add(wall, "trap", event.source, **_trap_json(trap))

@@ -21,10 +21,8 @@ from typing import Any
 from aiohttp import web
 
 from sdrpeer.api.view import AgentView, InstancesView
-from sdrpeer.errors import ConfigError
-from sdrpeer.launch.policy import LaunchRefused
+from sdrpeer.errors import CommandError, ConfigError, LaunchRefused
 from sdrpeer.runtime import logfile
-from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec
 
 log = logging.getLogger(__name__)

@@ -19,7 +19,7 @@ from typing import Any, Final
 
 import msgpack
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import PartError
 
 __all__ = [
     "MAX_BLOB",
@@ -38,10 +38,6 @@ MAX_BLOB: Final = 64 << 20
 """The most a host holds for one transfer (the agent's own limit is usually lower)."""
 
 Message = dict[str, Any]
-
-
-class PartError(SdrpeerError):
-    """The parts of a transfer do not add up (missing, too many bytes, or over the limit)."""
 
 
 def parts(ident: int, blob: bytes) -> list[Message]:

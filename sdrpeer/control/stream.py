@@ -5,7 +5,7 @@ How it works: the channel is a stream of msgpack maps, each with a string "t" (d
 the unpacker in pieces, so a message over the limit fails before it is buffered; each message's
 size is measured exactly (`Unpacker.tell()`), so `max_message` bytes pass and one more fails.
 Anything else — undecodable bytes, a value that is not a map, a map without a string "t" — raises
-`ControlProtocolError`, and the caller closes the channel. Pure: no I/O, no clock. Kept free of
+`ProtocolError`, and the caller closes the channel. Pure: no I/O, no clock. Kept free of
 heavy imports: the host process imports it.
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 
 import msgpack
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import ProtocolError
 
 PROTOCOL = 1
 """Version of the control channel, sent in `hello`."""
@@ -28,10 +28,6 @@ _PIECE = 64 * 1024
 Message = dict[str, Any]
 
 
-class ControlProtocolError(SdrpeerError):
-    """The peer sent something the control channel contract forbids; the channel is closed."""
-
-
 class MessageStream:
     """Cuts a msgpack byte stream into maps with a string "t", enforcing the size limit."""
 
@@ -41,16 +37,14 @@ class MessageStream:
         self._offset = 0
 
     def feed(self, data: bytes) -> list[Message]:
-        """Consume `data`; return the complete messages in it; raise ControlProtocolError."""
+        """Consume `data`; return the complete messages in it; raise ProtocolError."""
         out: list[Message] = []
         view = memoryview(data)
         for start in range(0, len(view), _PIECE):
             try:
                 self._unpacker.feed(view[start : start + _PIECE])
             except msgpack.BufferFull:
-                raise ControlProtocolError(
-                    f"message over the size limit {self.max_message}"
-                ) from None
+                raise ProtocolError(f"message over the size limit {self.max_message}") from None
             self._drain(out)
         return out
 
@@ -61,17 +55,17 @@ class MessageStream:
             except msgpack.OutOfData:
                 return
             except Exception as exc:
-                raise ControlProtocolError(f"undecodable msgpack: {type(exc).__name__}") from exc
+                raise ProtocolError(f"undecodable msgpack: {type(exc).__name__}") from exc
             end = self._unpacker.tell()
             size, self._offset = end - self._offset, end
             if size > self.max_message:
-                raise ControlProtocolError(
+                raise ProtocolError(
                     f"message of {size} bytes over the size limit {self.max_message}"
                 )
             if not isinstance(value, dict):
-                raise ControlProtocolError(f"expected a map, got {type(value).__name__}")
+                raise ProtocolError(f"expected a map, got {type(value).__name__}")
             if not isinstance(value.get("t"), str):
-                raise ControlProtocolError("map without a str 't'")
+                raise ProtocolError("map without a str 't'")
             out.append(value)
 
 

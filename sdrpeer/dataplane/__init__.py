@@ -7,10 +7,11 @@ between two processes on one machine.
 """
 
 from sdrpeer.dataplane.connection import Connection
-from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, FrameDecoder, FrameError
+from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, FrameDecoder
 from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
 from sdrpeer.dataplane.port_api import InPortLike
 from sdrpeer.dataplane.server import DataServer
+from sdrpeer.errors import FrameError
 
 __all__ = [
     "DEFAULT_MAX_FRAME",

@@ -38,12 +38,13 @@ import os
 
 from sdrpeer.dataplane.address import parse_address
 from sdrpeer.dataplane.auth import DataAuth
-from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, AckOffer, FrameError, Hello
+from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, AckOffer, Hello
 from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.pending import PolicyLike
 from sdrpeer.dataplane.retention import DEFAULT_BYTES, DEFAULT_FRAMES, Retention
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.writer import FrameWriter
+from sdrpeer.errors import FrameError
 
 log = logging.getLogger("sdrpeer.dataplane")
 

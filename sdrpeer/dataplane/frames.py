@@ -24,7 +24,7 @@ from typing import Any, Final, cast
 
 import msgpack
 
-from sdrpeer.errors import WireError
+from sdrpeer.errors import FrameError
 
 PROTOCOL_VERSION: Final = 1
 DEFAULT_MAX_FRAME: Final = 16 * 1024 * 1024
@@ -41,10 +41,6 @@ _U64: Final = struct.Struct(">BBQ").pack
 
 def _packb(value: object) -> bytes:
     return cast(bytes, msgpack.packb(value))
-
-
-class FrameError(WireError):
-    """A hello, reply or frame could not be accepted; `reason` is oversized or malformed."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -37,16 +37,10 @@ import msgpack
 
 from sdrpeer.dataplane.address import parse_address
 from sdrpeer.dataplane.auth import DataAuth, proof_names
-from sdrpeer.dataplane.frames import (
-    FrameDecoder,
-    FrameError,
-    Hello,
-    encode_hello,
-    parse_reply,
-    reply_auth,
-)
+from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello, parse_reply, reply_auth
 from sdrpeer.dataplane.seal import Opener, sealed_writer
 from sdrpeer.dataplane.shm import SenderRing
+from sdrpeer.errors import FrameError
 from sdrpeer.keys.derive import stream_keys
 
 _SNDBUF: Final = 4 * 1024 * 1024

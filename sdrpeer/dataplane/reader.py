@@ -24,7 +24,8 @@ from typing import Any, Final
 
 import msgpack
 
-from sdrpeer.dataplane.frames import INCOMPLETE, FrameDecoder, FrameError, big_frame_header
+from sdrpeer.dataplane.frames import INCOMPLETE, FrameDecoder, big_frame_header
+from sdrpeer.errors import FrameError
 
 READ_SIZE: Final = 1024 * 1024
 BIG: Final = 64 * 1024

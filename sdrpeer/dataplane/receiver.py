@@ -23,17 +23,12 @@ from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 import msgpack
 
 from sdrpeer.dataplane.auth import proof_names
-from sdrpeer.dataplane.frames import (
-    PROTOCOL_VERSION,
-    FrameError,
-    Hello,
-    encode_reply,
-    parse_hello,
-)
+from sdrpeer.dataplane.frames import PROTOCOL_VERSION, Hello, encode_reply, parse_hello
 from sdrpeer.dataplane.port_api import AckingPort, InPortLike
 from sdrpeer.dataplane.reader import FrameReader
 from sdrpeer.dataplane.seal import TAG, Opener, sealed_writer
 from sdrpeer.dataplane.shm import ReceiverRing
+from sdrpeer.errors import FrameError
 from sdrpeer.keys.derive import stream_keys
 
 if TYPE_CHECKING:

@@ -22,7 +22,7 @@ import struct
 from collections.abc import Callable
 from typing import Any, Final
 
-from sdrpeer.dataplane.frames import FrameError
+from sdrpeer.errors import FrameError
 
 __all__ = ["Opener", "Sealer", "sealed_writer"]
 

@@ -30,7 +30,7 @@ from typing import Any, Final
 
 import msgpack
 
-from sdrpeer.dataplane.frames import FrameError
+from sdrpeer.errors import FrameError
 
 SHM_DIR: Final = "/dev/shm"
 DEFAULT_SIZE: Final = 8 * 1024 * 1024

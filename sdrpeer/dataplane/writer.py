@@ -27,10 +27,11 @@ from typing import Final
 
 import msgpack
 
-from sdrpeer.dataplane.frames import FRAME_OVERHEAD, FrameError, frame_header
+from sdrpeer.dataplane.frames import FRAME_OVERHEAD, frame_header
 from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
 from sdrpeer.dataplane.retention import Retention
 from sdrpeer.dataplane.shm import SenderRing, ref_frame
+from sdrpeer.errors import FrameError
 
 BIG: Final = 64 * 1024
 """Bytes values at least this large are queued and written without a copy."""

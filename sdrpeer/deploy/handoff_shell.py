@@ -34,10 +34,9 @@ from sdrpeer.deploy.handoff_rules import (
     admit,
     final_target,
 )
-from sdrpeer.errors import ApiError
+from sdrpeer.errors import ApiError, CommandError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
-from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.manager import InstanceManager
 
 log = logging.getLogger(__name__)

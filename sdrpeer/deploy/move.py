@@ -15,14 +15,11 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass, replace
 
+from sdrpeer.errors import MoveError
 from sdrpeer.plan import Plan
 from sdrpeer.system.model import SystemDef
 
 __all__ = ["MoveError", "MoveInputs", "move_inputs", "swap_to_standby"]
-
-
-class MoveError(ValueError):
-    """The move cannot be asked for (no system, unknown component, bad destination)."""
 
 
 @dataclass(frozen=True, slots=True)

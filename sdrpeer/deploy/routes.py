@@ -20,8 +20,7 @@ from sdrpeer.api.app import Route, json_error, json_object, require_token, view_
 from sdrpeer.api.peer_client import call
 from sdrpeer.config import NAME_RE
 from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
-from sdrpeer.deploy.move import MoveError
-from sdrpeer.errors import ApiError, NotAllocator
+from sdrpeer.errors import ApiError, MoveError, NotAllocator
 from sdrpeer.plan import plan_from_json
 from sdrpeer.runtime.handoff import MAX_STATE
 from sdrpeer.system.model import SystemDef, system_from_json

@@ -11,7 +11,7 @@ from sdrpeer.election.core import Election
 from sdrpeer.election.events import Elected, ElectionEvent, LeaderChanged, SteppedDown
 from sdrpeer.election.fence import Fence
 from sdrpeer.election.health import eligible, health_bucket
-from sdrpeer.election.rules import ElectionError, Role
+from sdrpeer.election.rules import Role
 from sdrpeer.election.state import (
     NO_STATE,
     Candidate,
@@ -22,6 +22,7 @@ from sdrpeer.election.state import (
     state_from_wire,
     state_to_wire,
 )
+from sdrpeer.errors import ElectionError
 
 __all__ = [
     "NO_STATE",

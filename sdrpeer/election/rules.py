@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from enum import Enum
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import ElectionError
 
 
 class Role(Enum):
@@ -36,10 +36,6 @@ class Role(Enum):
     FOLLOWER = "follower"
     WAITING = "waiting"
     LEADER = "leader"
-
-
-class ElectionError(SdrpeerError):
-    """The election core tried a move its table does not allow (a bug in the core)."""
 
 
 TRANSITIONS: dict[tuple[Role, str], Role] = {

@@ -22,7 +22,7 @@ from typing import Any
 
 import msgpack
 
-from sdrpeer.errors import WireError
+from sdrpeer.errors import RecordError
 
 MAX_EPOCH = 2**62
 """Largest epoch a decoder accepts (the record codec uses the same bound)."""
@@ -79,16 +79,16 @@ def state_to_wire(state: ElectionState) -> list[Any]:
 
 
 def state_from_wire(x: object) -> ElectionState:
-    """Check and rebuild a state from its array; raises WireError("malformed") on anything odd."""
+    """Check and rebuild a state from its array; raises RecordError("malformed") on anything odd."""
     if not isinstance(x, list | tuple) or len(x) != 3:
-        raise WireError("malformed", "election: expected [epoch, leader, claiming]")
+        raise RecordError("malformed", "election: expected [epoch, leader, claiming]")
     epoch, leader, claiming = x
     if isinstance(epoch, bool) or not isinstance(epoch, int) or not 0 <= epoch <= MAX_EPOCH:
-        raise WireError("malformed", f"election.epoch: expected an int in [0, 2**62]: {epoch!r}")
+        raise RecordError("malformed", f"election.epoch: expected an int in [0, 2**62]: {epoch!r}")
     if leader is not None and not isinstance(leader, str):
-        raise WireError("malformed", "election.leader: expected a string or nil")
+        raise RecordError("malformed", "election.leader: expected a string or nil")
     if not isinstance(claiming, bool):
-        raise WireError("malformed", "election.claiming: expected a boolean")
+        raise RecordError("malformed", "election.claiming: expected a boolean")
     return ElectionState(epoch, leader, claiming)
 
 
@@ -99,9 +99,9 @@ def encode_state(state: ElectionState) -> bytes:
 
 
 def decode_state(data: bytes) -> ElectionState:
-    """Inverse of `encode_state`; raises WireError("malformed") on bad input, nothing else."""
+    """Inverse of `encode_state`; raises RecordError("malformed") on bad input, nothing else."""
     try:
         x = msgpack.unpackb(data, raw=False, strict_map_key=True)
     except Exception as e:  # msgpack raises several unrelated types
-        raise WireError("malformed", f"election: {type(e).__name__}") from None
+        raise RecordError("malformed", f"election: {type(e).__name__}") from None
     return state_from_wire(x)

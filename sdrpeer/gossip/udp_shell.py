@@ -75,7 +75,7 @@ class GossipShell(asyncio.DatagramProtocol):
         try:
             packet = self.codec.decode(data, self._wall())
         except WireError as e:
-            if self.codec.stale_hint:
+            if e.sender_behind:
                 self._nudge(addr)
             self._rejected(e, addr)
             return

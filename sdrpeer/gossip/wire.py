@@ -29,7 +29,8 @@ of the last `REPLAY_WINDOW` seqs, as in IPsec).
 
 Time: timestamps are in cluster time (`replay.ClusterClock`: the wall clock plus an offset that
 only grows to the newest authenticated timestamp accepted), so robots need no common clock;
-`Codec.stale_hint` tells the shell when an authenticated datagram was stale (its sender is behind).
+`WireError.sender_behind` tells the shell when an authenticated datagram was stale (its sender is
+behind).
 
 A failure raises `WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else
 escapes `decode`.
@@ -406,8 +407,6 @@ class Codec:
         self._seq = seq_start
         self.clock = ClusterClock()
         """This robot's cluster time (`clock.offset_ms` is kept across restarts by the agent)."""
-        self.stale_hint = False
-        """True after `decode` refused an authenticated datagram as stale (its sender is behind)."""
         self._unpacker = _new_unpacker(max_datagram)
         self._insecure_header = MAGIC + bytes([PROTOCOL_VERSION]) + bytes(HEADER_SIZE - 3)
         self._nonce_prefix = os.urandom(NONCE_SIZE - 8)
@@ -418,10 +417,10 @@ class Codec:
         """Whether datagrams are signed and verified."""
         return self.keyring is not None
 
-    def reject(self, reason: str, detail: str = "") -> WireError:
+    def reject(self, reason: str, detail: str = "", *, sender_behind: bool = False) -> WireError:
         """Count a rejection under `reason` and return the error to raise."""
         self.counters[reason] += 1
-        return WireError(reason, detail)
+        return WireError(reason, detail, sender_behind=sender_behind)
 
     def encode(self, packet: Packet, now_wall: float) -> bytes:
         """The datagram carrying `packet`, with the next seq and `now_wall` as its timestamp."""
@@ -445,7 +444,6 @@ class Codec:
 
     def decode(self, data: bytes | bytearray | memoryview, now_wall: float) -> Packet:
         """The packet in datagram `data`, received at `now_wall`; else WireError (counted)."""
-        self.stale_hint = False
         if type(data) is not bytes:
             data = bytes(data)  # a bytearray or memoryview: key ids must be hashable
         size = len(data)
@@ -486,8 +484,9 @@ class Codec:
             raise self.reject("stale", f"from {packet.sender!r}: ts {ts_ms} ms in the future")
         reason = self.guard.check(packet.sender, seq, ts_ms, cluster_ms)
         if reason is not None:
-            self.stale_hint = reason == "stale" and secure
-            raise self.reject(reason, f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms")
+            behind = reason == "stale" and secure
+            detail = f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms"
+            raise self.reject(reason, detail, sender_behind=behind)
         if secure and self.clock.observe(ts_ms, cluster_ms):
             self.counters["clock_advanced"] += 1
         self.counters["accepted"] += 1

@@ -4,7 +4,7 @@ How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CON
 read from it go through `ControlDecoder`, a pure core: the shared framing
 (`sdrpeer.control.stream`, the same code the agent uses) cuts the msgpack stream into values and
 enforces the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
-`ControlProtocolError`); maps carrying an integer `"id"` become `Command`s. `part` maps (a big
+`ProtocolError`); maps carrying an integer `"id"` become `Command`s. `part` maps (a big
 value cut up, `sdrpeer.control.parts`) are collected, and the command they belong to (it says
 `"size"`) gets their bytes as `Command.blob`, or `blob_error`. The report builders (`hello`,
 `state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs, `now` included.
@@ -29,15 +29,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sdrpeer.control.parts import MAX_BLOB, PartAssembler, PartError, check_part
-from sdrpeer.control.stream import (
-    MAX_MESSAGE,
-    PROTOCOL,
-    ControlProtocolError,
-    Message,
-    MessageStream,
-    encode,
-)
+from sdrpeer.control.parts import MAX_BLOB, PartAssembler, check_part
+from sdrpeer.control.stream import MAX_MESSAGE, PROTOCOL, Message, MessageStream, encode
+from sdrpeer.errors import PartError, ProtocolError
 
 log = logging.getLogger("sdrpeer.host.control")
 
@@ -47,8 +41,8 @@ __all__ = [
     "Command",
     "ControlChannel",
     "ControlDecoder",
-    "ControlProtocolError",
     "Message",
+    "ProtocolError",
     "arm_parent_death_signal",
     "encode",
     "fault",
@@ -90,7 +84,7 @@ class ControlDecoder:
         """Maps that were well-formed but not commands (no integer id): logged and skipped."""
 
     def feed(self, data: bytes) -> list[Command]:
-        """Consume `data`; return the complete commands in it; raise ControlProtocolError."""
+        """Consume `data`; return the complete commands in it; raise ProtocolError."""
         out: list[Command] = []
         for msg in self._stream.feed(data):
             ident = msg.get("id")
@@ -98,7 +92,7 @@ class ControlDecoder:
                 try:
                     self._parts.add(*check_part(msg), self.max_blob)
                 except PartError as exc:
-                    raise ControlProtocolError(str(exc)) from None
+                    raise ProtocolError(str(exc)) from None
                 continue
             if type(ident) is not int:
                 self.ignored += 1
@@ -253,7 +247,7 @@ class ControlChannel(asyncio.Protocol):
         """Decode and dispatch; a protocol error closes the channel."""
         try:
             commands = self._decoder.feed(data)
-        except ControlProtocolError as exc:
+        except ProtocolError as exc:
             self.protocol_errors += 1
             log.error("control: protocol error: %s; closing the channel", exc)
             self._end(f"protocol error: {exc}")

@@ -11,16 +11,12 @@ what the runner raised) and becomes `reply ok=false`: none of them ends the host
 
 from __future__ import annotations
 
-from sdrpeer.control.parts import PartError, decode_value, encode_value
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.control.parts import decode_value, encode_value
+from sdrpeer.errors import HandoffError, PartError
 from sdrpeer.host.control import Command
 from sdrpeer.sdk import ComponentRunner
 
 __all__ = ["HandoffError", "restore", "snapshot"]
-
-
-class HandoffError(SdrpeerError):
-    """A snapshot or restore command cannot be carried out (the message says why)."""
 
 
 async def snapshot(runner: ComponentRunner, command: Command) -> bytes:

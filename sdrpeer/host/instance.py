@@ -6,7 +6,7 @@ reports every lifecycle change and fault through the `report` callback the momen
 announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for
 a heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `restore` are
 sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot),
-else None. It raises `CommandError` (our peer's mistake: a bad field, an unknown port or
+else None. It raises `CommandRefused` (our peer's mistake: a bad field, an unknown port or
 connection) or whatever the runner raised (an illegal transition, a failing callback); the caller
 turns either into `reply ok=false`. The data server's `resolve` is `in_port`.
 """
@@ -22,17 +22,13 @@ from typing import Any
 
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import control, handoff
 from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
 
 log = logging.getLogger("sdrpeer.host")
 
 Report = Callable[[control.Message], None]
-
-
-class CommandError(SdrpeerError):
-    """A command the agent sent cannot be carried out as given (the message names the field)."""
 
 
 async def maybe_await(value: object) -> None:
@@ -48,10 +44,10 @@ def _state_name(value: object) -> str:
 
 
 def _field(msg: control.Message, key: str, kind: type, where: str = "") -> Any:
-    """`msg[key]` if it has type `kind`, else CommandError."""
+    """`msg[key]` if it has type `kind`, else CommandRefused."""
     value = msg.get(key)
     if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
-        raise CommandError(f"{where}{key!r} must be a {kind.__name__}, got {value!r}")
+        raise CommandRefused(f"{where}{key!r} must be a {kind.__name__}, got {value!r}")
     return value
 
 
@@ -162,22 +158,22 @@ class HostedInstance:
         in_port = _field(conn, "in", str, "conn ")
         policy_map = conn.get("policy") or {}
         if not isinstance(policy_map, dict):
-            raise CommandError(f"conn 'policy' must be a map, got {policy_map!r}")
+            raise CommandRefused(f"conn 'policy' must be a map, got {policy_map!r}")
         if conn_id in self.connections:
-            raise CommandError(f"connection {conn_id!r} already exists")
+            raise CommandRefused(f"connection {conn_id!r} already exists")
         port = self.out_ports.get(out)
         if port is None:
-            raise CommandError(f"no OutPort {out!r} (have: {', '.join(sorted(self.out_ports))})")
+            raise CommandRefused(f"no OutPort {out!r} (have: {', '.join(sorted(self.out_ports))})")
         try:
             policy = ConnectorPolicy.from_map(policy_map)
         except (ValueError, TypeError, SdrpeerError) as exc:
-            raise CommandError(f"conn 'policy': {exc}") from None
+            raise CommandRefused(f"conn 'policy': {exc}") from None
         try:
             connection = Connection(
                 conn_id, to, in_port, f"{self.name}.{out}", policy, auth=self.auth
             )
         except ValueError as exc:
-            raise CommandError(f"conn 'to': {exc}") from None
+            raise CommandRefused(f"conn 'to': {exc}") from None
         connection.start()
         port.attach(connection)
         self.connections[conn_id] = (connection, port)
@@ -187,7 +183,7 @@ class HostedInstance:
         """The connection a command names."""
         conn_id = _field(msg, "conn_id", str)
         if conn_id not in self.connections:
-            raise CommandError(f"no connection {conn_id!r}")
+            raise CommandRefused(f"no connection {conn_id!r}")
         return (conn_id, *self.connections[conn_id])
 
     async def _disconnect(self, msg: control.Message) -> None:
@@ -205,7 +201,7 @@ class HostedInstance:
         try:
             connection.repoint(to)
         except ValueError as exc:
-            raise CommandError(f"'to': {exc}") from None
+            raise CommandRefused(f"'to': {exc}") from None
         log.info("connection %s repointed to %s", conn_id, to)
 
     async def _data_keys(self, msg: control.Message) -> None:
@@ -214,11 +210,11 @@ class HostedInstance:
         try:
             parsed = [bytes.fromhex(k) for k in keys if isinstance(k, str)]
         except ValueError:
-            raise CommandError("'keys': expected hex strings") from None
+            raise CommandRefused("'keys': expected hex strings") from None
         if len(parsed) != len(keys) or not all(16 <= len(k) <= 64 for k in parsed):
-            raise CommandError("'keys': expected hex strings of 16 to 64 bytes")
+            raise CommandRefused("'keys': expected hex strings of 16 to 64 bytes")
         if not parsed and self.auth.enabled:
-            raise CommandError("'keys': a host with data keys cannot be left without any")
+            raise CommandRefused("'keys': a host with data keys cannot be left without any")
         self.auth.keys[:] = parsed
         log.info("data keys updated: %d key(s)", len(parsed))
 

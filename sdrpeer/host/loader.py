@@ -18,11 +18,7 @@ import os
 import sys
 from types import ModuleType
 
-from sdrpeer.errors import SdrpeerError
-
-
-class LoadError(SdrpeerError):
-    """The host's target could not be loaded (the message names the target and the reason)."""
+from sdrpeer.errors import LoadError
 
 
 def split_target(target: str) -> tuple[str, str | None]:

@@ -19,10 +19,10 @@ import os
 import shutil
 import sys
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import LoadError, SdrpeerError
 from sdrpeer.host import control
 from sdrpeer.host.config import parse_args
-from sdrpeer.host.loader import LoadError, load_component_class
+from sdrpeer.host.loader import load_component_class
 
 log = logging.getLogger("sdrpeer.host")
 

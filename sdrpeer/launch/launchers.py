@@ -18,15 +18,11 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import LauncherError
 
 log = logging.getLogger("sdrpeer.launch.launchers")
 
 ENTRY_POINT_GROUP = "sdrpeer.launch.launchers"
-
-
-class LauncherError(ConfigError):
-    """An instance names an unknown launcher or gives it a target it cannot use."""
 
 
 @runtime_checkable

@@ -23,13 +23,6 @@ import fnmatch
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from sdrpeer.errors import ConfigError
-
-
-class LaunchRefused(ConfigError):
-    """A spec this robot's launch policy does not let run (the API answers 403)."""
-
-
 DEFAULT_LAUNCHERS: tuple[str, ...] = ("python",)
 DEFAULT_TARGETS: tuple[str, ...] = ("*",)
 

@@ -6,7 +6,7 @@ sample is no longer at or below -50 (i.e. above -50). Between the two levels not
 a value wobbling around the threshold makes one trap, not one per sample. `TrapDetector.feed`
 returns only the new crossings; a metric the robot does not have (None) changes nothing. Traps
 travel in gossip `Event(kind="trap")` payloads, encoded by `encode_trap` and checked by
-`decode_trap` (which raises only `WireError("malformed", ...)`).
+`decode_trap` (which raises only `RecordError("malformed", ...)`).
 
 Default rules follow the paper's Table VI where it gives values ("or less" is `<=`): free
 memory <= 200MB (clears above 250MB), RSSI <= -52.5 dBm (clears above -50 dBm); plus battery
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import msgpack
 
-from sdrpeer.errors import WireError
+from sdrpeer.errors import RecordError
 from sdrpeer.record.robot import Metrics
 
 METRICS = ("cpu_pct", "mem_free", "battery_pct", "rssi_dbm")
@@ -136,25 +136,25 @@ def encode_trap(t: Trap) -> bytes:
 def _finite(x: object, what: str) -> float:
     """A finite float from the wire (ints accepted)."""
     if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
-        raise WireError("malformed", f"trap: {what}: expected a finite number")
+        raise RecordError("malformed", f"trap: {what}: expected a finite number")
     return float(x)
 
 
 def decode_trap(b: bytes) -> Trap:
-    """Bytes from an Event(kind="trap") -> a checked Trap; raises WireError("malformed")."""
+    """Bytes from an Event(kind="trap") -> a checked Trap; raises RecordError("malformed")."""
     try:
         wire = msgpack.unpackb(b, raw=False, strict_map_key=True, use_list=True)
     except Exception as e:  # msgpack raises many types on garbage; all mean the same here
-        raise WireError("malformed", f"trap: not msgpack ({type(e).__name__})") from None
+        raise RecordError("malformed", f"trap: not msgpack ({type(e).__name__})") from None
     if not isinstance(wire, list) or len(wire) != 6:
-        raise WireError("malformed", "trap: expected a list of 6")
+        raise RecordError("malformed", "trap: expected a list of 6")
     fmt, metric, value, threshold, state, ts = wire
     if fmt != _FORMAT or isinstance(fmt, bool):
-        raise WireError("malformed", f"trap: format {fmt!r} not understood")
+        raise RecordError("malformed", f"trap: format {fmt!r} not understood")
     if not isinstance(metric, str) or not _METRIC_RE.fullmatch(metric):
-        raise WireError("malformed", "trap: metric: expected a metric name")
+        raise RecordError("malformed", "trap: metric: expected a metric name")
     if isinstance(state, bool) or not isinstance(state, int) or state not in (0, 1):
-        raise WireError("malformed", "trap: state: expected 0 or 1")
+        raise RecordError("malformed", "trap: state: expected 0 or 1")
     return Trap(
         metric=metric,
         value=_finite(value, "value"),

@@ -16,14 +16,10 @@ from typing import Any
 
 import msgpack
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import ProfileError
 
 Source = Callable[[int, float], Any]
 """An input source: (seq from 1, time in seconds) -> the value to send."""
-
-
-class ProfileError(SdrpeerError):
-    """The component could not be profiled (did not start, went to ERROR, ...)."""
 
 
 def image_source(w: int = 160, h: int = 120) -> Source:

@@ -57,10 +57,10 @@ import psutil
 import yaml
 
 from sdrpeer.dataplane import Connection, DataServer
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import ProfileError, SdrpeerError
 from sdrpeer.launch.launchers import get_launcher, host_env
 from sdrpeer.monitor.procstats import ProcessTreeMeter
-from sdrpeer.profiling.inputs import GENERATORS, ProfileError, Source, make_source
+from sdrpeer.profiling.inputs import GENERATORS, Source, make_source
 from sdrpeer.runtime.control import ControlChannel, Report
 from sdrpeer.runtime.launch import private_dir
 from sdrpeer.sdk.policy import ConnectorPolicy

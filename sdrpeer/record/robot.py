@@ -3,7 +3,7 @@
 How it works: the owning robot builds a `RobotRecord`, `encode_record` turns it into compact
 msgpack, and gossip spreads those bytes epidemically without looking inside, as one versioned
 record per robot. Every receiver calls `decode_record`, which checks each field and raises
-`WireError("malformed", ...)` on anything unexpected (never another exception), so a bad peer
+`RecordError("malformed", ...)` on anything unexpected (never another exception), so a bad peer
 cannot crash an agent.
 
 What a record carries is bounded by what the fleet decides with, not by the fleet's size: the
@@ -56,7 +56,7 @@ from typing import Any
 
 import msgpack
 
-from sdrpeer.errors import WireError
+from sdrpeer.errors import RecordError
 from sdrpeer.launch.policy import DEFAULT_POLICY, LaunchPolicy
 from sdrpeer.record.limits import LIMITS, MAX_COORD_M
 
@@ -377,7 +377,7 @@ def encode_vitals(v: Vitals) -> bytes:
 
 
 class _Malformed(Exception):
-    """Internal: a field failed validation (turned into WireError by the decoders)."""
+    """Internal: a field failed validation (turned into RecordError by the decoders)."""
 
 
 def _list(x: object, what: str, n: int | None = None) -> list[Any]:
@@ -531,12 +531,12 @@ def _unpack(b: bytes, what: str) -> list[Any]:
     try:
         wire = msgpack.unpackb(b, raw=False, strict_map_key=True, use_list=True)
     except Exception as e:  # msgpack raises many types on garbage; all mean the same here
-        raise WireError("malformed", f"{what}: not msgpack ({type(e).__name__})") from None
+        raise RecordError("malformed", f"{what}: not msgpack ({type(e).__name__})") from None
     if not isinstance(wire, list) or not wire:
-        raise WireError("malformed", f"{what}: expected a list")
+        raise RecordError("malformed", f"{what}: expected a list")
     fmt = wire[0]
     if fmt != FORMAT or isinstance(fmt, bool):
-        raise WireError("malformed", f"{what}: format {fmt!r} not understood")
+        raise RecordError("malformed", f"{what}: format {fmt!r} not understood")
     return wire
 
 
@@ -551,7 +551,7 @@ def _launch(x: object) -> LaunchPolicy:
 
 
 def decode_record(b: bytes) -> RobotRecord:
-    """Bytes from the wire -> a checked record; raises WireError("malformed", ...) otherwise."""
+    """Bytes from the wire -> a checked record; raises RecordError("malformed", ...) otherwise."""
     wire = _unpack(b, "record")
     try:
         _, metrics, links, api, priority, comps, instances, elect, plan, launch = _list(
@@ -571,11 +571,11 @@ def decode_record(b: bytes) -> RobotRecord:
         )
     except (_Malformed, ValueError, TypeError) as e:
         # ValueError/TypeError come from unpacking a list of the wrong length.
-        raise WireError("malformed", str(e)) from None
+        raise RecordError("malformed", str(e)) from None
 
 
 def decode_vitals(b: bytes) -> Vitals:
-    """Bytes from a probe -> checked vitals; raises WireError("malformed", ...) otherwise."""
+    """Bytes from a probe -> checked vitals; raises RecordError("malformed", ...) otherwise."""
     wire = _unpack(b, "vitals")
     try:
         _, metrics, links, flat = _list(wire, "vitals", 4)
@@ -598,7 +598,7 @@ def decode_vitals(b: bytes) -> Vitals:
             loads,
         )
     except (_Malformed, ValueError, TypeError) as e:
-        raise WireError("malformed", str(e)) from None
+        raise RecordError("malformed", str(e)) from None
 
 
 def metrics_to_json(m: Metrics) -> dict[str, Any]:

@@ -23,15 +23,9 @@ import socket
 from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
-from sdrpeer.control.parts import PartAssembler, PartError, check_part, parts
-from sdrpeer.control.stream import (
-    MAX_MESSAGE,
-    PROTOCOL,
-    ControlProtocolError,
-    MessageStream,
-    encode,
-)
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.control.parts import PartAssembler, check_part, parts
+from sdrpeer.control.stream import MAX_MESSAGE, PROTOCOL, MessageStream, encode
+from sdrpeer.errors import CommandError, PartError, ProtocolError
 
 REPORTS = ("hello", "state", "heartbeat", "fault", "part")
 LIFECYCLE = ("CREATED", "INACTIVE", "ACTIVE", "ERROR", "FINALIZED")
@@ -54,20 +48,6 @@ __all__ = [
 
 Report = dict[str, Any]
 ReportHandler = Callable[[Report], None]
-
-
-ProtocolError = ControlProtocolError
-"""The host sent something the protocol does not allow (the channel's one error type)."""
-
-
-class CommandError(SdrpeerError):
-    """A command did not succeed; `reason` is refused, timeout or closed."""
-
-    def __init__(self, command: str, reason: str, detail: str = "") -> None:
-        super().__init__(f"{command}: {reason}" + (f" ({detail})" if detail else ""))
-        self.command = command
-        self.reason = reason
-        self.detail = detail
 
 
 def check_report(msg: Report) -> None:

@@ -14,8 +14,9 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from typing import Any, Final
 
-from sdrpeer.control.parts import PartError, decode_value, encode_value
-from sdrpeer.runtime.control import CommandError, Report
+from sdrpeer.control.parts import decode_value, encode_value
+from sdrpeer.errors import PartError, StateError
+from sdrpeer.runtime.control import Report
 
 __all__ = ["MAX_STATE", "StateError", "give_state", "take_snapshot"]
 
@@ -23,13 +24,6 @@ MAX_STATE: Final = 16 << 20
 """The default size limit of a state, in bytes of msgpack."""
 
 SendCommand = Callable[..., Awaitable[Report]]
-
-
-class StateError(CommandError):
-    """A state cannot be handed over: too big, or not one msgpack value."""
-
-    def __init__(self, command: str, detail: str) -> None:
-        super().__init__(command, "refused", detail)
 
 
 async def take_snapshot(command: SendCommand, limit: int = MAX_STATE) -> Any:

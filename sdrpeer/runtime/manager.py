@@ -28,9 +28,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.launch.policy import LaunchPolicy, LaunchRefused
+from sdrpeer.errors import CommandError, LaunchRefused
+from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
-from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec, connection_to_json
 from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import PurePath
 from typing import Any
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import SpecError
 from sdrpeer.launch.launchers import known_launchers
 
 LAUNCHERS = ("python", "script", "exec")
@@ -46,14 +46,6 @@ _CONN_KEYS = frozenset({"id", "out", "to", "in", "policy", "to_addr"})
 
 INSTANCE_ACTIONS = ("activate", "deactivate", "reset", "restart")
 """What can be asked of a running instance (`POST /v1/instances/NAME/ACTION`)."""
-
-
-class SpecError(ConfigError):
-    """An instance or connection spec is wrong; `field` is the dotted name of the culprit."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"field '{field}': {message}")
-        self.field = field
 
 
 @dataclass(frozen=True, slots=True)

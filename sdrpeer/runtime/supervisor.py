@@ -35,10 +35,10 @@ from typing import Any
 
 import psutil
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import CommandError, ConfigError
 from sdrpeer.runtime import problems
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
-from sdrpeer.runtime.control import CommandError, ControlChannel, Report
+from sdrpeer.runtime.control import ControlChannel, Report
 from sdrpeer.runtime.handoff import MAX_STATE, give_state, take_snapshot
 from sdrpeer.runtime.launch import (
     create_process,

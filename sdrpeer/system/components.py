@@ -18,7 +18,8 @@ from typing import Any
 
 import yaml
 
-from sdrpeer.runtime.spec import SpecError, _launcher, _name, _target
+from sdrpeer.errors import ProfileFileError, SpecError
+from sdrpeer.runtime.spec import _launcher, _name, _target
 from sdrpeer.system.classes import ClassInfo, check_params, inspect_target
 from sdrpeer.system.model import (
     RECONCILE,
@@ -29,7 +30,7 @@ from sdrpeer.system.model import (
     StandbySpec,
 )
 from sdrpeer.system.problems import MISSING, Problems
-from sdrpeer.system.profiles import ProfileError, ProfileFigures, read_profile
+from sdrpeer.system.profiles import ProfileFigures, read_profile
 from sdrpeer.system.values import (
     boolean,
     bounded,
@@ -201,7 +202,7 @@ def _profile(
         return None
     try:
         figures = read_profile(base_dir / path, path)
-    except ProfileError as e:
+    except ProfileFileError as e:
         p.add(node, where, str(e))
         return None
     if isinstance(target, str) and figures.target is not None and figures.target != target:

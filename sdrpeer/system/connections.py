@@ -15,7 +15,8 @@ from typing import Any
 
 import yaml
 
-from sdrpeer.runtime.spec import SpecError, _port, validate_policy
+from sdrpeer.errors import SpecError
+from sdrpeer.runtime.spec import _port, validate_policy
 from sdrpeer.system.components import ComponentEntry
 from sdrpeer.system.model import ConnectionDef
 from sdrpeer.system.problems import MISSING, Problems

@@ -27,11 +27,12 @@ from pathlib import Path
 
 import yaml
 
-from sdrpeer.runtime.spec import SpecError, _name
+from sdrpeer.errors import SpecError, SystemFileError
+from sdrpeer.runtime.spec import _name
 from sdrpeer.system.components import read_components
 from sdrpeer.system.connections import read_connections
 from sdrpeer.system.model import SystemDef
-from sdrpeer.system.problems import MISSING, Problems, SystemFileError
+from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.sections import read_allocation, read_recovery, read_streams
 from sdrpeer.yamlfile import YamlFile
 

@@ -17,26 +17,10 @@ from typing import Any, NoReturn, TypeVar, cast
 
 import yaml
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import SystemFileError
 from sdrpeer.yamlfile import YamlFile
 
 T = TypeVar("T")
-
-
-class SystemFileError(ConfigError):
-    """A system file is wrong; `.problems` lists every problem (`file:line: field 'x': ...`)."""
-
-    def __init__(self, message: str, problems: Sequence[str] | None = None) -> None:
-        super().__init__(message)
-        self.problems: list[str] = list(problems) if problems is not None else [message]
-
-    @classmethod
-    def collect(cls, name: str, problems: Sequence[str]) -> SystemFileError:
-        """One error for several problems: a count line, then one problem per line."""
-        if len(problems) == 1:
-            return cls(problems[0], problems)
-        head = f"{name}: {len(problems)} problems"
-        return cls("\n".join([head, *problems]), problems)
 
 
 class _Missing:

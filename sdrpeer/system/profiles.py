@@ -5,7 +5,8 @@ How it works: the profile is composed with `YamlFile`, so a broken profile is re
 own file and line. Only four things are taken: `target`, `cpu.mean_pct` (percent of one core),
 `memory.peak_rss` (bytes) and `bytes_per_s` of every port whose `direction` is `out`. Other keys
 are left alone (a profile carries host facts and params we do not need). Errors are raised as
-`ProfileError` (a ValueError, so the loader reports them at the `profile:` line of the system file).
+`ProfileFileError` (a ValueError, so the loader reports them at the `profile:` line of the system
+file).
 """
 
 from __future__ import annotations
@@ -16,13 +17,9 @@ from pathlib import Path
 
 import yaml
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import ConfigError, ProfileFileError
 from sdrpeer.system.values import MAX_RATE
 from sdrpeer.yamlfile import YamlFile
-
-
-class ProfileError(ValueError):
-    """A profile file is missing, unreadable or lacks a figure we need."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,15 +38,15 @@ def read_profile(path: Path, shown: str) -> ProfileFigures:
     try:
         is_file = path.is_file()
     except OSError as e:  # a name too long, a path through a file, ...
-        raise ProfileError(f"cannot read profile file {shown[:200]!r}: {e.strerror}") from None
+        raise ProfileFileError(f"cannot read profile file {shown[:200]!r}: {e.strerror}") from None
     if not is_file:
-        raise ProfileError(f"no such profile file {shown[:200]!r}")
+        raise ProfileFileError(f"no such profile file {shown[:200]!r}")
     try:
         f = YamlFile.read(path)
         f.name = shown
         return _figures(f, shown)
     except ConfigError as e:
-        raise ProfileError(f"bad profile: {e}") from None
+        raise ProfileFileError(f"bad profile: {e}") from None
 
 
 def _figures(f: YamlFile, shown: str) -> ProfileFigures:
