@@ -21,10 +21,10 @@ from sdrpeer.alloc.constraints import (
     RssiAbove,
     active_constraints,
 )
-from sdrpeer.alloc.registry import Registry
 from sdrpeer.alloc.strategies import STRATEGIES, FirstFit, Objective
 from sdrpeer.alloc.view import RobotView
 from sdrpeer.errors import ConfigError
+from sdrpeer.plugins.registry import Registry
 from sdrpeer.record.robot import LinkStats, Metrics
 from sdrpeer.system.model import ComponentDef, Thresholds
 
@@ -279,7 +279,9 @@ def test_register_a_plugin_in_process():
 
 
 def test_registry_refuses_the_wrong_kind():
-    reg: Registry[RobotConstraint] = Registry("sdrpeer.nothing", (RobotConstraint,), "constraint")
+    reg: Registry[RobotConstraint] = Registry(
+        "sdrpeer.nothing", (RobotConstraint,), "allocation constraint"
+    )
     with pytest.raises(ConfigError, match="is a str, not a RobotConstraint"):
         reg.register("x", "not a constraint")  # type: ignore[arg-type]
     assert reg.names() == []

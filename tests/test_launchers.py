@@ -115,12 +115,13 @@ def test_plugins_from_entry_points(monkeypatch: pytest.MonkeyPatch) -> None:
         "bogus": _EntryPoint("bogus", object()),
         "python": _EntryPoint("python", _Nix),
     }
-    monkeypatch.setattr(launchers, "_plugins", lambda: eps)
+    monkeypatch.setattr(launchers.LAUNCHERS, "_points", lambda: eps)
+    monkeypatch.setattr(launchers.LAUNCHERS, "_loaded", {})
     assert get_launcher("nix").command("x", {}, python=PY) == ["nix-shell", "--run", "x"]
     assert get_launcher("python").name == "python"  # built-ins win
     with pytest.raises(LauncherError, match=r"'broken'.*failed to load: no module named nixpkgs"):
         get_launcher("broken")
-    with pytest.raises(LauncherError, match=r"'bogus'.*no name/command"):
+    with pytest.raises(LauncherError, match=r"launcher 'bogus' is a object, not a Launcher"):
         get_launcher("bogus")
     with pytest.raises(LauncherError, match="known: bogus, broken, exec, nix, python, script"):
         get_launcher("other")

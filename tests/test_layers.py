@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent / "sdrpeer"
 LAYERS: list[tuple[str, set[str]]] = [
     ("the package and its errors", {"__init__", "errors"}),
     ("foundation", {"units", "yamlfile", "vocabulary", "eventlog"}),
+    ("plugins", {"plugins"}),
     ("primitives", {"keys", "launch", "control", "sdk", "client", "netlab"}),
     ("codecs and transports", {"record", "gossip", "dataplane"}),
     ("processes and settings", {"config", "runtime", "host"}),

@@ -85,7 +85,7 @@ if TYPE_CHECKING:
     from sdrpeer.monitor.virtual import VirtualRobot
     from sdrpeer.runtime.manager import InstanceManager
 
-log = logging.getLogger("sdrpeer.agent.agent")
+log = logging.getLogger("sdrpeer.agent")
 
 INSECURE_WARNING = (
     "running INSECURE (no cluster key): gossip on %s is neither authenticated, encrypted nor "

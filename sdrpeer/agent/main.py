@@ -20,7 +20,7 @@ from sdrpeer.agent.logs import setup_logging
 from sdrpeer.config import AgentConfig
 from sdrpeer.errors import ConfigError
 
-log = logging.getLogger("sdrpeer.agent.agent")
+log = logging.getLogger("sdrpeer.agent")
 
 STOP_DEADLINE = 2.5
 """Seconds a graceful stop may take (leave, component hosts' on_finalize, API close); past it the

@@ -29,8 +29,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sdrpeer.alloc.registry import Registry
 from sdrpeer.alloc.view import RobotView
+from sdrpeer.plugins.registry import Registry
 from sdrpeer.record.robot import LinkStats
 from sdrpeer.system.model import ComponentDef, Thresholds
 from sdrpeer.units import format_size
@@ -294,7 +294,7 @@ class DelayBelow(LinkConstraint):
 CONSTRAINTS: Registry[RobotConstraint | LinkConstraint] = Registry(
     "sdrpeer.constraints",
     (RobotConstraint, LinkConstraint),
-    "constraint",
+    "allocation constraint",
 )
 """Every constraint plugin by name (entry points of `sdrpeer.constraints`, plus registered)."""
 

@@ -24,7 +24,6 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 from sdrpeer.alloc.constraints import RobotLoad
-from sdrpeer.alloc.registry import Registry
 from sdrpeer.alloc.scores import (
     DEFAULT_WEIGHTS,
     UNKNOWN_CLOSENESS,
@@ -37,6 +36,7 @@ from sdrpeer.alloc.scores import (
 )
 from sdrpeer.alloc.view import RobotView
 from sdrpeer.errors import ConfigError
+from sdrpeer.plugins.registry import Registry
 from sdrpeer.system.model import AllocationDef, ComponentDef
 
 
@@ -224,5 +224,5 @@ class _ObjectiveRanker(Ranker):
                 yield i
 
 
-STRATEGIES: Registry[Strategy] = Registry("sdrpeer.strategies", (Strategy,), "strategy")
+STRATEGIES: Registry[Strategy] = Registry("sdrpeer.strategies", (Strategy,), "allocation strategy")
 """Every strategy by name (entry points of `sdrpeer.strategies`, plus registered)."""

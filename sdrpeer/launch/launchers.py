@@ -5,24 +5,25 @@ returning an argv (docs/protocol.md, section 3). Three are built in: `python` (`
 and `script` (`path/to/file.py[:Class]`), both `python -m sdrpeer.host TARGET --param k=v ...`,
 and `exec` (an argv list run as is; it must speak the control channel itself, and gets its
 params as `SDRPEER_PARAMS`, a JSON map, in its environment). Plugins come from the entry point group
-`sdrpeer.launch.launchers`; each entry point loads a launcher class (instantiated with no
-arguments) or
-instance. `get_launcher(name)` looks in the built-ins first, then the plugins, and fails with the
-list of known names. `host_env` builds the environment of docs/protocol.md for one host.
+`sdrpeer.launchers`; each entry point loads a launcher class (instantiated with no
+arguments) or instance (`LAUNCHERS`, a `sdrpeer.plugins.registry.Registry`). `get_launcher(name)`
+looks in the built-ins first, then the plugins, and fails with the list of known names. `host_env`
+builds the environment of docs/protocol.md for one host.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 from sdrpeer.errors import LauncherError
+from sdrpeer.plugins.registry import Registry
 
 log = logging.getLogger("sdrpeer.launch.launchers")
 
-ENTRY_POINT_GROUP = "sdrpeer.launch.launchers"
+ENTRY_POINT_GROUP = "sdrpeer.launchers"
 
 
 @runtime_checkable
@@ -110,44 +111,23 @@ class ExecLauncher:
         return list(target)
 
 
-BUILTIN: dict[str, Callable[[], Launcher]] = {
-    "python": PythonLauncher,
-    "script": ScriptLauncher,
-    "exec": ExecLauncher,
-}
-"""The built-in launchers by name (always win over a plugin of the same name)."""
-
-
-def _plugins() -> dict[str, Any]:
-    """Entry points of the `sdrpeer.launch.launchers` group, by name."""
-    from importlib.metadata import entry_points  # noqa: PLC0415 - slow-ish, only when needed
-
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+LAUNCHERS: Registry[Launcher] = Registry(
+    ENTRY_POINT_GROUP, (Launcher,), "launcher", error=LauncherError
+)
+"""Every launcher by name: the built-ins (registered, so they win over a plugin of their name)
+and the plugins of the entry point group."""
+for _builtin in (PythonLauncher, ScriptLauncher, ExecLauncher):
+    LAUNCHERS.register(_builtin.name, _builtin)
 
 
 def known_launchers() -> list[str]:
     """Every launcher name available: built-ins and plugins."""
-    return sorted(set(BUILTIN) | set(_plugins()))
+    return LAUNCHERS.names()
 
 
 def get_launcher(name: str) -> Launcher:
     """The launcher called `name`; LauncherError listing the known ones if there is none."""
-    factory = BUILTIN.get(name)
-    if factory is not None:
-        return factory()
-    plugins = _plugins()
-    ep = plugins.get(name)
-    if ep is None:
-        known = ", ".join(sorted(set(BUILTIN) | set(plugins)))
-        raise LauncherError(f"unknown launcher {name!r} (known: {known})")
-    try:
-        obj = ep.load()
-        launcher = obj() if isinstance(obj, type) else obj
-    except Exception as exc:
-        raise LauncherError(f"launcher {name!r} ({ep.value}) failed to load: {exc}") from exc
-    if not isinstance(launcher, Launcher):
-        raise LauncherError(f"launcher {name!r} ({ep.value}) has no name/command()")
-    return launcher
+    return LAUNCHERS.get(name)
 
 
 def host_env(

@@ -31,7 +31,7 @@ import operator
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from sdrpeer.alloc.registry import Registry
+from sdrpeer.plugins.registry import Registry
 from sdrpeer.system.recovery_defaults import CAUSES
 
 OPS: dict[str, Callable[[float, float], bool]] = {
@@ -99,10 +99,8 @@ STANDBY_OTHER_ROBOT = Action("allocator", "standby")
 LAUNCH_OTHER_ROBOT = Action("allocator", "launch")
 
 CONDITIONS: Registry[Condition] = Registry(
-    "sdrpeer.recovery_conditions", (Condition,), "condition", area="recovery"
+    "sdrpeer.recovery_conditions", (Condition,), "recovery condition"
 )
 """Every cause by name (entry points of `sdrpeer.recovery_conditions`, plus registered)."""
-ACTIONS: Registry[Action] = Registry(
-    "sdrpeer.recovery_actions", (Action,), "action", area="recovery"
-)
+ACTIONS: Registry[Action] = Registry("sdrpeer.recovery_actions", (Action,), "recovery action")
 """Every ladder step by name (entry points of `sdrpeer.recovery_actions`, plus registered)."""

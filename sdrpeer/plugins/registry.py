@@ -1,12 +1,14 @@
-"""A named set of plugins (allocation strategies and constraints, recovery conditions and
-actions) backed by an entry point group.
+"""A named set of plugins (launchers, allocation strategies and constraints, recovery conditions
+and actions) backed by an entry point group: the one plugin registry.
 
 How it works: a `Registry` reads its entry point group once, on the first lookup, and keeps the
 loaded objects. `get(name)` returns an instance: an entry point naming a class is instantiated
 with no arguments, anything else is used as is. `register(name, obj)` adds or replaces a plugin
 in this process (tests, embedding applications) and wins over an entry point of the same name;
-`unregister(name)` takes it back out. An unknown name raises `ConfigError` listing the known ones
-(it comes from a system file's `allocation:` or `recovery:` section, which `area` names).
+`unregister(name)` takes it back out (built-in plugins are registered, so they win over entry
+points of their name). An unknown name raises `error` (a `ConfigError`) listing the known ones: it
+comes from a system file's `allocation:` or `recovery:` section, or an instance's launcher, which
+`label` names in messages.
 """
 
 from __future__ import annotations
@@ -23,16 +25,21 @@ class Registry(Generic[T]):
     """Plugins of one kind, by name: entry points of `group`, plus any registered in-process."""
 
     def __init__(
-        self, group: str, kinds: tuple[type[Any], ...], what: str, area: str = "allocation"
+        self,
+        group: str,
+        kinds: tuple[type[Any], ...],
+        label: str,
+        *,
+        error: type[ConfigError] = ConfigError,
     ) -> None:
         self.group = group
         """The entry point group read on first use."""
         self.kinds = kinds
         """Every plugin must be an instance of one of these classes (T's members)."""
-        self.what = what
-        """How messages call a plugin of this kind (e.g. 'constraint')."""
-        self.area = area
-        """The system file section the names come from (messages: 'allocation', 'recovery')."""
+        self.label = label
+        """How messages call a plugin of this kind (e.g. 'allocation constraint', 'launcher')."""
+        self.error = error
+        """What an unknown, broken or wrong plugin raises."""
         self._entry_points: dict[str, Any] | None = None
         self._loaded: dict[str, T] = {}
         self._registered: dict[str, T] = {}
@@ -65,14 +72,12 @@ class Registry(Generic[T]):
         ep = self._points().get(name)
         if ep is None:
             known = ", ".join(self.names())
-            raise ConfigError(f"unknown {self.area} {self.what} {name!r} (known: {known})")
+            raise self.error(f"unknown {self.label} {name!r} (known: {known})")
         try:
             obj = ep.load()
             plugin = obj() if isinstance(obj, type) else obj
         except Exception as exc:
-            raise ConfigError(
-                f"{self.area} {self.what} {name!r} ({ep.value}) failed to load: {exc}"
-            ) from exc
+            raise self.error(f"{self.label} {name!r} ({ep.value}) failed to load: {exc}") from exc
         self._loaded[name] = self._check(name, plugin)
         return self._loaded[name]
 
@@ -80,7 +85,5 @@ class Registry(Generic[T]):
         """The plugin, if it is of the right kind."""
         if not isinstance(plugin, self.kinds):
             wanted = " or ".join(k.__name__ for k in self.kinds)
-            raise ConfigError(
-                f"{self.area} {self.what} {name!r} is a {type(plugin).__name__}, not a {wanted}"
-            )
+            raise self.error(f"{self.label} {name!r} is a {type(plugin).__name__}, not a {wanted}")
         return plugin  # type: ignore[no-any-return]
