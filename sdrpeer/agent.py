@@ -34,7 +34,6 @@ from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError, WireError
 from sdrpeer.eventlog import EventLog, RecoveryTally
-from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import (
     REAPED,
@@ -70,6 +69,7 @@ from sdrpeer.record import (
     decode_vitals,
     metrics_to_json,
 )
+from sdrpeer.tuning import Tuning, preset
 from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:
@@ -97,6 +97,8 @@ class Agent:
 
     def __init__(self, config: AgentConfig) -> None:
         self.config = config
+        self.tuning: Tuning = preset(config.preset)
+        """Every timer and size of this agent and its parts: the preset `config.preset` names."""
         self.events = EventLog()
         self.links = LinkTable()
         self.records: dict[str, tuple[int, RobotRecord]] = {}
@@ -124,7 +126,7 @@ class Agent:
         """This robot's latest sample, whatever was published of it."""
         self._state: tuple[RobotRecord | None, ClusterState] | None = None
         """The last cluster state made, with the own sample it was made with (None: stale)."""
-        self.publisher = Publisher()
+        self.publisher = Publisher(min_gap=self.tuning.agent.record_gap)
         self._cpu = Average()
         """The CPU average the record carries (`sdrpeer.monitor.publish.CPU_AVERAGE_S`)."""
         self.record_json: dict[str, tuple[RobotRecord, dict[str, Any]]] = {}
@@ -192,10 +194,10 @@ class Agent:
                 self.scenario = Scenario.load(cfg.scenario, robots=[robot_file], fleet=True)
         else:
             self.host = HostMetrics()
-        gossip_preset = preset(cfg.preset)
+        gossip = self.tuning.gossip
         host, port = parse_hostport(cfg.bind)
         first = agent_files.seq_start(cfg.data_dir, time.time_ns() // 1000)
-        codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=first)
+        codec = Codec(cfg.name, self.keyring, max_datagram=gossip.datagram_limit, seq_start=first)
         if self.keyring is not None:
             codec.clock.offset_ms = self._saved_offset = agent_files.load_clock_offset(cfg.data_dir)
         wall = self.robot.file.wall if self.robot is not None else time.time
@@ -206,7 +208,7 @@ class Agent:
         self.core = Membership(
             cfg.name,
             addr,
-            gossip_preset,
+            gossip,
             now=loop.time(),
             rng=random.Random(),
             first_version=self._versions[0],
@@ -245,12 +247,11 @@ class Agent:
         await asyncio.to_thread(_load_stack)
         from sdrpeer.deploy.coordinator import Coordinator  # noqa: PLC0415 - loaded above
         from sdrpeer.runtime.manager import InstanceManager  # noqa: PLC0415
-        from sdrpeer.runtime.supervisor import SupervisorConfig  # noqa: PLC0415
 
-        config = SupervisorConfig(data_host=parse_hostport(cfg.bind)[0])
+        tuning = self.tuning
         instances = InstanceManager(
             cfg.data_dir,
-            config,
+            tuning.supervisor.with_(data_host=parse_hostport(cfg.bind)[0]),
             lambda: self._publish(force=True),
             on_fault=self._on_fault,
             on_instance_problem=self._on_fault,
@@ -265,6 +266,9 @@ class Agent:
             token=peer_token(self.keyring),
             events=self.events,
             on_change=lambda: self._publish(force=True),
+            config=tuning.deploy,
+            election=tuning.election,
+            recovery=tuning.recovery,
         )
         self.instances = instances
         await instances.start()
@@ -309,7 +313,7 @@ class Agent:
         if self.shell is not None and self.core is not None and leave:
             self.stopping = "the leave message"
             self.shell.leave()
-            await asyncio.sleep(max(0.3, 3 * self.core.config.gossip_interval))
+            await asyncio.sleep(self.tuning.agent.leave_wait)
         if self._runner is not None:
             self.stopping = "the API server"
             await self._runner.cleanup()

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.errors import ConfigError
-from sdrpeer.gossip.config import PRESETS
 from sdrpeer.launch_policy import DEFAULT_TARGETS, LaunchPolicy
 from sdrpeer.limits import check_int
 
@@ -57,7 +56,8 @@ class AgentConfig:
     token_file: Path | None = None
     """API bearer token file; None = the agent generates one into data_dir/token (mode 0600)."""
     preset: str = "lan"
-    """Gossip tuning preset: lan or fast_test."""
+    """The preset of every timer and size of the agent and its parts (`sdrpeer.tuning`): lan
+    (robots on one Wi-Fi network) or fast_test (loopback tests and the local lab)."""
     data_dir: Path = Path("~/.local/share/sdrpeer/{name}")
     """Directory for the token, agent.json and logs; `~` and `{name}` are expanded."""
     metrics_interval: float = 1.0
@@ -293,8 +293,12 @@ def _validate(values: dict[str, Any], origin: dict[str, str]) -> None:
     for pattern in values.get("allow_targets", ()):
         if not pattern.strip():
             raise fail("allow_targets", "a pattern must not be empty")
-    if "preset" in values and values["preset"] not in PRESETS:
-        raise fail("preset", f"unknown preset {values['preset']!r} (known: {', '.join(PRESETS)})")
+    if "preset" in values:
+        from sdrpeer.tuning import PRESETS  # noqa: PLC0415 - loads every part's config
+
+        if values["preset"] not in PRESETS:
+            names = ", ".join(PRESETS)
+            raise fail("preset", f"unknown preset {values['preset']!r} (known: {names})")
     if "log_level" in values and values["log_level"] not in LOG_LEVELS:
         raise fail("log_level", f"must be one of {', '.join(LOG_LEVELS)}")
     if "log_format" in values and values["log_format"] not in LOG_FORMATS:

@@ -18,8 +18,8 @@ from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.coordinator import Coordinator
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.eventlog import EventLog
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.supervisor import SupervisorConfig
 from tests.realnet import RealCluster
 from tests.test_recovery_e2e import deploy
 
@@ -29,7 +29,7 @@ async def coordinator_with(
 ) -> tuple[Coordinator, InstanceManager]:
     """robot-1's coordinator on fast ticks, with a started instance manager, seeing `state`
     (default: no robot); the caller stops both."""
-    manager = InstanceManager(tmp_path / "m", SupervisorConfig.fast_test(), interval=0.05)
+    manager = InstanceManager(tmp_path / "m", supervisor_fast(), interval=0.05)
     await manager.start()
     seen = state if state is not None else ClusterState({})
     coordinator = Coordinator(

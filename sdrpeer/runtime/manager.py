@@ -30,10 +30,11 @@ from typing import Any
 
 from sdrpeer.launch_policy import LaunchPolicy, LaunchRefused
 from sdrpeer.record import InstanceInfo
+from sdrpeer.runtime.config import SupervisorConfig
 from sdrpeer.runtime.control import CommandError
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec, connection_to_json
-from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+from sdrpeer.runtime.supervisor import Supervisor
 
 log = logging.getLogger(__name__)
 ACTIONS = INSTANCE_ACTIONS
