@@ -16,6 +16,7 @@ import pytest
 from sdrpeer import agent_timers, tuning
 from sdrpeer.agent import Agent
 from sdrpeer.agent_cli import add_agent_parser, agent_flag_values
+from sdrpeer.cli import build_parser
 from sdrpeer.config import build_config
 from sdrpeer.deploy import config as deploy
 from sdrpeer.election import config as election
@@ -104,6 +105,17 @@ def test_every_knob_is_read_outside_its_declaration(cls: type[Any]) -> None:
         f.name for f in dataclasses.fields(cls) if not re.search(rf"\.{f.name}\b|\b{f.name}=", code)
     ]
     assert dead == []
+
+
+def test_the_command_line_offers_every_preset() -> None:
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    add_agent_parser(sub)
+    agent_help = sub.choices["agent"].format_help()
+    lab = build_parser()
+    for name in tuning.PRESETS:
+        assert name in agent_help
+        assert lab.parse_args(["lab", "up", "--preset", name]).preset == name
 
 
 def _flags(*argv: str) -> dict[str, Any]:
