@@ -70,7 +70,7 @@ def test_an_unknown_preset_names_the_known_ones() -> None:
 
 
 def _config_classes() -> list[type[Any]]:
-    classes: list[type[Any]] = [RestartConfig]
+    classes: list[type[Any]] = [tuning.Tuning, RestartConfig]
     for f in dataclasses.fields(tuning.Tuning):
         if f.name != "name":
             classes.append(type(getattr(tuning.lan(), f.name)))
