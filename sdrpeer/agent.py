@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from sdrpeer import agent_files, agent_keys, agent_views
 from sdrpeer.agent_files import load_token, write_agent_json
+from sdrpeer.agent_tuning import Tuning, preset
 from sdrpeer.api.server import BoundedSite, serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
@@ -69,7 +70,6 @@ from sdrpeer.record import (
     decode_vitals,
     metrics_to_json,
 )
-from sdrpeer.tuning import Tuning, preset
 from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:

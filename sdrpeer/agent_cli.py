@@ -15,7 +15,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.config import FIELDS, LOG_FORMATS, LOG_LEVELS, build_config, load_agent_config
+from sdrpeer.config import (
+    FIELDS,
+    LOG_FORMATS,
+    LOG_LEVELS,
+    PRESET_NAMES,
+    build_config,
+    load_agent_config,
+)
 from sdrpeer.errors import ConfigError
 
 
@@ -56,7 +63,7 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--token-file", type=Path, metavar="FILE", help="API token (default: generate)")
     p.add_argument(
         "--preset",
-        metavar="NAME",
+        choices=PRESET_NAMES,
         help="every timer's preset: lan (default; robots on Wi-Fi) or fast_test (loopback tests)",
     )
     p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")

@@ -1,7 +1,7 @@
 """The agent's own timers (not its parts'), with presets like the other layers' configurations.
 
 Every duration is in seconds. An agent takes these from the preset its `--preset` names
-(`sdrpeer.tuning`). How often it samples its robot is a flag, not a preset value
+(`sdrpeer.agent_tuning`). How often it samples its robot is a flag, not a preset value
 (`--metrics-interval`, `sdrpeer.config.AgentConfig.metrics_interval`).
 """
 

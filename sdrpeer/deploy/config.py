@@ -1,7 +1,7 @@
 """Deployment timers (the coordinator's), with presets like the other layers' configurations.
 
 Every duration is in seconds. An agent takes these from the preset its `--preset` names
-(`sdrpeer.tuning`).
+(`sdrpeer.agent_tuning`).
 """
 
 from __future__ import annotations

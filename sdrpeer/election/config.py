@@ -2,7 +2,7 @@
 
 Every duration is in seconds. The grace period should cover a few gossip rounds: it is how long a
 robot gives each higher-ranked robot to claim the vacant role before it claims it itself. An agent
-takes its settings from the preset its `--preset` names (`sdrpeer.tuning`).
+takes its settings from the preset its `--preset` names (`sdrpeer.agent_tuning`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Membership and dissemination settings, with presets.
 
 Every duration is in seconds. Formulas that use these live in `sdrpeer.gossip.formulas`. An
-agent takes its settings from the preset its `--preset` names (`sdrpeer.tuning`).
+agent takes its settings from the preset its `--preset` names (`sdrpeer.agent_tuning`).
 """
 
 from __future__ import annotations

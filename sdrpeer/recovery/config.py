@@ -4,7 +4,7 @@ Every threshold, sustain time, clearing level, attempt budget, window and dwell 
 system file's `recovery:` section (`sdrpeer.system.model.RecoveryDef`, Table III defaults in
 `sdrpeer.system.recovery_defaults`). What is here is how the engine treats its inputs: how old a
 sample may be and still count, and how long an action is given before its effect is judged. An
-agent takes these from the preset its `--preset` names (`sdrpeer.tuning`).
+agent takes these from the preset its `--preset` names (`sdrpeer.agent_tuning`).
 """
 
 from __future__ import annotations

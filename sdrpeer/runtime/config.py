@@ -1,7 +1,7 @@
 """How a supervisor runs its host, with presets like the other layers' configurations.
 
 Every duration is in seconds. An agent takes these from the preset its `--preset` names
-(`sdrpeer.tuning`), with `data_host` set from its `--bind` address.
+(`sdrpeer.agent_tuning`), with `data_host` set from its `--bind` address.
 """
 
 from __future__ import annotations

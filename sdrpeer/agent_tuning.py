@@ -5,8 +5,9 @@ next to the code that reads them: `sdrpeer.gossip.config`, `sdrpeer.election.con
 `sdrpeer.recovery.config`, `sdrpeer.runtime.config` (the instance supervisors),
 `sdrpeer.deploy.config` (the coordinator) and `sdrpeer.agent_timers` (the agent itself). A
 `Tuning` holds one of each, and a preset of the tree is built one way: the same-named preset of
-every part. The agent's `--preset` (or `preset:` in its config file) names one; the agent hands
-every part its sub-config (`sdrpeer.agent`). Nothing here reads a clock.
+every part. The agent's `--preset` (or `preset:` in its config file) names one of
+`sdrpeer.config.PRESET_NAMES` (the configuration checks names without loading every part); the
+agent hands every part its sub-config (`sdrpeer.agent`). Nothing here reads a clock.
 """
 
 from __future__ import annotations
@@ -82,7 +83,7 @@ def fast_test() -> Tuning:
 
 
 PRESETS: dict[str, Callable[[], Tuning]] = {"lan": lan, "fast_test": fast_test}
-"""Every preset of the tree, by the name `--preset` takes."""
+"""Every preset of the tree, by the name `--preset` takes (`sdrpeer.config.PRESET_NAMES`)."""
 
 
 def preset(name: str) -> Tuning:

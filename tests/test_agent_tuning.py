@@ -13,11 +13,12 @@ from typing import Any
 
 import pytest
 
-from sdrpeer import agent_timers, tuning
+from sdrpeer import agent_timers
+from sdrpeer import agent_tuning as tuning
 from sdrpeer.agent import Agent
 from sdrpeer.agent_cli import add_agent_parser, agent_flag_values
 from sdrpeer.cli import build_parser
-from sdrpeer.config import build_config
+from sdrpeer.config import PRESET_NAMES, build_config
 from sdrpeer.deploy import config as deploy
 from sdrpeer.election import config as election
 from sdrpeer.gossip import config as gossip
@@ -35,6 +36,10 @@ PARTS = {
 }
 """Each sub-config of the tree and the module that declares it (and its presets)."""
 SDRPEER = Path(tuning.__file__).parent
+
+
+def test_the_presets_are_the_names_the_configuration_takes() -> None:
+    assert tuple(tuning.PRESETS) == PRESET_NAMES
 
 
 def test_the_tree_has_one_sub_config_per_part() -> None:
