@@ -16,11 +16,13 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.errors import ConfigError
-from sdrpeer.gossip.config import PRESETS
 from sdrpeer.launch.policy import DEFAULT_TARGETS, LaunchPolicy
 from sdrpeer.record.limits import check_int
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
+PRESET_NAMES = ("lan", "fast_test")
+"""The presets `--preset` takes: each names one tree of every timer and size of the agent and its
+parts (`sdrpeer.agent.tuning.PRESETS`, which builds one for each of these names)."""
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("text", "json")
 NO_KEY_MESSAGE = (
@@ -57,7 +59,8 @@ class AgentConfig:
     token_file: Path | None = None
     """API bearer token file; None = the agent generates one into data_dir/token (mode 0600)."""
     preset: str = "lan"
-    """Gossip tuning preset: lan or fast_test."""
+    """The preset of every timer and size of the agent and its parts (`sdrpeer.agent.tuning`):
+    lan (robots on one Wi-Fi network) or fast_test (loopback tests and the local lab)."""
     data_dir: Path = Path("~/.local/share/sdrpeer/{name}")
     """Directory for the token, agent.json and logs; `~` and `{name}` are expanded."""
     metrics_interval: float = 1.0
@@ -293,8 +296,9 @@ def _validate(values: dict[str, Any], origin: dict[str, str]) -> None:
     for pattern in values.get("allow_targets", ()):
         if not pattern.strip():
             raise fail("allow_targets", "a pattern must not be empty")
-    if "preset" in values and values["preset"] not in PRESETS:
-        raise fail("preset", f"unknown preset {values['preset']!r} (known: {', '.join(PRESETS)})")
+    if "preset" in values and values["preset"] not in PRESET_NAMES:
+        names = ", ".join(PRESET_NAMES)
+        raise fail("preset", f"unknown preset {values['preset']!r} (known: {names})")
     if "log_level" in values and values["log_level"] not in LOG_LEVELS:
         raise fail("log_level", f"must be one of {', '.join(LOG_LEVELS)}")
     if "log_format" in values and values["log_format"] not in LOG_FORMATS:

@@ -196,6 +196,13 @@ def test_file_validation_error_names_file_and_line(tmp_path: Path) -> None:
     )
 
 
+def test_an_unknown_preset_in_a_file_names_file_line_and_field(tmp_path: Path) -> None:
+    path = write(tmp_path, "name: robot-1\ninsecure: true\npreset: wan\n")
+    with pytest.raises(ConfigError) as info:
+        build_config(load_agent_config(path), {})
+    assert str(info.value) == f"{path}:3: preset: unknown preset 'wan' (known: lan, fast_test)"
+
+
 def test_refuses_without_key_unless_insecure(key: Path) -> None:
     with pytest.raises(ConfigError) as info:
         build_config(None, {"name": "robot-1"})

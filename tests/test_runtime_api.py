@@ -14,8 +14,8 @@ from aiohttp.test_utils import TestClient, TestServer
 
 from sdrpeer.api.app import build_app
 from sdrpeer.launch.policy import LaunchPolicy
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.supervisor import SupervisorConfig
 
 TOKEN = "tok"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -54,9 +54,7 @@ def fake(name: str, *conns: dict[str, Any], mode: str = "") -> dict[str, Any]:
 
 @pytest.fixture
 async def setup(tmp_path: Path) -> AsyncIterator[tuple[TestClient[Any, Any], InstanceManager]]:
-    manager = InstanceManager(
-        tmp_path, SupervisorConfig.fast_test(), interval=0.1, policy=WITH_EXEC
-    )
+    manager = InstanceManager(tmp_path, supervisor_fast(), interval=0.1, policy=WITH_EXEC)
     await manager.start()
     client = TestClient(TestServer(build_app(View(manager), token=TOKEN)))
     await client.start_server()

@@ -18,8 +18,10 @@ from sdrpeer.errors import CommandError
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.monitor.procstats import ProcessTreeMeter
 from sdrpeer.runtime.backoff import RestartConfig
+from sdrpeer.runtime.config import SupervisorConfig
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.spec import InstanceSpec
-from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+from sdrpeer.runtime.supervisor import Supervisor
 
 FAKE_HOST = str(Path(__file__).with_name("fake_host.py"))
 WAIT = 10.0
@@ -48,7 +50,7 @@ async def sups(tmp_path: Path) -> AsyncIterator[Callable[..., Supervisor]]:
     made: list[Supervisor] = []
 
     def make(spec: InstanceSpec, config: SupervisorConfig | None = None) -> Supervisor:
-        sup = Supervisor(spec, tmp_path, config or SupervisorConfig.fast_test())
+        sup = Supervisor(spec, tmp_path, config or supervisor_fast())
         made.append(sup)
         return sup
 
@@ -110,7 +112,7 @@ async def test_fast_failures_give_up_then_restart_tries_again(sups):
     spec = InstanceSpec.from_json(
         {"name": "Bad", "launcher": "exec", "target": [sys.executable, "-c", "exit(3)"]}
     )
-    config = replace(SupervisorConfig.fast_test(), restart=RestartConfig(0.01, 2, 0.05, 5, 3))
+    config = replace(supervisor_fast(), restart=RestartConfig(0.01, 2, 0.05, 5, 3))
     sup = sups(spec, config)
     sup.start()
     await until("FAILED", lambda: sup.state == "FAILED")
@@ -122,7 +124,7 @@ async def test_fast_failures_give_up_then_restart_tries_again(sups):
 
 async def test_missing_executable_fails(sups):
     spec = InstanceSpec.from_json({"name": "X", "launcher": "exec", "target": ["/nonexistent/x"]})
-    config = replace(SupervisorConfig.fast_test(), restart=RestartConfig(0.01, 2, 0.05, 5, 2))
+    config = replace(supervisor_fast(), restart=RestartConfig(0.01, 2, 0.05, 5, 2))
     sup = sups(spec, config)
     sup.start()
     await until("FAILED", lambda: sup.state == "FAILED")
@@ -134,7 +136,7 @@ async def test_missing_executable_fails(sups):
 )
 async def test_graceful_stop_escalates(sups, mode, code):
     # a host that obeys gets 10 s (a loaded machine is slow to exit); the others 1 s per step
-    config = SupervisorConfig.fast_test()
+    config = supervisor_fast()
     if code == 0:
         config = replace(config, exit_timeout=10.0, term_timeout=10.0)
     sup = sups(fake(mode=mode), config)
@@ -164,7 +166,7 @@ async def test_protocol_error_kills_and_restarts(sups):
 
 
 async def test_no_hello_is_killed(sups):
-    config = replace(SupervisorConfig.fast_test(), hello_timeout=0.3)
+    config = replace(supervisor_fast(), hello_timeout=0.3)
     sup = sups(fake(mode="no_hello"), config)
     sup.start()
     await until("a kill", lambda: sup.last_exit is not None)
@@ -231,9 +233,7 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
         return proc
 
     monkeypatch.setattr(asyncio, "create_subprocess_exec", slow)
-    manager = InstanceManager(
-        tmp_path, SupervisorConfig.fast_test(), interval=0.02, policy=WITH_EXEC
-    )
+    manager = InstanceManager(tmp_path, supervisor_fast(), interval=0.02, policy=WITH_EXEC)
     await manager.start()
     try:
         manager.set_desired([fake("A")])
@@ -258,7 +258,7 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
 async def watched(sups, seen: list[str]):
     """A fake host beating every 0.1 s under a 0.6 s watchdog, initialized and heard from once;
     its problems' causes go to `seen`."""
-    sup = sups(fake(heartbeat=0.1), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.6))
+    sup = sups(fake(heartbeat=0.1), replace(supervisor_fast(), heartbeat_timeout=0.6))
     sup.on_problem = lambda s, cause: seen.append(cause)
     sup.start()
     await until("INACTIVE", lambda: sup.state == "INACTIVE")
@@ -302,7 +302,7 @@ async def test_a_stall_of_the_agents_own_loop_does_not_make_its_hosts_hung(sups)
 
 async def test_a_watchdog_of_zero_never_fires_and_an_instance_value_wins(sups):
     spec = replace(fake("Off"), watchdog_s=0.0)
-    sup = sups(spec, replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.5))
+    sup = sups(spec, replace(supervisor_fast(), heartbeat_timeout=0.5))
     sup.start()
     await until("INACTIVE", lambda: sup.state == "INACTIVE")
     assert sup.silence_limit() == 0
@@ -321,7 +321,7 @@ async def test_a_watchdog_of_zero_never_fires_and_an_instance_value_wins(sups):
 
 
 async def test_a_host_still_initializing_has_the_hello_timeout_not_the_heartbeat_deadline(sups):
-    sup = sups(fake(heartbeat=0.1), replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.5))
+    sup = sups(fake(heartbeat=0.1), replace(supervisor_fast(), heartbeat_timeout=0.5))
     assert sup.silence_limit() == sup.config.hello_timeout  # not yet initialized
     sup.start()
     await until("INACTIVE", lambda: sup.state == "INACTIVE")
@@ -333,7 +333,7 @@ async def test_a_long_lifecycle_call_is_not_hung(sups):
     watchdog waits for the command (its own timeout applies), then counts again."""
     sup = sups(
         fake(mode="slow_activate", heartbeat=0.1),
-        replace(SupervisorConfig.fast_test(), heartbeat_timeout=0.5),
+        replace(supervisor_fast(), heartbeat_timeout=0.5),
     )
     sup.start()
     await until("INACTIVE", lambda: sup.state == "INACTIVE")

@@ -15,9 +15,9 @@ from typing import Any
 
 import pytest
 
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.spec import InstanceSpec
-from sdrpeer.runtime.supervisor import SupervisorConfig
 from sdrpeer.sdk import (
     FAULT_EFFECTS,
     FAULT_KINDS,
@@ -281,7 +281,7 @@ async def managed(tmp_path: Path) -> AsyncIterator[tuple[InstanceManager, Seen]]
     seen = Seen()
     manager = InstanceManager(
         tmp_path,
-        replace(SupervisorConfig.fast_test(), max_faults=3),
+        replace(supervisor_fast(), max_faults=3),
         interval=0.1,
         on_fault=seen.fault,
         on_instance_problem=seen.problem,

@@ -18,8 +18,8 @@ from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.coordinator import Coordinator
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.eventlog import EventLog
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.supervisor import SupervisorConfig
 from tests.realnet import RealCluster
 from tests.test_recovery_e2e import deploy
 
@@ -29,7 +29,7 @@ async def coordinator_with(
 ) -> tuple[Coordinator, InstanceManager]:
     """robot-1's coordinator on fast ticks, with a started instance manager, seeing `state`
     (default: no robot); the caller stops both."""
-    manager = InstanceManager(tmp_path / "m", SupervisorConfig.fast_test(), interval=0.05)
+    manager = InstanceManager(tmp_path / "m", supervisor_fast(), interval=0.05)
     await manager.start()
     seen = state if state is not None else ClusterState({})
     coordinator = Coordinator(
@@ -79,24 +79,29 @@ components:
 
 
 @pytest.mark.realnet
-def test_an_agent_whose_host_will_not_stop_exits_within_its_deadline(
-    cluster: RealCluster, tmp_path: Path
-) -> None:
-    """A component that ignores the exit request (its on_finalize never returns): SIGTERM to the
-    agent still ends it within the stop deadline (2.5 s, plus the interpreter's exit); the log
-    says what it waited for, and no host outlives it."""
-    agent = cluster.start_many(1)[0]
-    path = tmp_path / "stuck.yaml"
-    path.write_text(HANGS_ON_FINALIZE)
-    deploy(cluster, agent, path)  # waits until it is ACTIVE
-    host = psutil.Process(int({i["name"]: i for i in agent.get("/v1/instances")}["Stuck"]["pid"]))
-    began = time.monotonic()
-    os.kill(agent.pid, signal.SIGTERM)
-    rc = agent.proc.wait(timeout=10)
-    took = time.monotonic() - began
-    assert rc == 1, "an overdue stop exits with 1"
-    assert took < 20.0, f"{took:.1f} s"  # 2.5 s deadline, then exit 1 (below); generous on load
-    log = agent.log.read_text()
-    assert "stop still waiting for the component hosts" in log, log[-2000:]
-    host_gone = not host.is_running() or host.status() == psutil.STATUS_ZOMBIE
-    assert host_gone, "the host outlived its agent"
+def test_an_agent_whose_host_will_not_stop_exits_within_its_deadline(tmp_path: Path) -> None:
+    """A component that ignores the exit request (its on_finalize never returns) and SIGTERM:
+    SIGTERM to the agent still ends it within the stop deadline (2.5 s, plus the interpreter's
+    exit); the log says what it waited for, and no host outlives it. The `lan` preset: its
+    supervisor would wait 5 s for the exit, then 3 s for SIGTERM, before its SIGKILL (`fast_test`
+    kills the host after 2 s, within the deadline)."""
+    cluster = RealCluster(tmp_path / "net", preset="lan")
+    try:
+        agent = cluster.start_many(1)[0]
+        path = tmp_path / "stuck.yaml"
+        path.write_text(HANGS_ON_FINALIZE)
+        deploy(cluster, agent, path)  # waits until it is ACTIVE
+        instances = {i["name"]: i for i in agent.get("/v1/instances")}
+        host = psutil.Process(int(instances["Stuck"]["pid"]))
+        began = time.monotonic()
+        os.kill(agent.pid, signal.SIGTERM)
+        rc = agent.proc.wait(timeout=10)
+        took = time.monotonic() - began
+        assert rc == 1, "an overdue stop exits with 1"
+        assert took < 20.0, f"{took:.1f} s"  # 2.5 s deadline, then exit 1 (below); generous on load
+        log = agent.log.read_text()
+        assert "stop still waiting for the component hosts" in log, log[-2000:]
+        host_gone = not host.is_running() or host.status() == psutil.STATUS_ZOMBIE
+        assert host_gone, "the host outlived its agent"
+    finally:
+        cluster.close()

@@ -21,8 +21,10 @@ from components.position_estimation import Estimator, PositionEstimation
 from components.red_controller import Odometry, REDController
 from sdrpeer.control.parts import PART_SIZE, PartAssembler, parts
 from sdrpeer.errors import CommandError, PartError, StateError
+from sdrpeer.runtime.config import SupervisorConfig
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.spec import InstanceSpec
-from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+from sdrpeer.runtime.supervisor import Supervisor
 from sdrpeer.sdk import (
     CallbackError,
     Component,
@@ -291,7 +293,7 @@ async def sups(tmp_path: Path) -> AsyncIterator[Callable[..., Supervisor]]:
     made: list[Supervisor] = []
 
     def make(spec: InstanceSpec, config: SupervisorConfig | None = None) -> Supervisor:
-        sup = Supervisor(spec, tmp_path, config or SupervisorConfig.fast_test())
+        sup = Supervisor(spec, tmp_path, config or supervisor_fast())
         made.append(sup)
         sup.start()
         return sup
@@ -363,7 +365,7 @@ async def test_a_running_position_estimation_migrates_with_its_pose(sups: Any) -
 
 
 async def test_a_big_state_travels_in_parts_and_an_oversized_one_is_refused(sups: Any) -> None:
-    config = replace(SupervisorConfig.fast_test(), max_state=3 << 20)
+    config = replace(supervisor_fast(), max_state=3 << 20)
     big = sups(fixture_spec("Big", "Hoarder", kb=2500), config)  # 2.5 MiB: ten parts
     huge = sups(fixture_spec("Huge", "Hoarder", kb=4096), config)  # 4 MiB: over the limit
     other = sups(fixture_spec("Other", "Hoarder", kb=1), config)

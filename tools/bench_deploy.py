@@ -14,7 +14,7 @@ record shows its memory free again. With `reserve_mb: 500`
 each component really allocates and touches 500 MB on activation (the paper: ~16 s on Raspberry
 Pi 4s). Election: `--kills` times a fresh lab elects an allocator, the allocator's agent is
 SIGKILLed, and the clock stops when every surviving agent names the same new allocator with a
-higher epoch (polled every 10 ms; the agents use the `--preset` gossip tuning).
+higher epoch (polled every 10 ms; the agents use the `--preset` timers).
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=int, default=5, help="deploys per reserve value")
     p.add_argument("--reserve", default="0,500", help="reserve_mb values, comma-separated")
     p.add_argument("--kills", type=int, default=3, help="allocator kills (a fresh lab each)")
-    p.add_argument("--preset", default="lan", help="gossip preset of the agents")
+    p.add_argument("--preset", default="lan", help="timer preset of the agents (lan, fast_test)")
     args = p.parse_args(argv)
     reserves = [int(x) for x in args.reserve.split(",") if x.strip()]
     figures: dict[str, Any] = {"preset": args.preset, "deploy": {}, "election": None}

@@ -20,8 +20,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.spec import InstanceSpec
-from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+from sdrpeer.runtime.supervisor import Supervisor
 
 TARGET_START_S = 0.150
 TARGET_RSS_MB = 25.0
@@ -32,7 +33,7 @@ DEFAULT_TARGET = "components.camera:Camera"
 async def one_run(target: str, data_dir: Path, idle: float) -> tuple[float, int]:
     """(spawn to INACTIVE in seconds, RSS bytes after `idle` s) of one host."""
     spec = InstanceSpec.from_json({"name": "bench", "target": target, "desired": "inactive"})
-    sup = Supervisor(spec, data_dir, SupervisorConfig.fast_test())
+    sup = Supervisor(spec, data_dir, supervisor_fast())
     sup.start()
     try:
         async with asyncio.timeout(15.0):

@@ -3,7 +3,7 @@ elsewhere, with hot and cold standbys, with the allocator off or on the failing 
 
 Usage: python tools/bench_recovery.py [--json out.json] [--runs 20] [--only crash,death,comm]
 
-How it works: every run starts a fresh local lab of three real agents (`lan` gossip preset,
+How it works: every run starts a fresh local lab of three real agents (`lan` preset,
 robot files of 2000MB), deploys examples/paper/system-small.yaml through robot-1 (first_fit
 puts the five actives on robot-1 and one standby of each on another robot; `--standby` hot or
 cold), then breaks robot-1:

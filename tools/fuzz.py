@@ -61,7 +61,7 @@ from sdrpeer.dataplane.frames import (
 )
 from sdrpeer.deploy.handoff_rules import StateMsg
 from sdrpeer.errors import ConfigError, FrameError, ProtocolError, RecordError, WireError
-from sdrpeer.gossip.config import preset
+from sdrpeer.gossip.config import lan
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import RecordChanged
 from sdrpeer.gossip.messages import (
@@ -211,7 +211,7 @@ class GossipSurface:
         self.keyring = Keyring([Keyring.generate()])
         self.sender = Codec("robot-2", self.keyring)
         self.codec = Codec("robot-1", self.keyring)
-        self.core = Membership("robot-1", ("10.0.0.1", 7946), preset("lan"), now=0.0, rng=rng)
+        self.core = Membership("robot-1", ("10.0.0.1", 7946), lan(), now=0.0, rng=rng)
         self.now = 0.0
         self.seq = 1
         record = encode_record(reference_record(peers=3, instances=3))

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from sdrpeer import __version__
 from sdrpeer.agent import files as agent_files
 from sdrpeer.agent.files import load_token, write_agent_json
+from sdrpeer.agent.tuning import Tuning, preset
 from sdrpeer.api.server import BoundedSite, serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
@@ -36,7 +37,6 @@ from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError, RecordError
 from sdrpeer.eventlog import EventLog, RecoveryTally
-from sdrpeer.gossip.config import preset
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import (
     REAPED,
@@ -102,6 +102,8 @@ class Agent:
 
     def __init__(self, config: AgentConfig) -> None:
         self.config = config
+        self.tuning: Tuning = preset(config.preset)
+        """Every timer and size of this agent and its parts: the preset `config.preset` names."""
         self.events = EventLog()
         self.links = LinkTable()
         self.records: dict[str, tuple[int, RobotRecord]] = {}
@@ -129,7 +131,7 @@ class Agent:
         """This robot's latest sample, whatever was published of it."""
         self._state: tuple[RobotRecord | None, ClusterState] | None = None
         """The last cluster state made, with the own sample it was made with (None: stale)."""
-        self.publisher = Publisher()
+        self.publisher = Publisher(min_gap=self.tuning.agent.record_gap)
         self._cpu = Average()
         """The CPU average the record carries (`sdrpeer.monitor.publish.CPU_AVERAGE_S`)."""
         self.record_json: dict[str, tuple[RobotRecord, dict[str, Any]]] = {}
@@ -197,10 +199,10 @@ class Agent:
                 self.scenario = Scenario.load(cfg.scenario, robots=[robot_file], fleet=True)
         else:
             self.host = HostMetrics()
-        gossip_preset = preset(cfg.preset)
+        gossip = self.tuning.gossip
         host, port = parse_hostport(cfg.bind)
         first = agent_files.seq_start(cfg.data_dir, time.time_ns() // 1000)
-        codec = Codec(cfg.name, self.keyring, max_datagram=65000, seq_start=first)
+        codec = Codec(cfg.name, self.keyring, max_datagram=gossip.datagram_limit, seq_start=first)
         if self.keyring is not None:
             codec.clock.offset_ms = self._saved_offset = agent_files.load_clock_offset(cfg.data_dir)
         wall = self.robot.file.wall if self.robot is not None else time.time
@@ -211,7 +213,7 @@ class Agent:
         self.core = Membership(
             cfg.name,
             addr,
-            gossip_preset,
+            gossip,
             now=loop.time(),
             rng=random.Random(),
             first_version=self._versions[0],
@@ -250,12 +252,11 @@ class Agent:
         await asyncio.to_thread(_load_stack)
         from sdrpeer.deploy.coordinator import Coordinator  # noqa: PLC0415 - loaded above
         from sdrpeer.runtime.manager import InstanceManager  # noqa: PLC0415
-        from sdrpeer.runtime.supervisor import SupervisorConfig  # noqa: PLC0415
 
-        config = SupervisorConfig(data_host=parse_hostport(cfg.bind)[0])
+        tuning = self.tuning
         instances = InstanceManager(
             cfg.data_dir,
-            config,
+            tuning.supervisor.with_(data_host=parse_hostport(cfg.bind)[0]),
             lambda: self._publish(force=True),
             on_fault=self._on_fault,
             on_instance_problem=self._on_fault,
@@ -270,6 +271,9 @@ class Agent:
             token=peer_token(self.keyring.signing_key if self.keyring else None),
             events=self.events,
             on_change=lambda: self._publish(force=True),
+            config=tuning.deploy,
+            election=tuning.election,
+            recovery=tuning.recovery,
         )
         self.instances = instances
         await instances.start()
@@ -314,7 +318,7 @@ class Agent:
         if self.shell is not None and self.core is not None and leave:
             self.stopping = "the leave message"
             self.shell.leave()
-            await asyncio.sleep(max(0.3, 3 * self.core.config.gossip_interval))
+            await asyncio.sleep(self.tuning.agent.leave_wait)
         if self._runner is not None:
             self.stopping = "the API server"
             await self._runner.cleanup()

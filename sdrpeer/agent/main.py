@@ -1,12 +1,12 @@
 """`sdrpeer agent`: run one robot's agent as a process until SIGINT or SIGTERM.
 
 How it works: `run_agent` sets up logging and runs `_serve`, which starts the `Agent`, waits for a
-signal and stops it gracefully (leaving the cluster) within `STOP_DEADLINE`; past it, the agent
-SIGKILLs its component hosts and exits anyway, logging what it was waiting for. A second
-SIGINT/SIGTERM does the same at once. The API answers before the deployment stack has loaded; if it
-cannot load, the agent leaves and exits with 2. SIGHUP re-reads the key file
-(`Agent.reload_keys`). Exit codes: 0 after a clean stop, 1 after a forced or overdue one, 2 when
-the agent cannot start (configuration, address in use, key file).
+signal and stops it gracefully (leaving the cluster) within its preset's `stop_deadline`
+(`sdrpeer.agent.timers`); past it, the agent SIGKILLs its component hosts and exits anyway,
+logging what it was waiting for. A second SIGINT/SIGTERM does the same at once. The API answers
+before the deployment stack has loaded; if it cannot load, the agent leaves and exits with 2.
+SIGHUP re-reads the key file (`Agent.reload_keys`). Exit codes: 0 after a clean stop, 1 after a
+forced or overdue one, 2 when the agent cannot start (configuration, address in use, key file).
 """
 
 from __future__ import annotations
@@ -21,10 +21,6 @@ from sdrpeer.config import AgentConfig
 from sdrpeer.errors import ConfigError
 
 log = logging.getLogger("sdrpeer.agent")
-
-STOP_DEADLINE = 2.5
-"""Seconds a graceful stop may take (leave, component hosts' on_finalize, API close); past it the
-agent SIGKILLs its hosts and exits with 1, saying what it was waiting for."""
 
 
 async def _serve(config: AgentConfig) -> int:
@@ -65,9 +61,9 @@ async def _serve(config: AgentConfig) -> int:
     await stop.wait()
     if failed:
         log.error("cannot start the deployment stack: %r", failed[0])
-        await _stop_within(agent, STOP_DEADLINE)
+        await _stop_within(agent, agent.tuning.agent.stop_deadline)
         return 2
-    return await _stop_within(agent, STOP_DEADLINE)
+    return await _stop_within(agent, agent.tuning.agent.stop_deadline)
 
 
 async def _stop_within(agent: Agent, deadline: float) -> int:

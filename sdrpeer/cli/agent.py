@@ -15,9 +15,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.config import FIELDS, LOG_FORMATS, LOG_LEVELS, build_config, load_agent_config
+from sdrpeer.config import (
+    FIELDS,
+    LOG_FORMATS,
+    LOG_LEVELS,
+    PRESET_NAMES,
+    build_config,
+    load_agent_config,
+)
 from sdrpeer.errors import ConfigError
-from sdrpeer.gossip.config import PRESETS
 
 
 def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -55,7 +61,11 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
         help="python targets allowed (shell pattern on package.module:Class; default *); repeat",
     )
     p.add_argument("--token-file", type=Path, metavar="FILE", help="API token (default: generate)")
-    p.add_argument("--preset", choices=sorted(PRESETS), help="gossip tuning (default lan)")
+    p.add_argument(
+        "--preset",
+        choices=PRESET_NAMES,
+        help="every timer's preset: lan (default; robots on Wi-Fi) or fast_test (loopback tests)",
+    )
     p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")
     p.add_argument("--metrics-interval", type=float, metavar="SECONDS", help="metrics period")
     p.add_argument("--priority", type=_priority, metavar="N", help="election priority (default 0)")

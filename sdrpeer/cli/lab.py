@@ -21,6 +21,7 @@ from typing import TextIO
 from sdrpeer.cli.format import format_members, render_table, want_color
 from sdrpeer.cli.netlab import add_fault_parsers
 from sdrpeer.client import AgentClient
+from sdrpeer.config import PRESET_NAMES
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab.files import DEFAULT_DIR, lab_down, lab_status
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
@@ -38,7 +39,7 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     up = lab_sub.add_parser("up", parents=[where], help="start a lab")
     up.add_argument("--robots", type=int, default=3, metavar="N", help="how many (default 3)")
     up.add_argument("--detach", action="store_true", help="leave the agents running and return")
-    up.add_argument("--preset", choices=("fast_test", "lan"), default="fast_test")
+    up.add_argument("--preset", choices=PRESET_NAMES, default="fast_test")
     up.add_argument("--robot-files", type=Path, metavar="DIR", help="robot-K.yaml files")
     up.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for every agent")
     up.add_argument("--seconds", type=float, metavar="S", help="stop after S s (default: Ctrl-C)")

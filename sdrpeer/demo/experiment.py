@@ -5,7 +5,7 @@ How it works:
    robot, three do not, so the five split 2 + 2 + 1 as in Fig. 3); the robot chosen to hold the
    allocator first gets the highest election priority; a scenario file drops robot-1's RSSI from
    about -47 to -55 dBm at `drop_at` seconds after its agent started (paper: 107 s);
-2. a lab of three real agents (`lan` gossip preset) and a `TimelineRecorder` polling them;
+2. a lab of three real agents (`lan` preset) and a `TimelineRecorder` polling them;
 3. the paper's system (examples/paper/system.yaml: five components, `reserve_mb` each, Tables V
    and VI) is deployed through robot-1 (the robot that "first acquires the configuration");
    the clock runs from the deploy request to all five ACTIVE (status polled every 50 ms);

@@ -1,6 +1,7 @@
 """Deployment timers (the coordinator's), with presets like the other layers' configurations.
 
-Every duration is in seconds.
+Every duration is in seconds. An agent takes these from the preset its `--preset` names
+(`sdrpeer.agent.tuning`).
 """
 
 from __future__ import annotations
@@ -52,8 +53,5 @@ def lan() -> DeployConfig:
 
 
 def fast_test() -> DeployConfig:
-    """Loopback tests and the simulator (the `fast_test` gossip preset)."""
+    """Loopback tests and the local lab: so far the `lan` timers."""
     return DeployConfig()
-
-
-PRESETS = {"lan": lan, "fast_test": fast_test}

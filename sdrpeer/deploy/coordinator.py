@@ -87,7 +87,7 @@ class Coordinator:
         self.tick = config.tick
         self.idle_tick = config.idle_tick
         self.local = LocalShell(
-            name, manager, lambda: self.store.plan, self.request_recovery, events
+            name, manager, lambda: self.store.plan, self.request_recovery, events, config=recovery
         )
         """Component faults on this robot (restart here; plan changes through the allocator)."""
         self.health = HealthShell(recovery)

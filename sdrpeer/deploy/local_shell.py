@@ -22,6 +22,7 @@ from typing import Any
 
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
+from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, Exhausted, InstanceLoad
 from sdrpeer.recovery.local import LocalRecovery
 from sdrpeer.runtime.manager import InstanceManager
@@ -43,12 +44,16 @@ class LocalShell:
         plan: Callable[[], Plan | None],
         request: Request,
         events: EventLog,
+        *,
+        config: RecoveryConfig | None = None,
     ) -> None:
         self.robot = robot
         self.manager = manager
         self.plan = plan
         self.request = request
         self.events = events
+        self.config = config or RecoveryConfig()
+        """The engine's staleness and settle time (the agent's preset)."""
         self.engine: LocalRecovery | None = None
         self._bg: set[asyncio.Task[Any]] = set()
 
@@ -60,7 +65,7 @@ class LocalShell:
         if recovery is None:
             self.engine = None
         elif self.engine is None or self.engine.recovery != recovery:
-            self.engine = LocalRecovery(self.robot, recovery)
+            self.engine = LocalRecovery(self.robot, recovery, self.config)
         if self.engine is not None and plan is not None:
             ready = {
                 s["component"]

@@ -6,7 +6,7 @@ which robot is the allocator and what this robot publishes (`ElectionState`, enc
 metrics into eligibility and a coarse health bucket; `rules.py` holds the role table.
 """
 
-from sdrpeer.election.config import ElectionConfig, fast_test, lan, preset
+from sdrpeer.election.config import ElectionConfig, fast_test, lan
 from sdrpeer.election.core import Election
 from sdrpeer.election.events import Elected, ElectionEvent, LeaderChanged, SteppedDown
 from sdrpeer.election.fence import Fence
@@ -43,7 +43,6 @@ __all__ = [
     "fast_test",
     "health_bucket",
     "lan",
-    "preset",
     "rank",
     "state_from_wire",
     "state_to_wire",

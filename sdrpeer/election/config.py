@@ -1,7 +1,8 @@
 """Election settings, with presets.
 
 Every duration is in seconds. The grace period should cover a few gossip rounds: it is how long a
-robot gives each higher-ranked robot to claim the vacant role before it claims it itself.
+robot gives each higher-ranked robot to claim the vacant role before it claims it itself. An agent
+takes its settings from the preset its `--preset` names (`sdrpeer.agent.tuning`).
 """
 
 from __future__ import annotations
@@ -51,15 +52,3 @@ def lan() -> ElectionConfig:
 def fast_test() -> ElectionConfig:
     """Loopback tests and the simulator with the `fast_test` gossip preset (0.05 s rounds)."""
     return ElectionConfig(grace=0.25, startup_grace=0.75, rejoin_grace=1.5)
-
-
-PRESETS = {"lan": lan, "fast_test": fast_test}
-
-
-def preset(name: str) -> ElectionConfig:
-    """The preset called `name` (lan, fast_test)."""
-    try:
-        return PRESETS[name]()
-    except KeyError:
-        known = ", ".join(PRESETS)
-        raise ValueError(f"unknown election preset {name!r} (known: {known})") from None

@@ -1,6 +1,7 @@
 """Membership and dissemination settings, with presets.
 
-Every duration is in seconds. Formulas that use these live in `sdrpeer.gossip.formulas`.
+Every duration is in seconds. Formulas that use these live in `sdrpeer.gossip.formulas`. An
+agent takes its settings from the preset its `--preset` names (`sdrpeer.agent.tuning`).
 """
 
 from __future__ import annotations
@@ -36,8 +37,6 @@ class GossipConfig:
     """Time between gossip rounds (only sent while there is something to spread)."""
     gossip_fanout: int = 4
     """Members each gossip round is sent to."""
-    gossip_to_dead_time: float = 5.0
-    """Dead members still receive gossip for this long (helps them refute quickly)."""
     push_pull_interval: float = 5.0
     """Mean time between full-state exchanges with one random peer (scaled up for large N)."""
     reconnect_time: float = 3600.0
@@ -53,7 +52,13 @@ class GossipConfig:
     awareness_max: int = 8
     """Ceiling of the local-health score; timeouts are scaled by (1 + score)."""
     max_datagram: int = 1400
-    """Largest datagram the core builds, in bytes (Wi-Fi MTU minus headers)."""
+    """Size the core packs its datagrams to, in bytes (Wi-Fi MTU minus headers): updates and
+    full-state chunks are batched under it. One entry bigger than that (a large record) is still
+    sent alone, up to `datagram_limit`."""
+    datagram_limit: int = 65000
+    """Largest datagram sent or accepted at all, in bytes, envelope included (the codec's
+    limit, `sdrpeer.gossip.wire.Codec`): a bigger one is refused as oversized. Near the UDP maximum:
+    a robot must still take a large record that a peer sent alone."""
     packet_overhead: int = 48
     """Bytes the wire envelope adds to every datagram (header, key id, MAC)."""
 
@@ -75,17 +80,5 @@ def fast_test() -> GossipConfig:
         suspicion_mult=3.0,
         gossip_interval=0.05,
         push_pull_interval=1.0,
-        gossip_to_dead_time=2.0,
         dead_reap_time=10.0,
     )
-
-
-PRESETS = {"lan": lan, "fast_test": fast_test}
-
-
-def preset(name: str) -> GossipConfig:
-    """The preset called `name` (lan, fast_test)."""
-    try:
-        return PRESETS[name]()
-    except KeyError:
-        raise ValueError(f"unknown gossip preset {name!r} (known: {', '.join(PRESETS)})") from None

@@ -27,11 +27,6 @@ class RestartConfig:
     max_fast_failures: int = 10
     """Give up (state FAILED) after this many consecutive fast failures."""
 
-    @classmethod
-    def fast_test(cls) -> RestartConfig:
-        """Short delays for tests."""
-        return cls(initial=0.05, maximum=0.4, stable_after=2.0, max_fast_failures=4)
-
 
 def backoff_delay(config: RestartConfig, failures: int) -> float:
     """The delay before restart number `failures` (1-based)."""

@@ -31,9 +31,10 @@ from typing import Any
 from sdrpeer.errors import CommandError, LaunchRefused
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
+from sdrpeer.runtime.config import SupervisorConfig
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec, connection_to_json
-from sdrpeer.runtime.supervisor import Supervisor, SupervisorConfig
+from sdrpeer.runtime.supervisor import Supervisor
 
 log = logging.getLogger(__name__)
 ACTIONS = INSTANCE_ACTIONS

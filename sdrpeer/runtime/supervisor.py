@@ -29,7 +29,6 @@ import subprocess
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,9 +36,10 @@ import psutil
 
 from sdrpeer.errors import CommandError, ConfigError
 from sdrpeer.runtime import problems
-from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
+from sdrpeer.runtime.backoff import RestartPolicy
+from sdrpeer.runtime.config import SupervisorConfig
 from sdrpeer.runtime.control import ControlChannel, Report
-from sdrpeer.runtime.handoff import MAX_STATE, give_state, take_snapshot
+from sdrpeer.runtime.handoff import give_state, take_snapshot
 from sdrpeer.runtime.launch import (
     create_process,
     exit_text,
@@ -58,8 +58,6 @@ log = logging.getLogger(__name__)
 LIFECYCLE = ("activate", "deactivate", "reset", "exit", "restore")
 """Commands whose callbacks may hold the host's loop for a while (the watchdog waits for them,
 up to the command timeout)."""
-_EOF_GRACE = 1.0  # seconds a host may live on after closing its control channel
-_CONFIRM = 0.25  # seconds the watchdog looks again before it kills a silent host
 STOPPED, STARTING, STOPPING, BACKOFF, FAILED = (
     "STOPPED",
     "STARTING",
@@ -67,37 +65,6 @@ STOPPED, STARTING, STOPPING, BACKOFF, FAILED = (
     "BACKOFF",
     "FAILED",
 )
-
-
-@dataclass(frozen=True, slots=True)
-class SupervisorConfig:
-    """How a supervisor runs its host (seconds)."""
-
-    restart: RestartConfig = field(default_factory=RestartConfig)
-    """Restart backoff."""
-    command_timeout: float = 5.0
-    """How long a command waits for its reply."""
-    hello_timeout: float = 15.0
-    """A host that has not said hello this long after spawning is killed."""
-    exit_timeout: float = 5.0
-    """After the exit command, SIGTERM follows this much later."""
-    term_timeout: float = 3.0
-    """After SIGTERM, SIGKILL follows this much later."""
-    data_host: str = "127.0.0.1"
-    """SDRPEER_DATA_HOST: the address hosts bind their TCP data servers to."""
-    max_state: int = MAX_STATE
-    """Bytes a state may take in snapshot/restore (msgpack); bigger ones are refused."""
-    max_faults: int = 16
-    """How many of the last faults an instance keeps (shown in its status)."""
-    heartbeat_timeout: float = 2.0
-    """A host silent this long once initialized (no heartbeat: stopped, deadlocked, stuck in
-    on_execute or in C code) is killed as hung; an instance's `watchdog_s` overrides it (0: off).
-    Hosts send a heartbeat every 0.5 s."""
-
-    @classmethod
-    def fast_test(cls) -> SupervisorConfig:
-        """Short timeouts and backoff for tests."""
-        return cls(RestartConfig.fast_test(), 2.0, 5.0, 1.0, 1.0)
 
 
 class Supervisor:
@@ -399,7 +366,7 @@ class Supervisor:
             self._kill(proc, reason)
         else:  # EOF: the host is most likely exiting; kill it if it lingers
             asyncio.get_running_loop().call_later(
-                _EOF_GRACE, self._kill, proc, "control channel closed by the host"
+                self.config.eof_grace, self._kill, proc, "control channel closed by the host"
             )
 
     # ----------------------------------------------------------------- reports
@@ -448,7 +415,9 @@ class Supervisor:
             # the loop's next turn, after this timer. A host that still says nothing then is hung.
             self._suspect_since = now
             loop = asyncio.get_running_loop()
-            self._watchdog = loop.call_later(_CONFIRM, self._silence_check, proc)
+            self._watchdog = loop.call_later(
+                self.config.watchdog_confirm, self._silence_check, proc
+            )
 
     def _on_state(self, msg: Report) -> None:
         state = str(msg["state"])

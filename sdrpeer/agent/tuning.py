@@ -1,0 +1,94 @@
+"""Every timer and size of an agent as one tree, with its presets (`lan`, `fast_test`).
+
+How it works: each part keeps its own configuration dataclass and presets, declared and documented
+next to the code that reads them: `sdrpeer.gossip.config`, `sdrpeer.election.config`,
+`sdrpeer.recovery.config`, `sdrpeer.runtime.config` (the instance supervisors),
+`sdrpeer.deploy.config` (the coordinator) and `sdrpeer.agent.timers` (the agent itself). A
+`Tuning` holds one of each, and a preset of the tree is built one way: the same-named preset of
+every part. The agent's `--preset` (or `preset:` in its config file) names one of
+`sdrpeer.config.PRESET_NAMES` (the configuration checks names without loading every part); the
+agent hands every part its sub-config (`sdrpeer.agent.agent.Agent`). Nothing here reads a clock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+from sdrpeer.agent import timers as agent_timers
+from sdrpeer.agent.timers import AgentTimers
+from sdrpeer.deploy import config as deploy
+from sdrpeer.deploy.config import DeployConfig
+from sdrpeer.election import config as election
+from sdrpeer.election.config import ElectionConfig
+from sdrpeer.gossip import config as gossip
+from sdrpeer.gossip.config import GossipConfig
+from sdrpeer.recovery import config as recovery
+from sdrpeer.recovery.config import RecoveryConfig
+from sdrpeer.runtime import config as runtime
+from sdrpeer.runtime.config import SupervisorConfig
+
+
+@dataclass(frozen=True, slots=True)
+class Tuning:
+    """One preset of every part's settings. Build it with `preset(name)`."""
+
+    name: str
+    """The preset's name (a key of `PRESETS`)."""
+    gossip: GossipConfig
+    """The SWIM core: probe, suspicion, dissemination and anti-entropy timers, datagram sizes."""
+    election: ElectionConfig
+    """The election core's grace periods (the coordinator's election shell runs it)."""
+    recovery: RecoveryConfig
+    """The recovery cores' sample staleness and settle time (local recovery, robot-wide
+    conditions)."""
+    supervisor: SupervisorConfig
+    """Each component host's supervisor: command, hello, watchdog and stop timeouts, restart
+    backoff (the agent sets `data_host` from its `--bind`)."""
+    deploy: DeployConfig
+    """The coordinator: its step periods, waits and retries."""
+    agent: AgentTimers
+    """The agent itself: record pacing, leaving, stopping."""
+
+    def with_(self, **changes: Any) -> Tuning:
+        """A copy with some sub-configs changed."""
+        return replace(self, **changes)
+
+
+def lan() -> Tuning:
+    """Robots on one Wi-Fi network: every part's `lan()`."""
+    return Tuning(
+        "lan",
+        gossip=gossip.lan(),
+        election=election.lan(),
+        recovery=recovery.lan(),
+        supervisor=runtime.lan(),
+        deploy=deploy.lan(),
+        agent=agent_timers.lan(),
+    )
+
+
+def fast_test() -> Tuning:
+    """Loopback tests and the local lab: every part's `fast_test()`."""
+    return Tuning(
+        "fast_test",
+        gossip=gossip.fast_test(),
+        election=election.fast_test(),
+        recovery=recovery.fast_test(),
+        supervisor=runtime.fast_test(),
+        deploy=deploy.fast_test(),
+        agent=agent_timers.fast_test(),
+    )
+
+
+PRESETS: dict[str, Callable[[], Tuning]] = {"lan": lan, "fast_test": fast_test}
+"""Every preset of the tree, by the name `--preset` takes (`sdrpeer.config.PRESET_NAMES`)."""
+
+
+def preset(name: str) -> Tuning:
+    """The preset called `name`; ValueError names the known ones."""
+    try:
+        return PRESETS[name]()
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r} (known: {', '.join(PRESETS)})") from None
