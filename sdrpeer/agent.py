@@ -45,7 +45,6 @@ from sdrpeer.gossip.events import (
     RecordChanged,
     VitalsChanged,
 )
-from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.monitor.links import LinkTable
 from sdrpeer.monitor.publish import (
@@ -69,7 +68,9 @@ from sdrpeer.record import (
     decode_record,
     decode_vitals,
     metrics_to_json,
+    state_to_wire,
 )
+from sdrpeer.vocabulary import MemberState
 from sdrpeer.wire import Codec, Keyring
 
 if TYPE_CHECKING:
@@ -426,7 +427,7 @@ class Agent:
                     self.name,
                     instance=name,
                     component=comp,
-                    state=state,
+                    state=state_to_wire(state),
                     role=role,
                 )
         for gone in set(self._states) - set(now):
@@ -475,10 +476,9 @@ class Agent:
                 if m.name == self.name:
                     continue
                 others = True
-                what = STATE_NAMES.get(m.state)
-                if what != "left":
+                if m.state != MemberState.LEFT:
                     members.add(m.name)
-                if what in ("alive", "suspect"):
+                if m.state in (MemberState.ALIVE, MemberState.SUSPECT):
                     heard.add(m.name)
                     rec = self.records.get(m.name)
                     if rec is not None:
@@ -565,13 +565,13 @@ class Agent:
         elif event.previous is None:
             kind = "member.join"
         else:
-            kind = "member." + STATE_NAMES[event.state]
+            kind = f"member.{event.state}"
         detail: dict[str, Any] = {
             "addr": f"{event.addr[0]}:{event.addr[1]}",
             "incarnation": event.incarnation,
         }
-        if event.previous is not None and event.previous in STATE_NAMES:
-            detail["previous"] = STATE_NAMES[event.previous]
+        if event.previous is not None:
+            detail["previous"] = event.previous
         self.events.add(wall, kind, event.name, **detail)
         self._wake_coordinator()
         if kind in ("member.dead", "member.suspect", "member.left"):

@@ -11,9 +11,9 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer import __version__
-from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.monitor.links import distance
 from sdrpeer.record import RobotRecord, link_to_json, record_to_json
+from sdrpeer.vocabulary import MemberState
 from sdrpeer.wire import REASONS
 
 if TYPE_CHECKING:
@@ -50,9 +50,9 @@ def members_view(self: Agent) -> list[dict[str, Any]]:
         for peer, link in doc["links"].items():
             d = distance(positions.get(m.name), positions.get(peer))
             link["distance_m"] = None if d is None else round(d, 2)
-        state = STATE_NAMES.get(m.state, str(m.state))
+        state = m.state
         instances = doc.get("instances", [])
-        if state in ("dead", "left"):  # its last record still lists them: they are gone
+        if state in (MemberState.DEAD, MemberState.LEFT):  # its last record lists them: gone
             instances = [{**i, "state": "lost", "last_state": i.get("state")} for i in instances]
         out.append(
             {
@@ -103,9 +103,9 @@ def agent_view(self: Agent) -> dict[str, Any]:
     c = self.shell.counters
     codec = self.shell.codec.counters
     site = self.api_site
-    states = dict.fromkeys(STATE_NAMES.values(), 0)
+    states = dict.fromkeys(MemberState, 0)
     for m in self.core.members():
-        states[STATE_NAMES[m.state]] += 1
+        states[m.state] += 1
     return {
         "name": self.name,
         "addr": f"{self.core.addr[0]}:{self.core.addr[1]}",

@@ -20,10 +20,8 @@ How it works — the rules (h11's `_state.py`: every word defined once, here):
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Final
 
 __all__ = [
-    "LIFECYCLE_STATES",
     "InstanceRole",
     "InstanceState",
     "LifecycleState",
@@ -62,9 +60,6 @@ class ProcessState(StrEnum):
 InstanceState = LifecycleState | ProcessState
 """What an instance's state is: its component's lifecycle while its host runs one, else its
 process's."""
-
-LIFECYCLE_STATES: Final = frozenset(LifecycleState)
-"""The states a host reports (the rest are the supervisor's)."""
 
 
 class InstanceRole(StrEnum):

@@ -16,6 +16,7 @@ from sdrpeer.api.app import build_app
 from sdrpeer.launch_policy import LaunchPolicy
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.runtime.supervisor import SupervisorConfig
+from sdrpeer.vocabulary import LifecycleState
 
 TOKEN = "tok"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -153,8 +154,8 @@ async def test_converge_act_logs_and_remove(setup):
     assert log_a.index("got connect") < log_a.index("got activate")
     infos = manager.infos()
     assert [(i.name, i.state, i.role) for i in infos] == [
-        ("A", "active", "active"),
-        ("B", "active", "active"),
+        ("A", LifecycleState.ACTIVE, "active"),
+        ("B", LifecycleState.ACTIVE, "active"),
     ]
 
     resp = await client.post("/v1/instances/A/deactivate", headers=AUTH)

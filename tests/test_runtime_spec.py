@@ -7,6 +7,7 @@ from typing import Any
 import pytest
 
 from sdrpeer.runtime.spec import InstanceSpec, SpecError
+from sdrpeer.vocabulary import LifecycleState
 
 FULL: dict[str, Any] = {
     "name": "Cam1",
@@ -35,7 +36,12 @@ def test_round_trip():
 
 def test_defaults():
     s = InstanceSpec.from_json({"name": "A", "target": "pkg.mod:Thing"})
-    assert (s.component, s.launcher, s.desired, s.role) == ("Thing", "python", "active", "active")
+    assert (s.component, s.launcher, s.desired, s.role) == (
+        "Thing",
+        "python",
+        LifecycleState.ACTIVE,
+        "active",
+    )
     e = InstanceSpec.from_json({"name": "B", "launcher": "exec", "target": ["/bin/x", "-v"]})
     assert e.target == ("/bin/x", "-v")
     assert e.component == "B"

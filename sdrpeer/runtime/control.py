@@ -32,9 +32,10 @@ from sdrpeer.control_stream import (
     encode,
 )
 from sdrpeer.errors import SdrpeerError
+from sdrpeer.vocabulary import LifecycleState
 
 REPORTS = ("hello", "state", "heartbeat", "fault", "part")
-LIFECYCLE = ("CREATED", "INACTIVE", "ACTIVE", "ERROR", "FINALIZED")
+LIFECYCLE = tuple(LifecycleState)
 _READ = 64 * 1024
 log = logging.getLogger(__name__)
 

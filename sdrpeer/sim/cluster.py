@@ -28,6 +28,7 @@ from sdrpeer.gossip.events import CoreEvent
 from sdrpeer.gossip.messages import Addr, Packet
 from sdrpeer.sim.network import Network
 from sdrpeer.sim.trace import Trace
+from sdrpeer.vocabulary import MemberState
 from sdrpeer.wire import OVERHEAD, packet_body
 
 if TYPE_CHECKING:
@@ -50,7 +51,7 @@ class Core(Protocol):
     def set_record(self, now: float, payload: bytes) -> int: ...
     def broadcast_event(self, now: float, kind: str, payload: bytes) -> None: ...
     def members(self) -> list[MemberInfo]: ...
-    def state_of(self, name: str) -> int | None: ...
+    def state_of(self, name: str) -> MemberState | None: ...
 
 
 CoreFactory = Callable[[str, Addr, GossipConfig, float, random.Random], Core]
