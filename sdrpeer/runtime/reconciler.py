@@ -4,7 +4,8 @@ How it works: `Reconciler.plan(now, desired, observed)` looks at every instance 
 at most one `Action` for each, in name order. Rules, in the order they are tried:
 
 1. An instance with an action in flight gets nothing (until `done(name)`, or `action_timeout`
-   after it was issued, in case the shell lost it). Transient statuses (starting, stopping) too.
+   after it was issued, in case the shell lost it). Transient states (STARTING, BACKOFF, CREATED,
+   STOPPING, FINALIZED) too.
 2. Not desired but running, or FAILED -> stop. Desired and stopped -> start. FAILED stays FAILED
    unless its spec changed (then start: someone fixed it). Running with a spec whose process
    fields (component, launcher, target, params) changed -> stop (the next pass starts it).
