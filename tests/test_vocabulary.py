@@ -17,7 +17,8 @@ The rule the test enforces, module by module (parsed with `ast`, nothing importe
     the judgement call: "error" as the lifecycle event or a fault effect is another concept
     than the ERROR state; "left" as the reason an allocator steps down is not MemberState.LEFT.
 - Allowed everywhere in `CODECS`: the modules that translate between a word and its wire
-  spelling (and the vocabulary itself).
+  spelling (and the vocabulary itself); and in `PENDING`, modules another branch is rewriting,
+  until they are converted.
 """
 
 from __future__ import annotations
@@ -42,11 +43,15 @@ CODECS = {
     "sdrpeer/wire.py": "member states as small ints in packets",
     "sdrpeer/runtime/spec.py": "a spec's `desired` in spec files and the API",
     "sdrpeer/runtime/control.py": "the host's `state` reports",
-    # converted after the deploy-core merge
-    "sdrpeer/deploy/coordinator.py": "converted after the deploy-core merge",
-    "sdrpeer/deploy/allocator_role.py": "converted after the deploy-core merge",
 }
 """Modules that may spell the words (path relative to the repository)."""
+
+PENDING = {
+    # converted after the deploy-core merge
+    "sdrpeer/deploy/coordinator.py": "being rewritten into a sans-IO core on another branch",
+    "sdrpeer/deploy/allocator_role.py": "being rewritten into a sans-IO core on another branch",
+}
+"""Modules not converted yet: allowed while they still spell a word, found once they do not."""
 
 OTHER_MEANINGS: dict[str, dict[str, str]] = {
     "sdrpeer/sdk/lifecycle.py": {"error": "the lifecycle event that leads to ERROR"},
@@ -123,7 +128,7 @@ def offences(root: Path = PACKAGE) -> list[str]:
     found = []
     for path in sorted(root.rglob("*.py")):
         rel = path.relative_to(ROOT).as_posix()
-        if rel in CODECS:
+        if rel in CODECS or rel in PENDING:
             continue
         other = OTHER_MEANINGS.get(rel, {})
         for line, word in spelled_words(path):
@@ -140,8 +145,18 @@ def test_words_are_spelled_only_in_the_vocabulary_and_the_codecs() -> None:
 
 def test_allow_lists_name_existing_modules() -> None:
     """A module renamed or removed must leave the allow-lists too."""
-    for rel in (*CODECS, *OTHER_MEANINGS):
+    for rel in (*CODECS, *PENDING, *OTHER_MEANINGS):
         assert (ROOT / rel).is_file(), rel
+
+
+def test_exceptions_are_still_needed() -> None:
+    """An `OTHER_MEANINGS` word its module no longer spells, or a `PENDING` module converted,
+    leaves its list (the lists stay as short as the code allows)."""
+    stale = [rel for rel in PENDING if not list(spelled_words(ROOT / rel))]
+    for rel, words in OTHER_MEANINGS.items():
+        spelled = {w.lower() for _, w in spelled_words(ROOT / rel)}
+        stale.extend(f"{rel}: {w}" for w in words if w not in spelled)
+    assert not stale, "remove from the allow-lists:\n" + "\n".join(stale)
 
 
 def test_the_rule_tells_fields_from_values(tmp_path: Path) -> None:
