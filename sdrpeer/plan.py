@@ -120,7 +120,7 @@ def plan_from_json(doc: Any) -> Plan:
 
 
 class _UnknownRole(ValueError):
-    pass
+    """A placement names a role this version does not know."""
 
 
 def _role(x: object) -> InstanceRole:
