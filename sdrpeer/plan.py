@@ -13,8 +13,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from sdrpeer.system.model import SystemDef, system_from_json
+from sdrpeer.vocabulary import InstanceRole
 
-ROLES = ("active", "standby")
+_ROLES = {r.value: r for r in InstanceRole}
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,7 +26,7 @@ class Placement:
     instance: str
     """Instance name, unique in the plan (CameraRTC, CameraRTC-s1, ...)."""
     robot: str
-    role: str = "active"
+    role: InstanceRole = InstanceRole.ACTIVE
     """active or standby."""
     mode: str = "hot"
     """For standbys: hot (started, INACTIVE) or cold (placed, launched only when needed)."""
@@ -60,7 +61,7 @@ class Plan:
     def active_of(self, component: str) -> Placement | None:
         """Where the component's active instance is, if placed."""
         for p in self.placements:
-            if p.component == component and p.role == "active":
+            if p.component == component and p.role == InstanceRole.ACTIVE:
                 return p
         return None
 
@@ -72,7 +73,11 @@ class Plan:
         short = {}
         for c in self.system.components:
             want = c.standby.same_robot + c.standby.other_robots
-            have = sum(1 for p in self.placements if p.component == c.name and p.role == "standby")
+            have = sum(
+                1
+                for p in self.placements
+                if p.component == c.name and p.role == InstanceRole.STANDBY
+            )
             if have < want:
                 short[c.name] = want - have
         return short
@@ -96,7 +101,7 @@ def plan_from_json(doc: Any) -> Plan:
     try:
         system = None if doc["system"] is None else system_from_json(doc["system"])
         placements = tuple(
-            Placement(str(c), str(i), str(r), str(role), str(mode))
+            Placement(str(c), str(i), str(r), _role(role), str(mode))
             for c, i, r, role, mode in doc["placements"]
         )
         plan = Plan(
@@ -107,8 +112,20 @@ def plan_from_json(doc: Any) -> Plan:
             allocator=str(doc.get("allocator", "")),
             origins=tuple((str(c), str(r)) for c, r in doc.get("origins", ())),
         )
+    except _UnknownRole:
+        raise ValueError("malformed plan: unknown role") from None
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise ValueError(f"malformed plan: {type(e).__name__}: {e}") from None
-    if any(p.role not in ROLES for p in plan.placements):
-        raise ValueError("malformed plan: unknown role")
     return plan
+
+
+class _UnknownRole(ValueError):
+    """A placement names a role this version does not know."""
+
+
+def _role(x: object) -> InstanceRole:
+    """A placement's role as plans spell it."""
+    role = _ROLES.get(str(x))
+    if role is None:
+        raise _UnknownRole
+    return role

@@ -9,6 +9,7 @@ from sdrpeer.gossip.config import GossipConfig, lan
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import CoreEvent
 from sdrpeer.gossip.messages import Addr, Packet
+from sdrpeer.vocabulary import MemberState
 
 Drop = Callable[[Addr, Addr, Packet], bool]
 
@@ -74,6 +75,6 @@ class Net:
                         self._drain(core)
         self.now = until
 
-    def state(self, viewer: Membership, name: str) -> int | None:
+    def state(self, viewer: Membership, name: str) -> MemberState | None:
         """The state `viewer` holds for `name`."""
         return viewer.state_of(name)

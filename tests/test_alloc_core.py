@@ -25,6 +25,7 @@ from sdrpeer.system.model import (
     SystemDef,
     Thresholds,
 )
+from sdrpeer.vocabulary import LifecycleState, ProcessState
 
 MB = 1000**2
 ROOT = Path(__file__).resolve().parent.parent
@@ -236,8 +237,8 @@ def test_hot_standbys_need_memory_cold_ones_only_battery_and_links():
 
 
 def test_running_standbys_are_reused_and_their_memory_is_not_counted_twice():
-    active = InstanceInfo("A", "A", "active", "active", 5.0, 520 * MB)
-    standby = InstanceInfo("A-s1", "A", "inactive", "standby", 0.5, 510 * MB)
+    active = InstanceInfo("A", "A", LifecycleState.ACTIVE, "active", 5.0, 520 * MB)
+    standby = InstanceInfo("A-s1", "A", LifecycleState.INACTIVE, "standby", 0.5, 510 * MB)
     view = cluster(
         robot("robot-1"),
         robot("robot-2", free=700 * MB, instances=(active,)),  # their memory is already gone
@@ -256,7 +257,7 @@ def test_running_standbys_are_reused_and_their_memory_is_not_counted_twice():
 
 
 def test_a_fresh_deployment_activates_a_running_standby():
-    running = InstanceInfo("A-s1", "A", "inactive", "standby", 0.5, 510 * MB)
+    running = InstanceInfo("A-s1", "A", LifecycleState.INACTIVE, "standby", 0.5, 510 * MB)
     view = cluster(robot("robot-1"), robot("robot-2", free=700 * MB, instances=(running,)))
     system = SystemDef("s", (comp("A", standby=StandbySpec(other_robots=1)),), allocation=TABLE_V)
     result = run(system, view)
@@ -272,7 +273,7 @@ def test_when_the_active_robot_dies_its_running_standby_takes_over():
     system = SystemDef("s", (comp("A", standby=StandbySpec(other_robots=1)),), allocation=TABLE_V)
     first = run(system, three())
     assert where(first) == {"A": "robot-1", "A-s1": "robot-2"}
-    warm = InstanceInfo("A-s1", "A", "inactive", "standby", 0.5, 510 * MB)
+    warm = InstanceInfo("A-s1", "A", LifecycleState.INACTIVE, "standby", 0.5, 510 * MB)
     view = cluster(robot("robot-2", free=1100 * MB, instances=(warm,)), robot("robot-3"))
     result = run(system, view, previous=first.plan)
     assert where(result) == {"A-s1": "robot-2", "A-s2": "robot-3"}
@@ -283,7 +284,7 @@ def test_when_the_active_robot_dies_its_running_standby_takes_over():
 
 
 def test_gone_instances_are_not_reused():
-    failed = InstanceInfo("A", "A", "failed", "active", 0.0, 0)
+    failed = InstanceInfo("A", "A", ProcessState.FAILED, "active", 0.0, 0)
     view = cluster(robot("robot-1"), robot("robot-2", instances=(failed,)))
     assert where(run(SystemDef("s", (comp("A"),)), view)) == {"A": "robot-1"}
 

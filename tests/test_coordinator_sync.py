@@ -20,6 +20,7 @@ from sdrpeer.errors import ApiError
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.loader import parse_system
+from sdrpeer.vocabulary import LifecycleState
 from tests.test_shutdown import coordinator_with
 
 
@@ -87,7 +88,9 @@ async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
         async with asyncio.timeout(60):
             while cnt_state() != "ACTIVE":  # noqa: ASYNC110
                 await asyncio.sleep(0.02)
-        running = InstanceInfo("Cnt", "Cnt", "active", "active", 1.0, 10**7, "tcp://127.0.0.1:7")
+        running = InstanceInfo(
+            "Cnt", "Cnt", LifecycleState.ACTIVE, "active", 1.0, 10**7, "tcp://127.0.0.1:7"
+        )
         state.alive["robot-2"] = replace(
             other, instances=(running,), plan=PlanInfo(2, 1, "d", "robot-2")
         )

@@ -17,6 +17,7 @@ from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.plan import Placement, Plan, plan_from_json
 from sdrpeer.system.loader import load_system
 from sdrpeer.system.model import ComponentDef, ConnectionDef, StandbySpec, StreamsDef, SystemDef
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 
 def _system(cycle: bool = False) -> SystemDef:
@@ -35,8 +36,8 @@ def _system(cycle: bool = False) -> SystemDef:
 
 def _plan(system: SystemDef, where: dict[str, str], **kw: object) -> Plan:
     placements = [Placement(c, c, r) for c, r in where.items()]
-    placements.append(Placement("Cam", "Cam-s1", "r2", "standby", "hot"))
-    placements.append(Placement("Det", "Det-s1", "r2", "standby", "cold"))
+    placements.append(Placement("Cam", "Cam-s1", "r2", InstanceRole.STANDBY, "hot"))
+    placements.append(Placement("Det", "Det-s1", "r2", InstanceRole.STANDBY, "cold"))
     return Plan(epoch=1, version=1, system=system, placements=tuple(placements), allocator="r1")
 
 
@@ -45,7 +46,7 @@ def test_local_connections_resolve_by_the_reconciler() -> None:
     specs = {s.name: s for s in specs_for_robot(plan, "r1", {})}
     assert sorted(specs) == ["Cam", "Ctl", "Det"]
     cam = specs["Cam"]
-    assert cam.desired == "active"
+    assert cam.desired == LifecycleState.ACTIVE
     assert cam.params == (("k", 1),)
     (conn,) = cam.connections
     assert (conn.id, conn.to_instance, conn.in_port, conn.to_addr) == (
@@ -67,15 +68,19 @@ def test_standbys_hot_started_cold_not_and_standbys_do_not_send() -> None:
 def test_a_move_between_alive_robots_is_break_before_make() -> None:
     """Ctl moved from r2 to r1: while r2 still runs its Ctl ACTIVE as the active, r1's waits."""
     plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
-    old = {"Ctl": Remote("r2", "active", "tcp://127.0.0.1:4001", "Ctl", "active")}
+    old = {"Ctl": Remote("r2", LifecycleState.ACTIVE, "tcp://127.0.0.1:4001", "Ctl", "active")}
     assert handover_waits(plan, "r1", old) == {"Ctl"}
     specs = {s.name: s for s in specs_for_robot(plan, "r1", old, hold={"Ctl"})}
-    assert specs["Ctl"].desired == "inactive"
-    assert specs["Cam"].desired == specs["Det"].desired == "active"
+    assert specs["Ctl"].desired == LifecycleState.INACTIVE
+    assert specs["Cam"].desired == specs["Det"].desired == LifecycleState.ACTIVE
     assert handover_waits(plan, "r1", old, active_here={"Ctl"}) == set()  # running: never held
-    stood_down = {"Ctl": Remote("r2", "inactive", "tcp://127.0.0.1:4001", "Ctl", "standby")}
+    stood_down = {
+        "Ctl": Remote("r2", LifecycleState.INACTIVE, "tcp://127.0.0.1:4001", "Ctl", "standby")
+    }
     assert handover_waits(plan, "r1", stood_down) == set()
-    a_standby = {"Ctl-s1": Remote("r2", "active", None, "Ctl", "standby")}  # not the active
+    a_standby = {
+        "Ctl-s1": Remote("r2", LifecycleState.ACTIVE, None, "Ctl", "standby")
+    }  # not the active
     assert handover_waits(plan, "r1", a_standby) == set()
     assert handover_waits(plan, "r2", old) == set()  # r2 places no active
 
@@ -84,15 +89,15 @@ def test_the_old_side_of_a_heal_yields_to_a_newer_plans_running_copy() -> None:
     """r1 still runs Ctl ACTIVE under its old plan; r2, holding a newer plan, runs Ctl ACTIVE as
     its active: r1 stands its copy down (held INACTIVE although it runs) before it has the plan."""
     plan = _plan(_system(), {"Cam": "r1", "Det": "r1", "Ctl": "r1"})
-    new = {"Ctl": Remote("r2", "active", "tcp://127.0.0.1:4001", "Ctl", "active")}
+    new = {"Ctl": Remote("r2", LifecycleState.ACTIVE, "tcp://127.0.0.1:4001", "Ctl", "active")}
     assert superseded(plan, "r1", new, newer={"r2"}) == {"Ctl"}
     specs = {s.name: s for s in specs_for_robot(plan, "r1", new, active_here={"Ctl"}, hold={"Ctl"})}
-    assert specs["Ctl"].desired == "inactive"
-    assert specs["Cam"].desired == "active"
+    assert specs["Ctl"].desired == LifecycleState.INACTIVE
+    assert specs["Cam"].desired == LifecycleState.ACTIVE
     assert superseded(plan, "r1", new, newer=set()) == set()  # r2's plan is not newer: r1 keeps it
-    held = {"Ctl": Remote("r2", "inactive", "tcp://127.0.0.1:4001", "Ctl", "active")}
+    held = {"Ctl": Remote("r2", LifecycleState.INACTIVE, "tcp://127.0.0.1:4001", "Ctl", "active")}
     assert superseded(plan, "r1", held, newer={"r2"}) == set()  # r2's copy waits: a handover
-    spare = {"Ctl-s1": Remote("r2", "active", None, "Ctl", "standby")}
+    spare = {"Ctl-s1": Remote("r2", LifecycleState.ACTIVE, None, "Ctl", "standby")}
     assert superseded(plan, "r1", spare, newer={"r2"}) == set()  # a standby is not the active
     assert superseded(plan, "r2", new, newer={"r2"}) == set()  # never yields to itself
 
@@ -119,31 +124,31 @@ def test_remote_receiver_waits_for_address_then_for_active() -> None:
     plan = _plan(_system(), {"Cam": "r1", "Det": "r2", "Ctl": "r2"})
     (cam,) = specs_for_robot(plan, "r1", {})
     assert [(c.to_instance, c.to_addr, c.pending) for c in cam.connections] == [("Det", None, True)]
-    assert cam.desired == "inactive"
-    started = {"Det": Remote("r2", "inactive", "tcp://127.0.0.1:4000")}
+    assert cam.desired == LifecycleState.INACTIVE
+    started = {"Det": Remote("r2", LifecycleState.INACTIVE, "tcp://127.0.0.1:4000")}
     (cam,) = specs_for_robot(plan, "r1", started)
     assert cam.connections[0].to_addr == "tcp://127.0.0.1:4000"
-    assert cam.desired == "inactive"  # receiver not ACTIVE yet
-    active = {"Det": Remote("r2", "active", "tcp://127.0.0.1:4000")}
+    assert cam.desired == LifecycleState.INACTIVE  # receiver not ACTIVE yet
+    active = {"Det": Remote("r2", LifecycleState.ACTIVE, "tcp://127.0.0.1:4000")}
     (cam,) = specs_for_robot(plan, "r1", active)
-    assert cam.desired == "active"
+    assert cam.desired == LifecycleState.ACTIVE
 
 
 def test_running_sender_is_not_held_back_when_receiver_moves() -> None:
     plan = _plan(_system(), {"Cam": "r1", "Det": "r3", "Ctl": "r3"})
-    stale = {"Det": Remote("r2", "active", "tcp://127.0.0.1:4000")}  # old robot
+    stale = {"Det": Remote("r2", LifecycleState.ACTIVE, "tcp://127.0.0.1:4000")}  # old robot
     (cam,) = specs_for_robot(plan, "r1", stale, active_here={"Cam"})
     assert [c.pending for c in cam.connections] == [True]  # kept as made until Det is known
-    assert cam.desired == "active"
+    assert cam.desired == LifecycleState.ACTIVE
 
 
 def test_cycle_across_robots_does_not_deadlock() -> None:
     system = _system(cycle=True)
     assert "Det" in reachable(system)["Det"]
     plan = _plan(system, {"Cam": "r1", "Det": "r1", "Ctl": "r2"})
-    remote = {"Ctl": Remote("r2", "inactive", "tcp://127.0.0.1:4001")}
+    remote = {"Ctl": Remote("r2", LifecycleState.INACTIVE, "tcp://127.0.0.1:4001")}
     specs = {s.name: s for s in specs_for_robot(plan, "r1", remote)}
-    assert specs["Det"].desired == "active"
+    assert specs["Det"].desired == LifecycleState.ACTIVE
 
 
 def test_undeployed_plan_hosts_nothing() -> None:

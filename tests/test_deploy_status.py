@@ -7,6 +7,7 @@ from sdrpeer.deploy.status import SinceTracker, all_active, status_doc
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.model import ComponentDef, SystemDef
+from sdrpeer.vocabulary import InstanceRole
 
 SYSTEM = SystemDef(
     name="s",
@@ -21,8 +22,8 @@ PLAN = Plan(
     SYSTEM,
     (
         Placement("A", "A", "r1"),
-        Placement("A", "A-s1", "r2", "standby", "hot"),
-        Placement("A", "A-s2", "r2", "standby", "cold"),
+        Placement("A", "A-s1", "r2", InstanceRole.STANDBY, "hot"),
+        Placement("A", "A-s2", "r2", InstanceRole.STANDBY, "cold"),
         Placement("B", "B", "r2"),
     ),
     "r1",

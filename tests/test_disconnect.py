@@ -16,6 +16,7 @@ from sdrpeer.errors import ConfigError
 from sdrpeer.plan import Placement, Plan, plan_from_json
 from sdrpeer.system.loader import parse_system
 from sdrpeer.system.model import DisconnectSpec, StandbySpec, SystemDef, system_from_json
+from sdrpeer.vocabulary import InstanceRole
 from tests.test_alloc_core import TABLE_V, comp, robot
 
 # -- quorum ----------------------------------------------------------------------------------
@@ -44,7 +45,7 @@ def test_a_fleet_of_one_and_robots_heard_beyond_the_table_count():
 
 def plan_on(*robots: str) -> Plan:
     placements = tuple(
-        Placement(f"C{k}", f"C{k}", r, "active", "hot") for k, r in enumerate(robots)
+        Placement(f"C{k}", f"C{k}", r, InstanceRole.ACTIVE, "hot") for k, r in enumerate(robots)
     )
     return Plan(4, 2, None, placements, "robot-1")
 
@@ -103,8 +104,8 @@ def test_back_in_touch_it_keeps_them_down_until_it_has_caught_up_with_the_plan()
 def two_components(a: DisconnectSpec, b: DisconnectSpec) -> Plan:
     system = SystemDef("s", (comp("A", disconnect=a), comp("B", disconnect=b)), allocation=TABLE_V)
     placements = (
-        Placement("A", "A", "robot-2", "active", "hot"),
-        Placement("B", "B", "robot-2", "active", "hot"),
+        Placement("A", "A", "robot-2", InstanceRole.ACTIVE, "hot"),
+        Placement("B", "B", "robot-2", InstanceRole.ACTIVE, "hot"),
     )
     return Plan(1, 1, system, placements, "robot-1")
 

@@ -30,6 +30,7 @@ from sdrpeer.gossip.messages import (
     Sync,
     Update,
 )
+from sdrpeer.vocabulary import MemberState
 from tests.gossip_net import Net, addr
 
 PEERS = [f"r{i}" for i in range(1, 10)]
@@ -81,7 +82,7 @@ def with_peers(now: float = 0.0) -> Membership:
     return core
 
 
-def states(core: Membership) -> dict[str, int]:
+def states(core: Membership) -> dict[str, MemberState]:
     return {m.name: m.state for m in core.members()}
 
 

@@ -19,6 +19,7 @@ from sdrpeer.deploy.handoff_rules import (
 )
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.system.model import ComponentDef, StandbySpec, SystemDef
+from sdrpeer.vocabulary import InstanceRole
 
 EST = ComponentDef(
     "Est", "python", "m:Est", standby=StandbySpec(other_robots=2, mode="hot", sync_s=1.0)
@@ -32,10 +33,10 @@ PLAN = Plan(
     allocator="r2",
     placements=(
         Placement("Est", "Est", "r1"),
-        Placement("Est", "Est-s1", "r2", "standby", "hot"),
-        Placement("Est", "Est-s2", "r3", "standby", "cold"),
+        Placement("Est", "Est-s1", "r2", InstanceRole.STANDBY, "hot"),
+        Placement("Est", "Est-s2", "r3", InstanceRole.STANDBY, "cold"),
         Placement("Cam", "Cam", "r1"),
-        Placement("Cam", "Cam-s1", "r2", "standby", "hot"),
+        Placement("Cam", "Cam-s1", "r2", InstanceRole.STANDBY, "hot"),
     ),
 )
 KEY = PLAN.key
@@ -44,9 +45,9 @@ MOVED = replace(  # Est-s1 took over on r2 (recovery); a new standby on r3
     version=8,
     placements=(
         Placement("Est", "Est-s1", "r2"),
-        Placement("Est", "Est-s3", "r3", "standby", "hot"),
+        Placement("Est", "Est-s3", "r3", InstanceRole.STANDBY, "hot"),
         Placement("Cam", "Cam", "r1"),
-        Placement("Cam", "Cam-s1", "r2", "standby", "hot"),
+        Placement("Cam", "Cam-s1", "r2", InstanceRole.STANDBY, "hot"),
     ),
 )
 

@@ -14,6 +14,7 @@ from sdrpeer.deploy.move import move_inputs
 from sdrpeer.errors import MoveError
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.system.loader import parse_system
+from sdrpeer.vocabulary import InstanceRole
 from tests.realnet import RealCluster, http
 from tests.test_recovery_e2e import deploy, status
 
@@ -23,9 +24,9 @@ def plan_with(placements: tuple[Placement, ...], *, standby: bool = False) -> Pl
     return Plan(1, 1, system, placements, "robot-1")
 
 
-SEQ = Placement("Sequencer", "Sequencer", "robot-1", "active", "hot")
-LEDGER = Placement("Ledger", "Ledger", "robot-2", "active", "hot")
-STANDBY = Placement("Ledger", "Ledger-s1", "robot-3", "standby", "hot")
+SEQ = Placement("Sequencer", "Sequencer", "robot-1", InstanceRole.ACTIVE, "hot")
+LEDGER = Placement("Ledger", "Ledger", "robot-2", InstanceRole.ACTIVE, "hot")
+STANDBY = Placement("Ledger", "Ledger-s1", "robot-3", InstanceRole.STANDBY, "hot")
 ALIVE = ("robot-1", "robot-2", "robot-3")
 
 
@@ -42,7 +43,7 @@ def test_a_move_to_a_robot_pins_the_component_there_for_one_allocation() -> None
 def test_a_move_onto_the_robot_of_a_standby_promotes_it() -> None:
     plan = plan_with((SEQ, LEDGER, STANDBY), standby=True)
     inputs = move_inputs(plan, "Ledger", "robot-3", ALIVE)
-    assert inputs.previous.active_of("Ledger") == replace(STANDBY, role="active")
+    assert inputs.previous.active_of("Ledger") == replace(STANDBY, role=InstanceRole.ACTIVE)
 
 
 def test_a_move_without_a_destination_avoids_the_current_robot() -> None:

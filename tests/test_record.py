@@ -33,6 +33,7 @@ from sdrpeer.record.robot import (
     reference_record,
     vitals_of,
 )
+from sdrpeer.vocabulary import LifecycleState
 
 
 def big_record() -> RobotRecord:
@@ -59,7 +60,7 @@ def test_round_trip_rounds_to_the_grid() -> None:
         "AnomalyDetectionRTC2",
         "CameraRTC3",
     ]
-    assert r.instances[1].state == "active"
+    assert r.instances[1].state == LifecycleState.ACTIVE
     assert r.instances[9].role == "standby"
     assert r.instances[0].rss == round(512_000_000 / 1024) * 1024
     assert r.api == "http://192.168.10.11:8080"

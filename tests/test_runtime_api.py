@@ -16,6 +16,7 @@ from sdrpeer.api.app import build_app
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.vocabulary import LifecycleState
 
 TOKEN = "tok"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -151,8 +152,8 @@ async def test_converge_act_logs_and_remove(setup):
     assert log_a.index("got connect") < log_a.index("got activate")
     infos = manager.infos()
     assert [(i.name, i.state, i.role) for i in infos] == [
-        ("A", "active", "active"),
-        ("B", "active", "active"),
+        ("A", LifecycleState.ACTIVE, "active"),
+        ("B", LifecycleState.ACTIVE, "active"),
     ]
 
     resp = await client.post("/v1/instances/A/deactivate", headers=AUTH)

@@ -9,6 +9,7 @@ import pytest
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy, backoff_delay
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
+from sdrpeer.vocabulary import LifecycleState, ProcessState
 
 CAM_TO_VIEW = ConnectionSpec("c1", "image", "View", "image")
 
@@ -22,10 +23,13 @@ VIEW = spec("View")
 ADDR = "unix:///run/view.sock"
 
 
+STATES = {s.value: s for s in (*LifecycleState, *ProcessState)}
+
+
 def obs(
     status: str, s: InstanceSpec | None = None, addr: str | None = None, **conns: Any
 ) -> Observed:
-    return Observed(status, s, addr, conns)
+    return Observed(STATES[status], s, addr, conns)
 
 
 def kinds(actions: list[Action]) -> list[tuple[str, str]]:
@@ -35,7 +39,7 @@ def kinds(actions: list[Action]) -> list[tuple[str, str]]:
 CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[str, str]]]] = [
     ("nothing to do", {}, {}, []),
     ("start what is missing", {"View": VIEW}, {}, [("start", "View")]),
-    ("wait while starting", {"View": VIEW}, {"View": obs("starting", VIEW)}, []),
+    ("wait while starting", {"View": VIEW}, {"View": obs("STARTING", VIEW)}, []),
     (
         "activate a lone instance",
         {"View": VIEW},
@@ -44,8 +48,8 @@ CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[
     ),
     ("active is converged", {"View": VIEW}, {"View": obs("ACTIVE", VIEW)}, []),
     ("stop what is not desired", {}, {"View": obs("ACTIVE", VIEW)}, [("stop", "View")]),
-    ("stopped and undesired: nothing", {}, {"View": obs("stopped", VIEW)}, []),
-    ("stopping: wait", {}, {"View": obs("stopping", VIEW)}, []),
+    ("stopped and undesired: nothing", {}, {"View": obs("STOPPED", VIEW)}, []),
+    ("stopping: wait", {}, {"View": obs("STOPPING", VIEW)}, []),
     ("undesired FAILED: stop (forget)", {}, {"View": obs("FAILED", VIEW)}, [("stop", "View")]),
     ("FAILED stays FAILED", {"View": VIEW}, {"View": obs("FAILED", VIEW)}, []),
     (
@@ -63,7 +67,7 @@ CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[
     ("ERROR: left alone", {"View": VIEW}, {"View": obs("ERROR", VIEW)}, []),
     (
         "desired inactive: deactivate",
-        {"View": spec("View", desired="inactive")},
+        {"View": spec("View", desired=LifecycleState.INACTIVE)},
         {"View": obs("ACTIVE", VIEW)},
         [("deactivate", "View")],
     ),
@@ -82,7 +86,7 @@ CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[
     (
         "sender waits for the receiver's address; receiver activates",
         {"Cam": CAM, "View": VIEW},
-        {"Cam": obs("INACTIVE", CAM), "View": obs("starting", VIEW)},
+        {"Cam": obs("INACTIVE", CAM), "View": obs("STARTING", VIEW)},
         [],
     ),
     (
@@ -163,8 +167,8 @@ CASES: list[tuple[str, dict[str, InstanceSpec], dict[str, Observed], list[tuple[
     (
         "receivers go down after their senders",
         {
-            "Cam": spec("Cam", CAM_TO_VIEW, desired="inactive"),
-            "View": spec("View", desired="inactive"),
+            "Cam": spec("Cam", CAM_TO_VIEW, desired=LifecycleState.INACTIVE),
+            "View": spec("View", desired=LifecycleState.INACTIVE),
         },
         {"Cam": obs("ACTIVE", CAM, c1=(CAM_TO_VIEW, ADDR)), "View": obs("ACTIVE", VIEW, ADDR)},
         [("deactivate", "Cam")],

@@ -8,6 +8,7 @@ import pytest
 
 from sdrpeer.errors import SpecError
 from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.vocabulary import LifecycleState
 
 FULL: dict[str, Any] = {
     "name": "Cam1",
@@ -36,7 +37,12 @@ def test_round_trip():
 
 def test_defaults():
     s = InstanceSpec.from_json({"name": "A", "target": "pkg.mod:Thing"})
-    assert (s.component, s.launcher, s.desired, s.role) == ("Thing", "python", "active", "active")
+    assert (s.component, s.launcher, s.desired, s.role) == (
+        "Thing",
+        "python",
+        LifecycleState.ACTIVE,
+        "active",
+    )
     e = InstanceSpec.from_json({"name": "B", "launcher": "exec", "target": ["/bin/x", "-v"]})
     assert e.target == ("/bin/x", "-v")
     assert e.component == "B"

@@ -13,6 +13,7 @@ from sdrpeer.gossip.config import GossipConfig, fast_test, lan
 from sdrpeer.gossip.events import CoreEvent, MemberChanged, ProbeOutcome, RecordChanged
 from sdrpeer.gossip.messages import ALIVE, DEAD, SUSPECT, Ack, Addr, Alive, Packet, Ping
 from sdrpeer.sim import Cluster, Network, Trace
+from sdrpeer.vocabulary import MemberState
 
 # -- a stand-in core: pings every known peer each tick, reports rtts ---------------------------
 
@@ -85,7 +86,7 @@ class Beacon:
     def members(self) -> list[Any]:
         return []
 
-    def state_of(self, name: str) -> int | None:
+    def state_of(self, name: str) -> MemberState | None:
         return ALIVE if name in self.known else None
 
 

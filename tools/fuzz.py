@@ -65,6 +65,7 @@ from sdrpeer.gossip.config import lan
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import RecordChanged
 from sdrpeer.gossip.messages import (
+    SUSPECT,
     Ack,
     Alive,
     Dead,
@@ -219,7 +220,7 @@ class GossipSurface:
         trap = Event("robot-2", 9, "trap", b"\x93\x01\x02\x03")
         ups = (alive, Suspect("robot-3", 2, "robot-2"), Dead("robot-4", 1, "robot-2"),
                Record("robot-2", 5, record), trap)  # fmt: skip
-        entry = ("robot-2", ("10.0.0.2", 7946), 0, 1, 5)
+        entry = ("robot-2", ("10.0.0.2", 7946), 0, SUSPECT, 5)
         self.seeds = [
             packet_body(Ping("robot-2", 7, "robot-1", ups[:2]), 1, 1),
             packet_body(PingReq("robot-2", 8, "robot-3", ("10.0.0.3", 7946), True, ups[2:3]), 1, 1),

@@ -47,7 +47,6 @@ from sdrpeer.gossip.events import (
     RecordChanged,
     VitalsChanged,
 )
-from sdrpeer.gossip.messages import STATE_NAMES
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.gossip.wire import REASONS, Codec, Keyring
 from sdrpeer.keys.derive import data_keys, peer_token, peer_tokens
@@ -75,7 +74,9 @@ from sdrpeer.record.robot import (
     link_to_json,
     metrics_to_json,
     record_to_json,
+    state_to_wire,
 )
+from sdrpeer.vocabulary import MemberState
 
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
@@ -435,7 +436,7 @@ class Agent:
                     self.name,
                     instance=name,
                     component=comp,
-                    state=state,
+                    state=state_to_wire(state),
                     role=role,
                 )
         for gone in set(self._states) - set(now):
@@ -510,10 +511,9 @@ class Agent:
                 if m.name == self.name:
                     continue
                 others = True
-                what = STATE_NAMES.get(m.state)
-                if what != "left":
+                if m.state != MemberState.LEFT:
                     members.add(m.name)
-                if what in ("alive", "suspect"):
+                if m.state in (MemberState.ALIVE, MemberState.SUSPECT):
                     heard.add(m.name)
                     rec = self.records.get(m.name)
                     if rec is not None:
@@ -600,13 +600,13 @@ class Agent:
         elif event.previous is None:
             kind = "member.join"
         else:
-            kind = "member." + STATE_NAMES[event.state]
+            kind = f"member.{event.state}"
         detail: dict[str, Any] = {
             "addr": f"{event.addr[0]}:{event.addr[1]}",
             "incarnation": event.incarnation,
         }
-        if event.previous is not None and event.previous in STATE_NAMES:
-            detail["previous"] = STATE_NAMES[event.previous]
+        if event.previous is not None:
+            detail["previous"] = event.previous
         self.events.add(wall, kind, event.name, **detail)
         self._wake_coordinator()
         if kind in ("member.dead", "member.suspect", "member.left"):
@@ -643,9 +643,9 @@ class Agent:
             for peer, link in doc["links"].items():
                 d = distance(positions.get(m.name), positions.get(peer))
                 link["distance_m"] = None if d is None else round(d, 2)
-            state = STATE_NAMES.get(m.state, str(m.state))
+            state = m.state
             instances = doc.get("instances", [])
-            if state in ("dead", "left"):  # its last record still lists them: they are gone
+            if state in (MemberState.DEAD, MemberState.LEFT):  # its last record lists them: gone
                 instances = [
                     {**i, "state": "lost", "last_state": i.get("state")} for i in instances
                 ]
@@ -696,9 +696,9 @@ class Agent:
         c = self.shell.counters
         codec = self.shell.codec.counters
         site = self.api_site
-        states = dict.fromkeys(STATE_NAMES.values(), 0)
+        states = dict.fromkeys(MemberState, 0)
         for m in self.core.members():
-            states[STATE_NAMES[m.state]] += 1
+            states[m.state] += 1
         return {
             "name": self.name,
             "addr": f"{self.core.addr[0]}:{self.core.addr[1]}",

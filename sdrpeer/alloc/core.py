@@ -42,6 +42,7 @@ from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.system.model import ComponentDef, SystemDef
+from sdrpeer.vocabulary import InstanceRole
 
 NOT_IN_VIEW = "not in view (dead, left or unknown)"
 
@@ -100,7 +101,7 @@ class _Allocation:
         """Components whose previous placements are kept as they are (see `allocate`)."""
         self.running_standbys: dict[str, list[tuple[int, InstanceInfo]]] = {}
         for i, inst in self.check.running.items():
-            if inst.role == "standby":
+            if inst.role == InstanceRole.STANDBY:
                 self.running_standbys.setdefault(inst.component, []).append((i[0], inst))
         self.adj = adjacency(system)
         self.order = component_order(system, self.adj)
@@ -123,7 +124,7 @@ class _Allocation:
 
     # -- placing --------------------------------------------------------------------------
 
-    def _place(self, comp: ComponentDef, name: str, role: str, cold: bool, i: int) -> None:
+    def _place(self, comp: ComponentDef, name: str, role: InstanceRole, cold: bool, i: int) -> None:
         need = self.check.need(comp, name, cold, i)
         load = self.loads[i]
         load.cpu_pct += need.cpu_pct
@@ -133,7 +134,7 @@ class _Allocation:
         self.placements.append(Placement(comp.name, name, self.robots[i].name, role, mode))
         self.holders[comp.name][i] = name
         self.names[comp.name].add(name)
-        if role == "active":
+        if role == InstanceRole.ACTIVE:
             self.active_at[comp.name] = i
 
     def _first(
@@ -174,7 +175,9 @@ class _Allocation:
             if i not in tried:
                 yield i
 
-    def _fail(self, comp: ComponentDef, name: str, role: str, cold: bool, only: int | None) -> None:
+    def _fail(
+        self, comp: ComponentDef, name: str, role: InstanceRole, cold: bool, only: int | None
+    ) -> None:
         """Record that the instance found no robot, with every robot's reason."""
         peers = self._peers(comp)
         held = self.holders[comp.name]
@@ -188,7 +191,7 @@ class _Allocation:
                 why = self.check.reason(comp, name, cold, i, peers)
             reasons.append((r.name, why or "ok, but another instance needed it first"))
         missing = [p.robot for p in self.previous.get(comp.name, ()) if p.instance == name]
-        if role == "active" and comp.pin is not None:
+        if role == InstanceRole.ACTIVE and comp.pin is not None:
             missing.append(comp.pin)
         for robot in dict.fromkeys(missing):
             if robot not in self.index:
@@ -208,14 +211,14 @@ class _Allocation:
         for comp in self.order:
             if comp.name in self.held:
                 continue
-            prev = [p for p in self.previous.get(comp.name, ()) if p.role == "active"]
+            prev = [p for p in self.previous.get(comp.name, ()) if p.role == InstanceRole.ACTIVE]
             names[comp.name] = prev[0].instance if prev else comp.name
             peers = self._peers(comp)
             for i in self._sticky(comp, names[comp.name]):
                 if comp.pin not in (None, self.robots[i].name):
                     continue
                 if self.check.reason(comp, names[comp.name], False, i, peers) is None:
-                    self._place(comp, names[comp.name], "active", False, i)
+                    self._place(comp, names[comp.name], InstanceRole.ACTIVE, False, i)
                     self.kept += 1
                     break
         rest = [c for c in self.order if c.name not in self.active_at and c.name not in self.held]
@@ -224,24 +227,26 @@ class _Allocation:
             if comp.pin is not None:
                 pin = self.index.get(comp.pin)
                 if pin is None or self._first(comp, name, False, [pin], self._peers(comp)) is None:
-                    self._fail(comp, name, "active", False, pin if pin is not None else -1)
+                    self._fail(
+                        comp, name, InstanceRole.ACTIVE, False, pin if pin is not None else -1
+                    )
                 else:
-                    self._place(comp, name, "active", False, pin)
+                    self._place(comp, name, InstanceRole.ACTIVE, False, pin)
                 continue
             if self._adopt(comp):
                 continue
             got = self._first(comp, name, False, self._candidates(comp), self._peers(comp))
             if got is None:
-                self._fail(comp, name, "active", False, None)
+                self._fail(comp, name, InstanceRole.ACTIVE, False, None)
             else:
-                self._place(comp, name, "active", False, got)
+                self._place(comp, name, InstanceRole.ACTIVE, False, got)
 
     def _adopt(self, comp: ComponentDef) -> bool:
         """Make a running standby of `comp` its active, if one fits (it keeps its name)."""
         peers = self._peers(comp)
         for i, inst in self.running_standbys.get(comp.name, ()):
             if self.check.reason(comp, inst.name, False, i, peers) is None:
-                self._place(comp, inst.name, "active", False, i)
+                self._place(comp, inst.name, InstanceRole.ACTIVE, False, i)
                 self.kept += 1
                 return True
         return False
@@ -265,7 +270,7 @@ class _Allocation:
                     other += 1
                 else:
                     continue
-                self._place(comp, name, "standby", cold, i)
+                self._place(comp, name, InstanceRole.STANDBY, cold, i)
                 self.kept += 1
             todo.append((comp, spec.same_robot - same, spec.other_robots - other))
         for comp, same, other in todo:
@@ -282,10 +287,10 @@ class _Allocation:
                 if got is None and self.standbys_optional:
                     continue
                 if got is None:
-                    self._fail(comp, name, "standby", cold, only)
+                    self._fail(comp, name, InstanceRole.STANDBY, cold, only)
                     self.names[comp.name].add(name)
                 else:
-                    self._place(comp, name, "standby", cold, got)
+                    self._place(comp, name, InstanceRole.STANDBY, cold, got)
 
     def _first_same(
         self, comp: ComponentDef, name: str, cold: bool, at: int, peers: Sequence[Peer]
@@ -297,7 +302,7 @@ class _Allocation:
         """Standbys that exist already: the previous plan's, then running ones, by name."""
         pool: dict[str, int] = {}
         for p in self.previous.get(comp.name, ()):
-            if p.role == "standby" and p.robot in self.index:
+            if p.role == InstanceRole.STANDBY and p.robot in self.index:
                 pool.setdefault(p.instance, self.index[p.robot])
         for i, inst in self.running_standbys.get(comp.name, ()):
             pool.setdefault(inst.name, i)
@@ -330,7 +335,12 @@ class _Allocation:
         declared = {c.name: k for k, c in enumerate(self.system.components)}
         placements = sorted(
             self.placements,
-            key=lambda p: (declared[p.component], p.role != "active", len(p.instance), p.instance),
+            key=lambda p: (
+                declared[p.component],
+                p.role != InstanceRole.ACTIVE,
+                len(p.instance),
+                p.instance,
+            ),
         )
         plan = Plan(epoch, version, self.system, tuple(placements), allocator)
         return AllocationResult(plan=plan, kept=self.kept)

@@ -26,8 +26,11 @@ from sdrpeer.alloc.strategies import Peer
 from sdrpeer.alloc.view import RobotView
 from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.system.model import AllocationDef, ComponentDef
+from sdrpeer.vocabulary import LifecycleState, ProcessState
 
-GONE_STATES = frozenset({"finalized", "stopping", "stopped", "failed"})
+GONE_STATES: frozenset[str] = frozenset(
+    {LifecycleState.FINALIZED, ProcessState.STOPPING, ProcessState.STOPPED, ProcessState.FAILED}
+)
 """Instance states that do not count as running (they are going or gone)."""
 _NOTHING = Need()
 
@@ -59,7 +62,7 @@ class Feasibility:
         """Instance name -> robots running an instance of that name."""
         for k, r in enumerate(robots):
             for inst in r.instances:
-                if inst.state.lower() in GONE_STATES:
+                if inst.state in GONE_STATES:
                     continue
                 self.running[(k, inst.name)] = inst
                 self.running_at.setdefault(inst.name, []).append(k)

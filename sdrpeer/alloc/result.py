@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from sdrpeer.plan import Plan
+from sdrpeer.vocabulary import InstanceRole
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,7 +26,7 @@ class Unplaced:
     """(robot, why it was ruled out) for every robot considered, in first-fit order."""
 
     def __str__(self) -> str:
-        what = self.instance if self.role == "active" else f"{self.instance} (standby)"
+        what = self.instance if self.role == InstanceRole.ACTIVE else f"{self.instance} (standby)"
         if not self.reasons:
             return f"{what}: no robot in view"
         lines = [f"{what}:"] + [f"  {robot}: {why}" for robot, why in self.reasons]

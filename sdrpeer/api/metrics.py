@@ -15,6 +15,8 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from sdrpeer.api.view import AgentView
+from sdrpeer.record.robot import state_to_wire
+from sdrpeer.vocabulary import LifecycleState, MemberState, ProcessState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 
@@ -39,7 +41,7 @@ TYPICAL_GAUGES: dict[str, tuple[str, float, str]] = {
     "sdrpeer_robot_link_jitter_seconds": ("jitter_ms", 0.001, "Typical jitter of its links."),
     "sdrpeer_robot_link_loss_ratio": ("loss", 1.0, "Typical probe loss of its links, 0..1."),
 }
-MEMBER_STATES = ("alive", "suspect", "dead", "left")
+MEMBER_STATES = tuple(MemberState)
 
 
 def _number(value: Any) -> float | None:
@@ -89,7 +91,7 @@ class ViewCollector(Collector):
         for member in members:
             name = str(member.get("name"))
             state = str(member.get("state"))
-            up.add_metric([name, state], 1.0 if state == "alive" else 0.0)
+            up.add_metric([name, state], 1.0 if state == MemberState.ALIVE else 0.0)
             for family, (key, scale, _) in ROBOT_GAUGES.items():
                 value = _number((member.get("metrics") or {}).get(key))
                 if value is not None:
@@ -152,7 +154,19 @@ def render(registry: CollectorRegistry) -> bytes:
     return generate_latest(registry)
 
 
-INSTANCE_STATES = ("active", "inactive", "error", "created", "starting", "stopping", "stopped")
+INSTANCE_STATES = tuple(
+    state_to_wire(s)
+    for s in (
+        LifecycleState.ACTIVE,
+        LifecycleState.INACTIVE,
+        LifecycleState.ERROR,
+        LifecycleState.CREATED,
+        ProcessState.STARTING,
+        ProcessState.STOPPING,
+        ProcessState.STOPPED,
+    )
+)
+"""The instance states every instance has a series for, as records spell them."""
 PORT_COUNTERS = ("frames", "bytes", "dropped", "lost", "refused", "replayed", "duplicates")
 
 

@@ -39,7 +39,9 @@ from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from sdrpeer.netlab.plan import PART_CHAIN
+from sdrpeer.record.robot import state_to_wire
 from sdrpeer.system.loader import parse_system
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 LOOK_EVERY = 0.25
 """Seconds between two looks at the fleet (each asks every robot at once, in parallel)."""
@@ -170,7 +172,9 @@ class Soak:
         start = names.index(robot)
         order = [n for n in names[start:] + names[:start] if n not in self.down]
         for name, rows in zip(order, self.pool.map(self._instances, order), strict=True):
-            pids = [r["pid"] for r in rows if r.get("state") == "ACTIVE" and r.get("pid")]
+            pids = [
+                r["pid"] for r in rows if r.get("state") == LifecycleState.ACTIVE and r.get("pid")
+            ]
             if pids:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(int(pids[pick % len(pids)]), signal.SIGKILL)
@@ -211,7 +215,10 @@ class Soak:
                 continue
             rows, status = answer
             for row in rows:
-                if row.get("state") == "ACTIVE" and row.get("role") == "active":
+                if (
+                    row.get("state") == LifecycleState.ACTIVE
+                    and row.get("role") == InstanceRole.ACTIVE
+                ):
                     actives.setdefault(str(row["component"]), set()).add(robot)
             p = status.get("plan")
             plans[robot] = None if p is None else (p["epoch"], p["allocator"], p["version"])
@@ -279,7 +286,8 @@ def _soak(
     def ready(doc: dict[str, Any]) -> bool:
         comps = doc.get("components") or []
         return bool(comps) and all(
-            c["state"] == "active" and all(s["state"] == "inactive" for s in c["standbys"])
+            c["state"] == state_to_wire(LifecycleState.ACTIVE)
+            and all(s["state"] == state_to_wire(LifecycleState.INACTIVE) for s in c["standbys"])
             for c in comps
         )
 

@@ -25,6 +25,8 @@ from sdrpeer.cli.status import format_status
 from sdrpeer.client import ELECTION_WAIT, AgentClient, post_when_elected
 from sdrpeer.deploy.status import all_active
 from sdrpeer.errors import SdrpeerError
+from sdrpeer.record.robot import state_to_wire
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 WAIT_POLL = 0.1
 """How long deploy/undeploy retry while no allocator is elected yet (a lab just started)."""
@@ -75,7 +77,7 @@ def cmd_deploy(args: argparse.Namespace) -> int:
         f" by {answer.get('allocator')}"
     )
     for comp, inst, robot, role, mode in plan.get("placements", []):
-        extra = f" ({mode})" if role == "standby" else ""
+        extra = f" ({mode})" if role == InstanceRole.STANDBY else ""
         print(f"  {comp:<28} {inst:<32} -> {robot} {role}{extra}")
     if not args.wait:
         return 0
@@ -108,7 +110,11 @@ def _wait(
                 print(f"all {len(seen)} components ACTIVE after {elapsed:.2f}s")
             return 0
         time.sleep(WAIT_POLL)
-    waiting = [c["component"] for c in doc.get("components", []) if c.get("state") != "active"]
+    waiting = [
+        c["component"]
+        for c in doc.get("components", [])
+        if c.get("state") != state_to_wire(LifecycleState.ACTIVE)
+    ]
     raise SdrpeerError(f"not ACTIVE after {timeout:.0f}s: {', '.join(waiting) or 'no plan yet'}")
 
 
@@ -149,7 +155,7 @@ def cmd_move(args: argparse.Namespace) -> int:
         doc = client.get("/v1/status")
         rows: list[dict[str, Any]] = doc.get("components", [])
         row = next((c for c in rows if c["component"] == args.component), {})
-        if row.get("robot") == robot and row.get("state") == "active":
+        if row.get("robot") == robot and row.get("state") == state_to_wire(LifecycleState.ACTIVE):
             elapsed = time.monotonic() - t0
             if args.json:
                 print(json.dumps({"elapsed_s": round(elapsed, 3), **answer}, indent=2))

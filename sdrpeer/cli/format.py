@@ -11,7 +11,14 @@ from collections.abc import Mapping, Sequence
 from datetime import datetime, tzinfo
 from typing import Any
 
-STATE_COLORS = {"alive": "32", "suspect": "33", "dead": "31", "left": "90"}
+from sdrpeer.vocabulary import LifecycleState, MemberState, ProcessState
+
+STATE_COLORS: dict[str, str] = {
+    MemberState.ALIVE: "32",
+    MemberState.SUSPECT: "33",
+    MemberState.DEAD: "31",
+    MemberState.LEFT: "90",
+}
 MEMBER_COLUMNS = (
     "NAME",
     "ADDR",
@@ -209,7 +216,7 @@ def format_agent(agent: Mapping[str, Any]) -> str:
         ("health score", agent.get("health_score", MISSING)),
         (
             "members",
-            ", ".join(f"{s} {members.get(s, 0)}" for s in ("alive", "suspect", "dead", "left")),
+            ", ".join(f"{s} {members.get(s, 0)}" for s in MemberState),
         ),
         (
             "messages",
@@ -253,7 +260,13 @@ def format_event(event: Mapping[str, Any], *, color: bool = False, tz: tzinfo | 
 
 
 INSTANCE_COLUMNS = ("NAME", "COMPONENT", "STATE", "ROLE", "PID", "CPU", "RSS", "RESTARTS", "SINCE")
-INSTANCE_COLORS = {"ACTIVE": "32", "INACTIVE": "36", "ERROR": "31", "FAILED": "31", "BACKOFF": "33"}
+INSTANCE_COLORS: dict[str, str] = {
+    LifecycleState.ACTIVE: "32",
+    LifecycleState.INACTIVE: "36",
+    LifecycleState.ERROR: "31",
+    ProcessState.FAILED: "31",
+    ProcessState.BACKOFF: "33",
+}
 
 
 def format_instances(

@@ -22,7 +22,8 @@ from sdrpeer.cli.common import client_for, endpoint, parse_assignment, print_jso
 from sdrpeer.cli.format import format_instances, want_color
 from sdrpeer.client import unreachable_message
 from sdrpeer.errors import ApiError
-from sdrpeer.runtime.spec import LAUNCHERS, InstanceSpec
+from sdrpeer.runtime.spec import LAUNCHERS, InstanceSpec, desired_to_json
+from sdrpeer.vocabulary import LifecycleState
 
 
 def cmd_instances(args: argparse.Namespace) -> int:
@@ -63,7 +64,9 @@ def instance_doc(args: argparse.Namespace) -> dict[str, Any]:
         "launcher": args.launcher,
         "target": args.target.split() if args.launcher == "exec" else args.target,
         "params": dict(parse_assignment(p) for p in args.param),
-        "desired": "inactive" if args.inactive else "active",
+        "desired": desired_to_json(
+            LifecycleState.INACTIVE if args.inactive else LifecycleState.ACTIVE
+        ),
     }
     if args.component:
         doc["component"] = args.component

@@ -23,15 +23,17 @@ from sdrpeer.cli.format import (
     paint,
     render_table,
 )
+from sdrpeer.record.robot import state_to_wire
+from sdrpeer.vocabulary import LifecycleState, ProcessState
 
 COMPONENT_COLORS = {
-    "active": "32",
-    "inactive": "36",
-    "error": "31",
-    "failed": "31",
+    state_to_wire(LifecycleState.ACTIVE): "32",
+    state_to_wire(LifecycleState.INACTIVE): "36",
+    state_to_wire(LifecycleState.ERROR): "31",
+    state_to_wire(ProcessState.FAILED): "31",
     "pending": "33",
-    "starting": "33",
-    "updating": "33",
+    state_to_wire(ProcessState.STARTING): "33",
+    state_to_wire(ProcessState.UPDATING): "33",
     "robot down": "31",
     "unplaced": "31",
     "cold": "90",

@@ -19,6 +19,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
+from sdrpeer.vocabulary import MemberState
+
 __all__ = ["METRICS", "History", "frame_values", "typical_link"]
 
 METRICS: Final = ("mem_free", "cpu_pct", "battery_pct", "rssi_dbm", "rtt_ms", "jitter_ms", "loss")
@@ -76,7 +78,7 @@ class History:
 
     def add(self, ts: float, members: Iterable[Mapping[str, Any]]) -> None:
         """Record the alive and suspect members' metrics at `ts` (seconds, increasing)."""
-        rows = [m for m in members if m.get("state") in ("alive", "suspect")]
+        rows = [m for m in members if m.get("state") in (MemberState.ALIVE, MemberState.SUSPECT)]
         names = tuple(str(m.get("name")) for m in rows)
         if names != self._robots:
             self._robots = names  # a new tuple only when the fleet changes

@@ -15,6 +15,8 @@ from collections import deque
 from collections.abc import Iterator, Mapping
 from typing import Any
 
+from sdrpeer.vocabulary import InstanceRole
+
 __all__ = ["Moments", "diff_status"]
 
 Doc = Mapping[str, Any]
@@ -24,9 +26,9 @@ def _instances(doc: Doc | None) -> Iterator[tuple[str, dict[str, Any]]]:
     for comp in (doc or {}).get("components") or []:
         name = str(comp.get("component"))
         if comp.get("instance"):
-            yield name, {**comp, "role": "active"}
+            yield name, {**comp, "role": InstanceRole.ACTIVE}
         for standby in comp.get("standbys") or []:
-            yield name, {**standby, "role": "standby"}
+            yield name, {**standby, "role": InstanceRole.STANDBY}
 
 
 def _state(ts: float, component: str, row: dict[str, Any], state: Any) -> dict[str, Any]:

@@ -25,6 +25,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sdrpeer.vocabulary import MemberState
+
 EVENT_KINDS = frozenset(
     {
         "election",
@@ -224,7 +226,7 @@ class Collector:
             member = views[agent].get(robot)
             if member is None:
                 continue
-            if member.get("state") in ("dead", "left"):
+            if member.get("state") in (MemberState.DEAD, MemberState.LEFT):
                 return agent, []
             if member.get("metrics") is None:
                 continue

@@ -30,7 +30,9 @@ from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import TimelineRecorder, load_timeline
 from sdrpeer.errors import ApiError
 from sdrpeer.lab.up import UpOptions, start_lab
+from sdrpeer.record.robot import state_to_wire
 from sdrpeer.system.loader import parse_system
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 REPO = Path(__file__).resolve().parent.parent.parent
 RSSI_THRESHOLD = -52.5
@@ -98,7 +100,9 @@ def _all_active(off: str | None = None) -> Callable[[dict[str, Any]], bool]:
     def ok(doc: dict[str, Any]) -> bool:
         comps = doc.get("components") or []
         return bool(comps) and all(
-            c["state"] == "active" and (off is None or c["robot"] != off) for c in comps
+            c["state"] == state_to_wire(LifecycleState.ACTIVE)
+            and (off is None or c["robot"] != off)
+            for c in comps
         )
 
     return ok
@@ -207,8 +211,8 @@ def _last_activation(events: list[dict[str, Any]], since: float) -> float | None
         for e in events
         if e["kind"] == "instance.state"
         and e["ts"] >= since
-        and (e.get("detail") or {}).get("state") == "active"
-        and (e.get("detail") or {}).get("role") == "active"
+        and (e.get("detail") or {}).get("state") == state_to_wire(LifecycleState.ACTIVE)
+        and (e.get("detail") or {}).get("role") == InstanceRole.ACTIVE
     ]
     return max(times, default=None)
 

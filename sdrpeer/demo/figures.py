@@ -23,6 +23,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sdrpeer.demo.query import Timeline
+from sdrpeer.record.robot import state_from_wire
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -39,15 +41,15 @@ MARK_STYLES: dict[str, dict[str, Any]] = {
     "fault": {"color": "0.45", "linestyle": ":", "label": "fault injected"},
 }
 STATE_STYLES: dict[str, dict[str, Any]] = {
-    "active": {"facecolors": "tab:blue", "label": "ACTIVE"},
-    "standby": {
+    LifecycleState.ACTIVE: {"facecolors": "tab:blue", "label": LifecycleState.ACTIVE},
+    InstanceRole.STANDBY: {
         "facecolors": "#9ecae1",
         "hatch": "///",
         "edgecolor": "tab:blue",
         "label": "ACTIVE (standby)",
     },
-    "inactive": {"facecolors": "#c6dbef", "label": "INACTIVE"},
-    "error": {"facecolors": "tab:red", "label": "ERROR"},
+    LifecycleState.INACTIVE: {"facecolors": "#c6dbef", "label": LifecycleState.INACTIVE},
+    LifecycleState.ERROR: {"facecolors": "tab:red", "label": LifecycleState.ERROR},
     "other": {"facecolors": "0.85", "label": "starting / stopping"},
 }
 GAP_S = 2.0
@@ -178,12 +180,14 @@ def _row_key(line: dict[str, Any]) -> tuple[str, str]:
 
 
 def _style(line: dict[str, Any]) -> str | None:
-    state = line.get("state")
-    if state == "active":
-        return "standby" if line.get("role") == "standby" else "active"
-    if state in ("inactive", "error"):
-        return str(state)
-    return None if state in ("gone", "finalized", None) else "other"
+    wire = line.get("state")
+    state = state_from_wire(wire) if isinstance(wire, str) else None
+    if state == LifecycleState.ACTIVE:
+        standby = line.get("role") == InstanceRole.STANDBY
+        return InstanceRole.STANDBY if standby else LifecycleState.ACTIVE
+    if state in (LifecycleState.INACTIVE, LifecycleState.ERROR):
+        return state
+    return None if wire in ("gone", None) or state == LifecycleState.FINALIZED else "other"
 
 
 def _series(

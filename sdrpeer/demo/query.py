@@ -12,6 +12,9 @@ from __future__ import annotations
 from collections.abc import Collection, Iterable, Iterator
 from typing import Any
 
+from sdrpeer.record.robot import state_to_wire
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
+
 Line = dict[str, Any]
 
 
@@ -69,7 +72,10 @@ class Timeline:
             if line.get("kind") != "state":
                 continue
             key = (str(line.get("robot")), str(line.get("instance")))
-            active = line.get("state") == "active" and line.get("role", "active") == "active"
+            active = (
+                line.get("state") == state_to_wire(LifecycleState.ACTIVE)
+                and line.get("role", InstanceRole.ACTIVE) == InstanceRole.ACTIVE
+            )
             if active and key[0] not in exclude:
                 running[key] = str(line.get("component"))
             else:

@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
 from sdrpeer.system.model import ConnectionDef, SystemDef
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,7 +37,7 @@ class Remote:
 
     robot: str
     state: str
-    """Lifecycle state in lower case (active, inactive, ...)."""
+    """Its InstanceState (as its record says)."""
     data: str | None
     """Its TCP data address, while its host runs."""
     component: str = ""
@@ -70,7 +71,9 @@ def handover_waits(
     return {
         p.instance
         for p in plan.on_robot(robot)
-        if p.role == "active" and p.component in running and p.instance not in active_here
+        if p.role == InstanceRole.ACTIVE
+        and p.component in running
+        and p.instance not in active_here
     }
 
 
@@ -82,8 +85,8 @@ def _running_elsewhere(
         r.component
         for r in remote.values()
         if r.robot != robot
-        and r.state == "active"
-        and r.role == "active"
+        and r.state == LifecycleState.ACTIVE
+        and r.role == InstanceRole.ACTIVE
         and (among is None or r.robot in among)
     }
 
@@ -95,7 +98,9 @@ def superseded(
     newer than `plan`) runs ACTIVE as its active instance (see the module docstring)."""
     running = _running_elsewhere(robot, remote, newer)
     return {
-        p.instance for p in plan.on_robot(robot) if p.role == "active" and p.component in running
+        p.instance
+        for p in plan.on_robot(robot)
+        if p.role == InstanceRole.ACTIVE and p.component in running
     }
 
 
@@ -118,12 +123,12 @@ def specs_for_robot(
     reach = reachable(system)
     specs = []
     for p in plan.on_robot(robot):
-        if p.role == "standby" and p.mode == "cold":
+        if p.role == InstanceRole.STANDBY and p.mode == "cold":
             continue
         comp = system.component(p.component)
         conns: list[ConnectionSpec] = []
         ready = True
-        if p.role == "active":
+        if p.role == InstanceRole.ACTIVE:
             for c in system.connections:
                 if c.from_component != comp.name:
                     continue
@@ -135,9 +140,11 @@ def specs_for_robot(
                 )
                 conns.append(spec)
                 ready = ready and ok
-        desired = "active" if ready or p.instance in active_here else "inactive"
+        desired = (
+            LifecycleState.ACTIVE if ready or p.instance in active_here else LifecycleState.INACTIVE
+        )
         if p.instance in hold:
-            desired = "inactive"
+            desired = LifecycleState.INACTIVE
         specs.append(
             InstanceSpec(
                 name=p.instance,
@@ -180,5 +187,5 @@ def _connection(
     if seen is None or seen.robot != receiver.robot or seen.data is None:
         return replace(base, pending=True), False
     in_cycle = c.from_component in reach.get(c.to_component, set())
-    ok = in_cycle or seen.state == "active"
+    ok = in_cycle or seen.state == LifecycleState.ACTIVE
     return replace(base, to_addr=seen.data), ok

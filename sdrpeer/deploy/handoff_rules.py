@@ -24,6 +24,7 @@ from typing import Any, Final
 import msgpack
 
 from sdrpeer.plan import Placement, Plan
+from sdrpeer.vocabulary import InstanceRole
 
 __all__ = [
     "KINDS",
@@ -112,12 +113,12 @@ def sync_targets(plan: Plan | None, robot: str) -> dict[str, tuple[str, float, l
         return out
     syncs = {c.name: c.standby.sync_s for c in plan.system.components if c.standby.sync_s > 0}
     for p in plan.placements:
-        if p.robot != robot or p.role != "active" or p.component not in syncs:
+        if p.robot != robot or p.role != InstanceRole.ACTIVE or p.component not in syncs:
             continue
         standbys = [
             s
             for s in plan.placements
-            if s.component == p.component and s.role == "standby" and s.mode == "hot"
+            if s.component == p.component and s.role == InstanceRole.STANDBY and s.mode == "hot"
         ]
         if standbys:
             out[p.instance] = (p.component, syncs[p.component], standbys)
@@ -178,14 +179,14 @@ def admit(plan: Plan | None, robot: str, msg: StateMsg) -> str:
     if target is not None and target.robot != robot:
         return "not_here"
     if msg.kind == "sync":
-        if target is None or target.role != "standby":
+        if target is None or target.role != InstanceRole.STANDBY:
             return "not_a_standby"
         active = plan.active_of(msg.component)
         if active is None or active.instance != msg.source:
             return "not_from_the_active"
         return APPLY
-    if target is not None and target.role == "active" and msg.source != msg.target:
+    if target is not None and target.role == InstanceRole.ACTIVE and msg.source != msg.target:
         return APPLY
-    if target is not None and target.role == "active" and msg.origin not in ("", robot):
+    if target is not None and target.role == InstanceRole.ACTIVE and msg.origin not in ("", robot):
         return APPLY  # the same instance name, moved here from the origin robot
     return HOLD if behind else "not_the_active"

@@ -38,10 +38,11 @@ from sdrpeer.errors import ApiError, CommandError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.vocabulary import LifecycleState
 
 log = logging.getLogger(__name__)
 
-READY = ("INACTIVE", "ACTIVE")
+READY = (LifecycleState.INACTIVE, LifecycleState.ACTIVE)
 """States in which an instance can take a state (sdrpeer.sdk.handoff's table)."""
 
 
@@ -82,7 +83,7 @@ class HandoffShell:
         """Start due syncs, hand held states to instances that are ready."""
         now = asyncio.get_running_loop().time()
         states = self._states()
-        active = {name for name, state in states.items() if state == "ACTIVE"}
+        active = {name for name, state in states.items() if state == LifecycleState.ACTIVE}
         for send in self.schedule.due(now, self.plan(), self.robot, active):
             if send.source not in self._busy:
                 self._spawn(self._send(send))

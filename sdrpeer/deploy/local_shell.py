@@ -27,6 +27,7 @@ from sdrpeer.recovery.events import Decision, Exhausted, InstanceLoad
 from sdrpeer.recovery.local import LocalRecovery
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.system.model import RecoveryDef
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +71,8 @@ class LocalShell:
             ready = {
                 s["component"]
                 for s in self.manager.status()
-                if s.get("role") == "standby" and s.get("state") == "INACTIVE"
+                if s.get("role") == InstanceRole.STANDBY
+                and s.get("state") == LifecycleState.INACTIVE
             }
             self.engine.set_standbys(ready)
         return self.engine
@@ -80,7 +82,7 @@ class LocalShell:
         if plan is None:
             return None
         for p in plan.on_robot(self.robot):
-            if p.instance == instance and p.role == "active":
+            if p.instance == instance and p.role == InstanceRole.ACTIVE:
                 return p.component
         return None
 
@@ -105,7 +107,7 @@ class LocalShell:
         loads = {
             s["name"]: InstanceLoad(s["component"], float(s.get("rss") or 0), s.get("cpu_pct") or 0)
             for s in self.manager.status()
-            if s.get("state") == "ACTIVE" and s.get("role") == "active"
+            if s.get("state") == LifecycleState.ACTIVE and s.get("role") == InstanceRole.ACTIVE
         }
         engine.robot_metrics(now, {"mem_free": float(mem_free), "cpu": cpu_pct}, loads)
         self._drain(now)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 from sdrpeer.errors import MoveError
 from sdrpeer.plan import Plan
 from sdrpeer.system.model import SystemDef
+from sdrpeer.vocabulary import InstanceRole
 
 __all__ = ["MoveError", "MoveInputs", "move_inputs", "swap_to_standby"]
 
@@ -70,15 +71,15 @@ def swap_to_standby(plan: Plan, component: str, robot: str) -> Plan:
         (
             p
             for p in plan.placements
-            if p.component == component and p.robot == robot and p.role == "standby"
+            if p.component == component and p.robot == robot and p.role == InstanceRole.STANDBY
         ),
         None,
     )
     if standby is None:
         return plan
     kept = tuple(
-        replace(p, role="active", mode="hot") if p is standby else p
+        replace(p, role=InstanceRole.ACTIVE, mode="hot") if p is standby else p
         for p in plan.placements
-        if not (p.component == component and p.role == "active")
+        if not (p.component == component and p.role == InstanceRole.ACTIVE)
     )
     return replace(plan, placements=kept)

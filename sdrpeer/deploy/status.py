@@ -12,7 +12,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from sdrpeer.plan import Plan
-from sdrpeer.record.robot import RobotRecord
+from sdrpeer.record.robot import RobotRecord, state_to_wire
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 
 class SinceTracker:
@@ -43,7 +44,7 @@ def instance_state(
         return "pending"
     for inst in rec.instances:
         if inst.name == instance:
-            return inst.state
+            return state_to_wire(inst.state)
     return "pending"
 
 
@@ -70,7 +71,7 @@ def status_doc(
         }
     for p in plan.placements:
         state = instance_state(alive, p.robot, p.instance, plan)
-        if p.role == "standby" and p.mode == "cold" and state == "pending":
+        if p.role == InstanceRole.STANDBY and p.mode == "cold" and state == "pending":
             state = "cold"
         row = {
             "instance": p.instance,
@@ -79,7 +80,7 @@ def status_doc(
             "since": round(since.since(p.instance, p.robot, state, now_wall), 3),
         }
         entry = comps.setdefault(p.component, {"component": p.component, "standbys": []})
-        if p.role == "active":
+        if p.role == InstanceRole.ACTIVE:
             entry.update(row)
         else:
             entry["standbys"].append({**row, "mode": p.mode})
@@ -122,4 +123,6 @@ def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str,
 def all_active(doc: Mapping[str, Any]) -> bool:
     """Whether every component's active instance is ACTIVE (what `deploy --wait` waits for)."""
     comps = doc.get("components") or []
-    return bool(comps) and all(c.get("state") == "active" for c in comps)
+    return bool(comps) and all(
+        c.get("state") == state_to_wire(LifecycleState.ACTIVE) for c in comps
+    )

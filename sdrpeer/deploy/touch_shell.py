@@ -29,6 +29,7 @@ from sdrpeer.errors import ApiError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +102,7 @@ class TouchShell:
         policies = [
             system.component(p.component).disconnect
             for p in plan.on_robot(self.name)
-            if p.role == "active"
+            if p.role == InstanceRole.ACTIVE
         ]
         return self.cutoff.next_timer(policies)
 
@@ -111,8 +112,8 @@ class TouchShell:
         if not (self.cutoff.cut or self.cutoff.rejoining) or system is None:
             return specs
         return [
-            replace(s, desired="inactive")
-            if s.role == "active"
+            replace(s, desired=LifecycleState.INACTIVE)
+            if s.role == InstanceRole.ACTIVE
             and self.cutoff.holds_down(now, system.component(s.component).disconnect)
             else s
             for s in specs

@@ -77,6 +77,7 @@ from sdrpeer.gossip.messages import (
 )
 from sdrpeer.gossip.probing import Probing
 from sdrpeer.gossip.table import Member, MemberInfo, ProbeRing, Suspicion
+from sdrpeer.vocabulary import MemberState
 
 
 class Membership(Probing, AntiEntropy):
@@ -233,7 +234,7 @@ class Membership(Probing, AntiEntropy):
         """Snapshots of every known member, ourselves included."""
         return [m.info() for m in self._members.values()]
 
-    def state_of(self, name: str) -> int | None:
+    def state_of(self, name: str) -> MemberState | None:
         """The state of `name`, or None if unknown."""
         m = self._members.get(name)
         return m.state if m else None
@@ -433,7 +434,7 @@ class Membership(Probing, AntiEntropy):
         back = self._revived.get(source)
         return back is not None and self._now - back < self.config.stale_verdict_time
 
-    def _set_state(self, m: Member, state: int, incarnation: int) -> None:
+    def _set_state(self, m: Member, state: MemberState, incarnation: int) -> None:
         previous = m.state
         if previous == DEAD and state in (ALIVE, SUSPECT):
             self._revived[m.name] = self._now

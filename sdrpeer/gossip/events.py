@@ -5,21 +5,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from sdrpeer.gossip.messages import Addr
+from sdrpeer.vocabulary import MemberState
 
 
 @dataclass(frozen=True, slots=True)
 class MemberChanged:
     """A member was added or changed state (alive, suspect, dead, left) or was reaped.
 
-    `state` is one of the ints in `messages` (ALIVE, SUSPECT, DEAD, LEFT) or -1 for reaped;
+    `state` is a MemberState, or REAPED (None) for reaped;
     `previous` is the prior state or None when the member is new.
     """
 
     name: str
     addr: Addr
-    state: int
+    state: MemberState | None
     incarnation: int
-    previous: int | None
+    previous: MemberState | None
     at: float
 
 
@@ -65,4 +66,4 @@ class ProbeOutcome:
 
 
 CoreEvent = MemberChanged | RecordChanged | VitalsChanged | EventReceived | ProbeOutcome
-REAPED = -1
+REAPED = None

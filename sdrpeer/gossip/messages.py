@@ -14,15 +14,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sdrpeer.vocabulary import MemberState
+
 Addr = tuple[str, int]
 """A UDP address: (host, port)."""
 
-# Member states, as small ints on the wire.
-ALIVE = 0
-SUSPECT = 1
-DEAD = 2
-LEFT = 3
-STATE_NAMES = {ALIVE: "alive", SUSPECT: "suspect", DEAD: "dead", LEFT: "left"}
+# Member states (sdrpeer.vocabulary) by the short names the gossip code uses; small ints on the
+# wire (sdrpeer.gossip.wire).
+ALIVE, SUSPECT, DEAD, LEFT = (
+    MemberState.ALIVE,
+    MemberState.SUSPECT,
+    MemberState.DEAD,
+    MemberState.LEFT,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,7 +143,7 @@ class Gossip:
     updates: tuple[Update, ...] = ()
 
 
-SyncEntry = tuple[str, Addr, int, int, int]
+SyncEntry = tuple[str, Addr, int, MemberState, int]
 """One member in a sync digest: (name, addr, incarnation, state, record_version)."""
 
 

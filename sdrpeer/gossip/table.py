@@ -13,6 +13,7 @@ import random
 from dataclasses import dataclass
 
 from sdrpeer.gossip.messages import Addr
+from sdrpeer.vocabulary import MemberState
 
 
 @dataclass(frozen=True, slots=True)
@@ -21,7 +22,7 @@ class MemberInfo:
 
     name: str
     addr: Addr
-    state: int
+    state: MemberState
     incarnation: int
     since: float
 
@@ -46,7 +47,9 @@ class Member:
 
     __slots__ = ("addr", "incarnation", "name", "since", "state", "suspicion")
 
-    def __init__(self, name: str, addr: Addr, incarnation: int, state: int, since: float) -> None:
+    def __init__(
+        self, name: str, addr: Addr, incarnation: int, state: MemberState, since: float
+    ) -> None:
         self.name = name
         self.addr = addr
         self.incarnation = incarnation

@@ -54,7 +54,6 @@ import msgpack
 
 from sdrpeer.errors import WireError
 from sdrpeer.gossip.messages import (
-    STATE_NAMES,
     Ack,
     Addr,
     Alive,
@@ -85,6 +84,7 @@ from sdrpeer.keys.keyring import (
     key_id,
     parse_key,
 )
+from sdrpeer.vocabulary import MemberState
 
 __all__ = [  # the keyring and replay guard live in their own modules; re-exported here
     "HEADER_SIZE",
@@ -134,6 +134,14 @@ REASONS = (
 # Packet and update tags (small ints on the wire; never reuse a retired one).
 T_PING, T_PINGREQ, T_ACK, T_NACK, T_GOSSIP, T_SYNC, T_DIGEST = range(7)
 U_ALIVE, U_SUSPECT, U_DEAD, U_RECORD, U_EVENT = range(5)
+_MEMBER_CODES: dict[MemberState, int] = {
+    MemberState.ALIVE: 0,
+    MemberState.SUSPECT: 1,
+    MemberState.DEAD: 2,
+    MemberState.LEFT: 3,
+}
+"""Member states in a sync entry (small ints on the wire; never reuse a retired one)."""
+_MEMBER_OF_CODE = {code: state for state, code in _MEMBER_CODES.items()}
 
 _PACKER = msgpack.Packer(use_bin_type=True)
 _pack = _PACKER.pack
@@ -196,7 +204,7 @@ def packet_body(packet: Packet, seq: int = _TYPICAL_SEQ, ts_ms: int = _TYPICAL_T
     """
     parts = [_pack(_head(packet, seq, ts_ms))]
     if isinstance(packet, Sync):
-        parts.extend(map(_pack, packet.entries))
+        parts.extend(_pack((n, a, i, _MEMBER_CODES[s], v)) for n, a, i, s, v in packet.entries)
     parts.extend([_pack(encode_update(u)) for u in packet.updates])
     return b"".join(parts)
 
@@ -275,13 +283,13 @@ def _entry(obj: object) -> SyncEntry:
     if type(obj) is not list or len(obj) < 5:
         raise _bad("sync entry", obj)
     state = obj[3]
-    if type(state) is not int or state not in STATE_NAMES:
+    if type(state) is not int or state not in _MEMBER_OF_CODE:
         raise _bad("member state", state)
     return (
         _name(obj[0], "name"),
         _addr(obj[1]),
         _uint(obj[2], "incarnation"),
-        state,
+        _MEMBER_OF_CODE[state],
         _uint(obj[4], "record version"),
     )
 

@@ -25,6 +25,7 @@ from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import control, handoff
 from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
+from sdrpeer.vocabulary import LifecycleState
 
 log = logging.getLogger("sdrpeer.host")
 
@@ -106,10 +107,10 @@ class HostedInstance:
             return
         self.state = name
         if self.on_taking is not None:
-            self.on_taking(name == "ACTIVE")
+            self.on_taking(name == LifecycleState.ACTIVE)
         text = None if error is None else (str(error) or type(error).__name__)
         log.info("state %s%s", name, f" ({text})" if text else "")
-        fault = self.runner.fault if name == "ERROR" else None
+        fault = self.runner.fault if name == LifecycleState.ERROR else None
         self.report(control.state(name, self.clock(), text, fault))
 
     def _on_fault(self, kind: str, detail: str) -> None:

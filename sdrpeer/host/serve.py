@@ -30,6 +30,7 @@ from sdrpeer.host import control
 from sdrpeer.host.config import FINALIZE_TIMEOUT, STANDALONE_REPORT_INTERVAL, HostConfig
 from sdrpeer.host.instance import HostedInstance, Report, maybe_await
 from sdrpeer.sdk import Component, ComponentRunner
+from sdrpeer.vocabulary import LifecycleState
 
 log = logging.getLogger("sdrpeer.host")
 
@@ -69,7 +70,7 @@ class Host:
             auth=auth,
         )
         self.inst.on_taking = server.set_taking
-        server.set_taking(self.inst.state == "ACTIVE")
+        server.set_taking(self.inst.state == LifecycleState.ACTIVE)
         await maybe_await(server.start())
         data = dict(server.addresses)
         if self.channel is not None:
@@ -103,7 +104,7 @@ class Host:
         """Initialize (and activate at once when standalone)."""
         try:
             await self.inst.runner.initialize()
-            if standalone and self.inst.state == "INACTIVE":
+            if standalone and self.inst.state == LifecycleState.INACTIVE:
                 await self.inst.runner.activate()
         except Exception as exc:
             log.error("start failed: %s", exc)
@@ -159,7 +160,7 @@ class Host:
 
     async def _finalize(self, runner: ComponentRunner) -> int:
         """Finalize the runner within the timeout; 0 if it did, 1 otherwise."""
-        if self.inst.state == "FINALIZED":
+        if self.inst.state == LifecycleState.FINALIZED:
             return 0
         try:
             async with asyncio.timeout(self._exit_timeout()):  # not wait_for (see below)

@@ -41,6 +41,7 @@ from sdrpeer.lab.files import (
 )
 from sdrpeer.netlab import net
 from sdrpeer.netlab.plan import NetPlan
+from sdrpeer.vocabulary import MemberState
 
 POLL = 0.1
 LOG_TAIL_LINES = 12
@@ -226,7 +227,7 @@ def _missing_alive(robot: LabRobot, names: set[str]) -> str | None:
         members = AgentClient(str(robot.api), timeout=1.0).members()
     except ApiError as exc:
         return str(exc)
-    alive = {m.get("name") for m in members if m.get("state") == "alive"}
+    alive = {m.get("name") for m in members if m.get("state") == MemberState.ALIVE}
     missing = sorted(names - alive)
     if not missing:
         return None

@@ -65,6 +65,7 @@ from sdrpeer.runtime.control import ControlChannel, Report
 from sdrpeer.runtime.launch import private_dir
 from sdrpeer.sdk.policy import ConnectorPolicy
 from sdrpeer.units import format_size
+from sdrpeer.vocabulary import LifecycleState
 
 __all__ = [
     "GENERATORS",
@@ -283,9 +284,12 @@ class _Session:
         shutil.rmtree(self.run_dir, ignore_errors=True)
 
     def _state(self, msg: Report) -> None:
-        if msg.get("state") == "ERROR":
+        if msg.get("state") == LifecycleState.ERROR:
             self.error = str(msg.get("error"))
-        if msg.get("state") in ("INACTIVE", "ERROR") and not self.inactive.done():
+        if (
+            msg.get("state") in (LifecycleState.INACTIVE, LifecycleState.ERROR)
+            and not self.inactive.done()
+        ):
             self.inactive.set_result(None)
 
     def _beat(self, msg: Report) -> None:

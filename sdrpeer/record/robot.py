@@ -59,14 +59,28 @@ import msgpack
 from sdrpeer.errors import RecordError
 from sdrpeer.launch.policy import DEFAULT_POLICY, LaunchPolicy
 from sdrpeer.record.limits import LIMITS, MAX_COORD_M
+from sdrpeer.vocabulary import InstanceRole, InstanceState, LifecycleState, ProcessState
 
 FORMAT = 3
 """Version of the wire layout above; a decoder refuses any other."""
 
-STATES = ("created", "inactive", "active", "error", "finalized", "starting", "stopping")
-"""Instance states sent as an index; others go as strings."""
-ROLES = ("active", "standby")
+STATES: tuple[InstanceState, ...] = (
+    LifecycleState.CREATED,
+    LifecycleState.INACTIVE,
+    LifecycleState.ACTIVE,
+    LifecycleState.ERROR,
+    LifecycleState.FINALIZED,
+    ProcessState.STARTING,
+    ProcessState.STOPPING,
+)
+"""Instance states sent as an index (in this order); others go as their wire spelling."""
+ROLES: tuple[InstanceRole, ...] = (InstanceRole.ACTIVE, InstanceRole.STANDBY)
 """Instance roles sent as an index; others go as strings."""
+_STATE_WIRE: dict[str, str] = {s: s.value.lower() for s in (*LifecycleState, *ProcessState)}
+"""Instance state -> how records and their JSON spell it (lower case)."""
+_STATE_OF_WIRE: dict[str, str] = {text: s for s, text in _STATE_WIRE.items()}
+_STATES_WIRE = tuple(_STATE_WIRE[s] for s in STATES)
+_ROLE_OF_WIRE: dict[str, str] = {r.value: r for r in InstanceRole}
 MAX_LISTED = 8
 """Links past the bounds a summary lists exactly (the worst first); the rest are only counted."""
 
@@ -180,7 +194,9 @@ class InstanceInfo:
     name: str
     component: str
     state: str
+    """An InstanceState, or a name this version does not know (from a peer's record)."""
     role: str
+    """An InstanceRole, or a name this version does not know."""
     cpu_pct: float
     rss: int
     data: str | None = None
@@ -270,6 +286,18 @@ def _kib(n: int) -> int:
     return (n + 512) // 1024
 
 
+def state_to_wire(state: str) -> str:
+    """An instance state as records, their JSON and the event log spell it (lower case);
+    a name this version does not know, as it is."""
+    return _STATE_WIRE.get(state, state)
+
+
+def state_from_wire(text: str) -> str:
+    """The InstanceState a record's spelling names; a name this version does not know, as it
+    is."""
+    return _STATE_OF_WIRE.get(text, text)
+
+
 def _code(value: str, table: tuple[str, ...]) -> int | str:
     """Index of a well-known string, or the string itself."""
     return table.index(value) if value in table else value
@@ -338,7 +366,7 @@ def encode_record(r: RobotRecord) -> bytes:
                 components.index(inst.component),
                 shared,
                 inst.name[shared:],
-                _code(inst.state, STATES),
+                _code(state_to_wire(inst.state), _STATES_WIRE),
                 _code(inst.role, ROLES),
                 _fix(inst.cpu_pct, 10),
                 _kib(inst.rss),
@@ -491,8 +519,8 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
             InstanceInfo(
                 name=_str(prefix + _str(rest, "instance.name", empty=True), "instance.name"),
                 component=component,
-                state=_named(state, STATES, "instance.state"),
-                role=_named(role, ROLES, "instance.role"),
+                state=state_from_wire(_named(state, _STATES_WIRE, "instance.state")),
+                role=_ROLE_OF_WIRE.get(r := _named(role, ROLES, "instance.role"), r),
                 cpu_pct=_int(cpu, "instance.cpu_pct", 0, 1_000_000) / 10,
                 rss=_int(rss, "instance.rss", 0, 1 << 50) * 1024,
                 data=None if data is None else _str(data, "instance.data"),
@@ -643,7 +671,7 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
             {
                 "name": i.name,
                 "component": i.component,
-                "state": i.state,
+                "state": state_to_wire(i.state),
                 "role": i.role,
                 "cpu_pct": i.cpu_pct,
                 "rss": i.rss,
@@ -693,8 +721,8 @@ def reference_record(peers: int = 10, instances: int = 10, bad: int = 2) -> Robo
         InstanceInfo(
             name=f"{PAPER_COMPONENTS[i % 5]}{i + 1}",
             component=PAPER_COMPONENTS[i % 5],
-            state="active" if i % 2 else "inactive",
-            role="active" if i < 7 else "standby",
+            state=LifecycleState.ACTIVE if i % 2 else LifecycleState.INACTIVE,
+            role=InstanceRole.ACTIVE if i < 7 else InstanceRole.STANDBY,
             cpu_pct=12.3 + i,
             rss=512_000_000 + i * 1_234_567,
         )

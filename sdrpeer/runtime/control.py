@@ -26,9 +26,10 @@ from typing import Any
 from sdrpeer.control.parts import PartAssembler, check_part, parts
 from sdrpeer.control.stream import MAX_MESSAGE, PROTOCOL, MessageStream, encode
 from sdrpeer.errors import CommandError, PartError, ProtocolError
+from sdrpeer.vocabulary import LifecycleState
 
 REPORTS = ("hello", "state", "heartbeat", "fault", "part")
-LIFECYCLE = ("CREATED", "INACTIVE", "ACTIVE", "ERROR", "FINALIZED")
+LIFECYCLE = tuple(LifecycleState)
 _READ = 64 * 1024
 log = logging.getLogger(__name__)
 

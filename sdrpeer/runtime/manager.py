@@ -33,19 +33,17 @@ from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.runtime.config import SupervisorConfig
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
-from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec, connection_to_json
+from sdrpeer.runtime.spec import (
+    INSTANCE_ACTIONS,
+    InstanceSpec,
+    connection_to_json,
+    desired_to_json,
+)
 from sdrpeer.runtime.supervisor import Supervisor
+from sdrpeer.vocabulary import InstanceState, LifecycleState, ProcessState
 
 log = logging.getLogger(__name__)
 ACTIONS = INSTANCE_ACTIONS
-_OBSERVED = {
-    "STOPPED": "stopped",
-    "STARTING": "starting",
-    "BACKOFF": "starting",
-    "CREATED": "starting",
-    "STOPPING": "stopping",
-    "FINALIZED": "stopping",
-}
 
 
 class InstanceManager:
@@ -118,7 +116,7 @@ class InstanceManager:
         if spec is None:
             raise KeyError(name)
         if action in ("activate", "deactivate"):
-            new = "active" if action == "activate" else "inactive"
+            new = LifecycleState.ACTIVE if action == "activate" else LifecycleState.INACTIVE
             self._desired[name] = replace(spec, desired=new)
         elif action == "reset":
             sup = self._sups.get(name)
@@ -188,7 +186,7 @@ class InstanceManager:
         """One reconcile pass: plan and launch the actions."""
         for name, sup in list(self._sups.items()):
             spec = self._desired.get(name)
-            if spec is None and sup.state == "STOPPED" and not sup.running:
+            if spec is None and sup.state == ProcessState.STOPPED and not sup.running:
                 del self._sups[name]
             elif spec is not None and spec.same_process(sup.spec):
                 sup.spec = spec  # lifecycle or links changed: the running host stays
@@ -249,7 +247,7 @@ class InstanceManager:
             return
         sup = self._sups[a.instance]
         if a.kind == "stop":
-            if self.before_stop is not None and sup.state == "ACTIVE":
+            if self.before_stop is not None and sup.state == LifecycleState.ACTIVE:
                 await self._quiesce(sup)  # it takes no more frames: the snapshot is its last
                 await self._before_stop(a.instance, self.before_stop)
             await sup.stop()
@@ -356,22 +354,21 @@ class InstanceManager:
         )
 
 
-def _record_state(sup: Supervisor, desired: InstanceSpec | None) -> str:
-    """The state gossip shows: 'updating' while the running host has an outdated spec."""
+def _record_state(sup: Supervisor, desired: InstanceSpec | None) -> InstanceState:
+    """The state gossip shows: UPDATING while the running host has an outdated spec."""
     if desired is not None and not desired.same_process(sup.spec):
-        return "updating"
-    return sup.state.lower()
+        return ProcessState.UPDATING
+    return sup.state
 
 
 def observe(sup: Supervisor) -> Observed:
     """What the reconciler needs to know of one supervisor."""
-    status = _OBSERVED.get(sup.state, sup.state)
-    return Observed(status, sup.spec, sup.data_address(), dict(sup.connections))
+    return Observed(sup.state, sup.spec, sup.data_address(), dict(sup.connections))
 
 
 def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
     """The JSON status of one instance (GET /v1/instances)."""
-    desired = spec.desired if spec is not None else "removed"
+    desired = desired_to_json(spec.desired) if spec is not None else "removed"
     conns = []
     for cid, (conn, addr) in sorted(sup.connections.items()):
         conns.append({**connection_to_json(conn), "id": cid, "addr": addr})

@@ -23,6 +23,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Final
 
+from sdrpeer.vocabulary import InstanceState, LifecycleState
+
 __all__ = [
     "COMPONENT_ERROR",
     "CRASHED",
@@ -71,9 +73,14 @@ def fault_from_report(msg: dict[str, Any], now: float) -> Fault:
     )
 
 
-def problem_of_state(current: str, msg: dict[str, Any], stopping: bool) -> str | None:
+def problem_of_state(current: InstanceState, msg: dict[str, Any], stopping: bool) -> str | None:
     """The problem a `state` report shows, given the supervisor's current state, or None."""
-    if msg.get("state") != "ERROR" or current == "ERROR" or stopping or msg.get("fault"):
+    if (
+        msg.get("state") != LifecycleState.ERROR
+        or current == LifecycleState.ERROR
+        or stopping
+        or msg.get("fault")
+    ):
         return None
     return COMPONENT_ERROR
 

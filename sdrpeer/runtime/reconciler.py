@@ -4,7 +4,8 @@ How it works: `Reconciler.plan(now, desired, observed)` looks at every instance 
 at most one `Action` for each, in name order. Rules, in the order they are tried:
 
 1. An instance with an action in flight gets nothing (until `done(name)`, or `action_timeout`
-   after it was issued, in case the shell lost it). Transient statuses (starting, stopping) too.
+   after it was issued, in case the shell lost it). Transient states (STARTING, BACKOFF, CREATED,
+   STOPPING, FINALIZED) too.
 2. Not desired but running, or FAILED -> stop. Desired and stopped -> start. FAILED stays FAILED
    unless its spec changed (then start: someone fixed it). Running with a spec whose process
    fields (component, launcher, target, params) changed -> stop (the next pass starts it).
@@ -27,15 +28,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
+from sdrpeer.vocabulary import InstanceState, LifecycleState, ProcessState
 
-STOPPED = "stopped"
-STARTING = "starting"
-STOPPING = "stopping"
-INACTIVE = "INACTIVE"
-ACTIVE = "ACTIVE"
-ERROR = "ERROR"
-FAILED = "FAILED"
-RUNNING = frozenset({INACTIVE, ACTIVE, ERROR})
+RUNNING: frozenset[InstanceState] = frozenset(
+    {LifecycleState.INACTIVE, LifecycleState.ACTIVE, LifecycleState.ERROR}
+)
+_DOWN: frozenset[InstanceState] = frozenset(
+    {ProcessState.STOPPED, ProcessState.STOPPING, LifecycleState.FINALIZED}
+)
+"""Not desired and nothing to stop: stopped, or on its way there."""
 KINDS = ("start", "stop", "activate", "deactivate", "connect", "disconnect", "repoint")
 
 
@@ -43,8 +44,8 @@ KINDS = ("start", "stop", "activate", "deactivate", "connect", "disconnect", "re
 class Observed:
     """What the agent sees of one instance right now."""
 
-    status: str
-    """stopped, starting, stopping, INACTIVE, ACTIVE, ERROR or FAILED."""
+    status: InstanceState
+    """Its supervisor's state."""
     spec: InstanceSpec | None = None
     """The spec its current (or last) host was started with."""
     data_addr: str | None = None
@@ -116,7 +117,7 @@ class Reconciler:
         for name in sorted(set(desired) | set(observed)):
             if name in self.in_flight:
                 continue
-            obs = observed.get(name, Observed(STOPPED))
+            obs = observed.get(name, Observed(ProcessState.STOPPED))
             spec = desired.get(name)
             action = (
                 _undesired(name, obs)
@@ -130,7 +131,7 @@ class Reconciler:
 
 
 def _undesired(name: str, obs: Observed) -> Action | None:
-    if obs.status in (STOPPED, STOPPING):
+    if obs.status in _DOWN:
         return None
     return Action("stop", name)
 
@@ -144,21 +145,29 @@ def _desired(
 ) -> Action | None:
     name = spec.name
     changed = obs.spec is not None and not spec.same_process(obs.spec)
-    if obs.status == STOPPED or (obs.status == FAILED and changed):
+    if obs.status == ProcessState.STOPPED or (obs.status == ProcessState.FAILED and changed):
         return Action("start", name)
     if obs.status not in RUNNING:
         return None
     if changed:
         return Action("stop", name)
-    if obs.status == ERROR:
+    if obs.status == LifecycleState.ERROR:
         return None
     action = _connection_action(spec, obs, observed)
     if action is not None:
         return action
     want = spec.wants_active()
-    if want and obs.status == INACTIVE and _receivers_ready(spec, obs, desired, observed, reach):
+    if (
+        want
+        and obs.status == LifecycleState.INACTIVE
+        and _receivers_ready(spec, obs, desired, observed, reach)
+    ):
         return Action("activate", name)
-    if not want and obs.status == ACTIVE and _senders_down(name, desired, observed, reach):
+    if (
+        not want
+        and obs.status == LifecycleState.ACTIVE
+        and _senders_down(name, desired, observed, reach)
+    ):
         return Action("deactivate", name)
     return None
 
@@ -209,7 +218,10 @@ def _receivers_ready(
             continue
         if spec.name in reach.get(conn.to_instance, set()):
             continue  # a cycle: no order to respect
-        if observed.get(conn.to_instance, Observed(STOPPED)).status != ACTIVE:
+        if (
+            observed.get(conn.to_instance, Observed(ProcessState.STOPPED)).status
+            != LifecycleState.ACTIVE
+        ):
             return False
     return True
 
@@ -224,6 +236,9 @@ def _senders_down(
         if sender == name or spec.wants_active() or sender in reach.get(name, set()):
             continue
         sends_here = any(c.to_instance == name for c in spec.connections)
-        if sends_here and observed.get(sender, Observed(STOPPED)).status == ACTIVE:
+        if (
+            sends_here
+            and observed.get(sender, Observed(ProcessState.STOPPED)).status == LifecycleState.ACTIVE
+        ):
             return False
     return True

@@ -18,10 +18,13 @@ from typing import Any
 
 from sdrpeer.errors import SpecError
 from sdrpeer.launch.launchers import known_launchers
+from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 LAUNCHERS = ("python", "script", "exec")
-DESIRED = ("active", "inactive")
-ROLES = ("active", "standby")
+_DESIRED_JSON = {LifecycleState.ACTIVE: "active", LifecycleState.INACTIVE: "inactive"}
+"""A spec's `desired` as spec files and the API spell it."""
+DESIRED = tuple(_DESIRED_JSON.values())
+ROLES = tuple(InstanceRole)
 POLICY_PUSH = ("all", "fifo", "skip", "new")
 POLICY_FULL = ("overwrite", "drop", "block")
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
@@ -88,9 +91,9 @@ class InstanceSpec:
     """What the launcher runs: a string, or an argv tuple for exec."""
     params: tuple[tuple[str, Any], ...] = ()
     """Initial parameters as sorted (name, value) pairs (hashable; see `params_map`)."""
-    desired: str = "active"
-    """The lifecycle state the instance should be kept in: active or inactive."""
-    role: str = "active"
+    desired: LifecycleState = LifecycleState.ACTIVE
+    """The lifecycle state the instance should be kept in: ACTIVE or INACTIVE."""
+    role: InstanceRole = InstanceRole.ACTIVE
     """active, or standby: a standby is started and kept INACTIVE (warm) whatever `desired` is."""
     connections: tuple[ConnectionSpec, ...] = field(default=())
     """Data streams leaving this instance."""
@@ -104,7 +107,7 @@ class InstanceSpec:
 
     def wants_active(self) -> bool:
         """Whether the instance should end up ACTIVE."""
-        return self.desired == "active" and self.role == "active"
+        return self.desired == LifecycleState.ACTIVE and self.role == InstanceRole.ACTIVE
 
     def same_process(self, other: InstanceSpec) -> bool:
         """Whether a host started for `other` can serve this spec (only lifecycle/links differ)."""
@@ -146,8 +149,10 @@ class InstanceSpec:
             launcher=launcher,
             target=target,
             params=tuple(sorted(params.items())),
-            desired=_choice(doc.get("desired", "active"), DESIRED, f"{where}.desired"),
-            role=_choice(doc.get("role", "active"), ROLES, f"{where}.role"),
+            desired=_desired(doc.get("desired", desired_to_json(LifecycleState.ACTIVE)), where),
+            role=InstanceRole(
+                _choice(doc.get("role", InstanceRole.ACTIVE), ROLES, f"{where}.role")
+            ),
             connections=connections,
             watchdog_s=_watchdog(doc.get("watchdog_s"), f"{where}.watchdog_s"),
         )
@@ -160,11 +165,21 @@ class InstanceSpec:
             "launcher": self.launcher,
             "target": list(self.target) if isinstance(self.target, tuple) else self.target,
             "params": self.params_map(),
-            "desired": self.desired,
+            "desired": desired_to_json(self.desired),
             "role": self.role,
             "connections": [connection_to_json(c) for c in self.connections],
             "watchdog_s": self.watchdog_s,
         }
+
+
+def desired_to_json(desired: LifecycleState) -> str:
+    """A spec's `desired` as spec files and the API spell it (active, inactive)."""
+    return _DESIRED_JSON[desired]
+
+
+def _desired(value: Any, where: str) -> LifecycleState:
+    spelled = _choice(value, DESIRED, f"{where}.desired")
+    return next(s for s, text in _DESIRED_JSON.items() if text == spelled)
 
 
 def connection_to_json(c: ConnectionSpec) -> dict[str, Any]:

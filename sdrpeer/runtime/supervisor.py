@@ -53,18 +53,12 @@ from sdrpeer.runtime.launch import (
     wait_exit,
 )
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
+from sdrpeer.vocabulary import InstanceState, LifecycleState, ProcessState
 
 log = logging.getLogger(__name__)
 LIFECYCLE = ("activate", "deactivate", "reset", "exit", "restore")
 """Commands whose callbacks may hold the host's loop for a while (the watchdog waits for them,
 up to the command timeout)."""
-STOPPED, STARTING, STOPPING, BACKOFF, FAILED = (
-    "STOPPED",
-    "STARTING",
-    "STOPPING",
-    "BACKOFF",
-    "FAILED",
-)
 
 
 class Supervisor:
@@ -93,9 +87,9 @@ class Supervisor:
         self.faults: deque[problems.Fault] = deque(maxlen=config.max_faults)
         """The last faults reported, oldest first."""
         self.policy = RestartPolicy(config.restart)
-        self.state = STOPPED
+        self.state: InstanceState = ProcessState.STOPPED
         self.since = time.time()
-        self.history: deque[tuple[float, str]] = deque(maxlen=32)
+        self.history: deque[tuple[float, InstanceState]] = deque(maxlen=32)
         self.pid: int | None = None
         self.restarts = 0
         self.last_error: str | None = None
@@ -151,7 +145,7 @@ class Supervisor:
         """The instance log."""
         return log_path(self.data_dir, self.name)
 
-    def _set(self, state: str) -> None:
+    def _set(self, state: InstanceState) -> None:
         if state != self.state:
             self.state = state
             self.since = time.time()
@@ -164,13 +158,13 @@ class Supervisor:
         if self._life is not None and not self._life.done():
             return
         self._stopping = False
-        if self.state == FAILED:
+        if self.state == ProcessState.FAILED:
             self.policy.reset()
         self._life = asyncio.create_task(self._run(), name=f"supervisor-{self.name}")
         # at once, not when the process exists: until then the instance manager must not take a
         # supervisor still STOPPED from an earlier life for a finished one and forget it (its
         # process would run on, untracked)
-        self._set(STARTING)
+        self._set(ProcessState.STARTING)
 
     async def stop(self) -> None:
         """Stop gracefully (exit, then SIGTERM, then SIGKILL) and do not restart."""
@@ -241,15 +235,15 @@ class Supervisor:
                     log.error(
                         "%s: giving up after %d fast failures", self.name, self.policy.failures
                     )
-                    self._set(FAILED)
+                    self._set(ProcessState.FAILED)
                     return
                 log.warning("%s: %s; restarting in %.2fs", self.name, self.last_error, delay)
-                self._set(BACKOFF)
+                self._set(ProcessState.BACKOFF)
                 await asyncio.sleep(delay)
                 self.restarts += 1
         finally:
-            if self.state != FAILED:
-                self._set(STOPPED)
+            if self.state != ProcessState.FAILED:
+                self._set(ProcessState.STOPPED)
 
     async def _spawn(self) -> asyncio.subprocess.Process:
         try:
@@ -296,7 +290,7 @@ class Supervisor:
             self._ps.cpu_percent(None)
         except psutil.Error:
             self._ps = None
-        self._set(STARTING)
+        self._set(ProcessState.STARTING)
         handlers = {"hello": self._on_hello, "state": self._on_state}
         handlers |= {"heartbeat": self._on_heartbeat, "fault": self._on_fault}
         self._channel = ControlChannel(
@@ -328,7 +322,7 @@ class Supervisor:
     async def _terminate(self) -> None:
         proc = self._proc
         assert proc is not None
-        self._set(STOPPING)
+        self._set(ProcessState.STOPPING)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.config.exit_timeout
         if self._channel is not None and not self._channel.closed:
@@ -396,7 +390,7 @@ class Supervisor:
     def _silence_check(self, proc: asyncio.subprocess.Process) -> None:
         self._watchdog = None
         limit = self.silence_limit()
-        if limit <= 0 or proc is not self._proc or self.state == STOPPING:
+        if limit <= 0 or proc is not self._proc or self.state == ProcessState.STOPPING:
             return
         now = asyncio.get_running_loop().time()
         since = None if self._channel is None else self._channel.pending_since(LIFECYCLE)
@@ -420,16 +414,16 @@ class Supervisor:
             )
 
     def _on_state(self, msg: Report) -> None:
-        state = str(msg["state"])
+        state = LifecycleState(msg["state"])  # the control codec checked it is one
         self._heard = asyncio.get_running_loop().time()
-        if state == "INACTIVE" and self.start_latency is None:
+        if state is LifecycleState.INACTIVE and self.start_latency is None:
             self.start_latency = self._heard - self._spawned
             if self._proc is not None:  # initialized: from now on the heartbeat deadline
                 self._arm_watchdog(self._proc)
         if msg.get("error"):
             self.last_error = str(msg["error"])
         problem = problems.problem_of_state(self.state, msg, self._stopping)
-        if self.state != STOPPING:
+        if self.state != ProcessState.STOPPING:
             self._set(state)
         self._problem(problem)
 

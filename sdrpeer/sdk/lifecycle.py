@@ -18,22 +18,12 @@ How it works — the rules:
 
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import Final
 
 from sdrpeer.sdk.errors import LifecycleError
+from sdrpeer.vocabulary import LifecycleState
 
 __all__ = ["EVENTS", "TRANSITIONS", "LifecycleError", "LifecycleState", "next_state"]
-
-
-class LifecycleState(StrEnum):
-    """A component's lifecycle state; values are the names reported in `state` messages."""
-
-    CREATED = "CREATED"
-    INACTIVE = "INACTIVE"
-    ACTIVE = "ACTIVE"
-    ERROR = "ERROR"
-    FINALIZED = "FINALIZED"
 
 
 S = LifecycleState

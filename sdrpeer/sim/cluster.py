@@ -29,6 +29,7 @@ from sdrpeer.gossip.messages import Addr, Packet
 from sdrpeer.gossip.wire import OVERHEAD, packet_body
 from sdrpeer.sim.network import Network
 from sdrpeer.sim.trace import Trace
+from sdrpeer.vocabulary import MemberState
 
 if TYPE_CHECKING:
     from sdrpeer.gossip.table import MemberInfo
@@ -50,7 +51,7 @@ class Core(Protocol):
     def set_record(self, now: float, payload: bytes) -> int: ...
     def broadcast_event(self, now: float, kind: str, payload: bytes) -> None: ...
     def members(self) -> list[MemberInfo]: ...
-    def state_of(self, name: str) -> int | None: ...
+    def state_of(self, name: str) -> MemberState | None: ...
 
 
 CoreFactory = Callable[[str, Addr, GossipConfig, float, random.Random], Core]

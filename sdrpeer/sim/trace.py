@@ -15,7 +15,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 
 from sdrpeer.gossip.events import REAPED, CoreEvent, EventReceived, MemberChanged, RecordChanged
-from sdrpeer.gossip.messages import ALIVE, DEAD, STATE_NAMES
+from sdrpeer.gossip.messages import ALIVE, DEAD
+from sdrpeer.vocabulary import MemberState
 
 
 class Trace:
@@ -27,10 +28,10 @@ class Trace:
         self.keep_all = keep_all
         self.events: list[tuple[float, str, CoreEvent]] = []
         """Every event as (time, observer, event); filled only with keep_all."""
-        self.views: list[dict[str, int]] = [{} for _ in self.names]
+        self.views: list[dict[str, MemberState]] = [{} for _ in self.names]
         """Per observer: member -> state, as its events told (reaped members removed)."""
         self._alive = [0] * len(self.names)
-        self._changes: dict[str, list[tuple[float, int, int, int]]] = {}
+        self._changes: dict[str, list[tuple[float, int, MemberState | None, int]]] = {}
         self._records: dict[str, list[tuple[float, int, int]]] = {}
         self.broadcasts: dict[tuple[str, int], dict[str, float]] = {}
         """(source, seq) -> observer -> first arrival time of that one-off event."""
@@ -53,7 +54,7 @@ class Trace:
             view = self.views[i]
             if view.get(name) == ALIVE:
                 self._alive[i] -= 1
-            if state == REAPED:
+            if state is REAPED:
                 view.pop(name, None)
             else:
                 view[name] = state
@@ -79,12 +80,12 @@ class Trace:
 
     # -- questions ----------------------------------------------------------------------------
 
-    def view(self, observer: str, member: str) -> int | None:
+    def view(self, observer: str, member: str) -> MemberState | None:
         """The state `observer` holds for `member` (None: unknown or reaped)."""
         return self.views[self.index[observer]].get(member)
 
     def first_seen(
-        self, observer: str, member: str, state: int, after: float = 0.0
+        self, observer: str, member: str, state: MemberState, after: float = 0.0
     ) -> float | None:
         """When `observer` first reported `member` in `state` at or after `after`."""
         i = self.index[observer]
@@ -93,7 +94,9 @@ class Trace:
                 return t
         return None
 
-    def first_seen_by(self, member: str, state: int, after: float = 0.0) -> dict[str, float]:
+    def first_seen_by(
+        self, member: str, state: MemberState, after: float = 0.0
+    ) -> dict[str, float]:
         """Observer -> first time (at or after `after`) it reported `member` in `state`."""
         seen: dict[str, float] = {}
         for t, obs, st, _ in self._changes.get(member, ()):
@@ -102,7 +105,7 @@ class Trace:
         return seen
 
     def when_all_see(
-        self, member: str, state: int, observers: Iterable[str], after: float = 0.0
+        self, member: str, state: MemberState, observers: Iterable[str], after: float = 0.0
     ) -> float | None:
         """When the last of `observers` first reported `member` in `state` (None: one never did)."""
         seen = self.first_seen_by(member, state, after)
@@ -123,7 +126,7 @@ class Trace:
         """(time, observer, member) for every DEAD report about a member never killed by then."""
         return self.false_reports(DEAD, after)
 
-    def false_reports(self, state: int, after: float = 0.0) -> list[tuple[float, str, str]]:
+    def false_reports(self, state: MemberState, after: float = 0.0) -> list[tuple[float, str, str]]:
         """(time, observer, member) for every report of `state` (SUSPECT, DEAD) about a member
         never killed by then."""
         found = []
@@ -155,10 +158,7 @@ class Trace:
             view, own = self.views[i], self.names[i]
             wrong = [(n, view.get(n)) for n in names if n != own and view.get(n) != ALIVE]
             if wrong:
-                shown = ", ".join(
-                    f"{n} ({'unknown' if s is None else STATE_NAMES.get(s, s)})"
-                    for n, s in wrong[:3]
-                )
+                shown = ", ".join(f"{n} ({'unknown' if s is None else s})" for n, s in wrong[:3])
                 lines.append(f"{own} misses {len(wrong)}: {shown}")
         more = f" (+{len(lines) - limit} more nodes)" if len(lines) > limit else ""
         return f"{len(lines)} of {len(up)} nodes lag; " + "; ".join(lines[:limit]) + more
