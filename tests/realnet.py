@@ -30,6 +30,7 @@ from typing import Any, TypeVar
 import pytest
 
 from sdrpeer.wire import Keyring, format_key
+from tests import wait
 
 REPO = Path(__file__).resolve().parents[1]
 POLL = 0.1
@@ -287,31 +288,25 @@ class RealCluster:
         what: str,
         timeout: float = WAIT,
     ) -> T:
-        """Poll `probe()` every 0.1 s until `ok(value)`; fail after `timeout` s with the logs."""
-        deadline = time.monotonic() + timeout
-        last: Any = "(never answered)"
-        while True:
-            try:
-                value = probe()
-            except (OSError, RealnetError, ValueError, LookupError) as exc:  # URLError: OSError
-                last = f"error: {exc}"
-            else:
-                if ok(value):
-                    return value
-                last = value
-            if time.monotonic() > deadline:
-                raise RealnetError(
-                    f"timed out after {timeout:g} s waiting for {what}; last seen: {last!r:.1500}\n"
-                    + self.logs()
-                )
-            crashed = [a for a in self.agents if not a.stopped and not a.running()]
-            if crashed:
-                a = crashed[0]
-                raise RealnetError(
-                    f"{a.name} exited with code {a.proc.returncode} while waiting for {what}\n"
-                    + self.logs()
-                )
-            time.sleep(POLL)
+        """`tests.wait.until` every 0.1 s with the logs on failure; an agent exiting on its own
+        fails it at once; an unanswered or refused request is "not yet"."""
+        return wait.until(
+            what,
+            probe,
+            ok,
+            within=timeout,
+            poll=POLL,
+            retry=(OSError, RealnetError, ValueError, LookupError),  # URLError: OSError
+            abort=self._crashed,
+            context=self.logs,
+        )
+
+    def _crashed(self) -> str | None:
+        """Which agent exited without being stopped, if one did."""
+        crashed = [a for a in self.agents if not a.stopped and not a.running()]
+        if crashed:
+            return f"{crashed[0].name} exited with code {crashed[0].proc.returncode}"
+        return None
 
     def wait_states(
         self, agent: Agent, expected: dict[str, str], what: str = "", timeout: float = WAIT

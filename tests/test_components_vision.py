@@ -10,8 +10,8 @@ import pytest
 from components.anomaly_detection import AnomalyDetection, find_blobs, find_hazard
 from components.camera import Camera, OmnidirectionalCamera
 from components.scene import DECOY_LEVEL, HAZARD_LEVEL, Scene
-from sdrpeer.dataplane.testing import until
 from sdrpeer.sdk import ComponentRunner, LifecycleState
+from tests.wait import until_async
 
 
 class ListSink:
@@ -131,7 +131,7 @@ async def test_cameras_publish_frames_at_their_rate_and_size(
     await runner.initialize()
     await runner.activate()
     start = time.monotonic()
-    await until(lambda: len(sink.values) >= 20)
+    await until_async("len(sink.values) >= 20", lambda: len(sink.values), lambda v: v >= 20)
     elapsed = time.monotonic() - start
     await runner.finalize()
     assert elapsed > 0.15  # paced by the rate, not a busy loop
@@ -155,7 +155,11 @@ async def test_anomaly_detection_raises_the_alarm_per_frame() -> None:
     for seq, t in enumerate((with_hazard, without), start=1):
         frame = {"w": 160, "h": 120, "seq": seq, "ts": 0.0, "pixels": scene.render(t)}
         det.image.deliver(frame, seq, "cam")
-        await until(lambda n=seq: len(sink.values) == n)  # type: ignore[misc]
+        await until_async(
+            f"detection {seq}",
+            lambda: len(sink.values),
+            lambda v, n=seq: v == n,  # type: ignore[misc]
+        )
     await runner.finalize()
     hit, miss = sink.values
     truth = scene.hazard_at(with_hazard)

@@ -31,9 +31,12 @@ WITHIN = 10.0
 """Default bound of `until` (s): long enough for a loaded 2-core machine, never reached when the
 code works."""
 POLL = 0.02
-"""Default time between two probes (s)."""
-SHOWN = 600
-"""How many characters of the last value a failure message shows."""
+"""Default time between two probes (s) that cost something (a request, a file read)."""
+POLL_ATTR = 0.005
+"""Default time between two probes of plain attributes on the event loop (s): cheap to look at,
+and the test goes on as soon as the condition holds."""
+SHOWN = 1200
+"""How many characters of the last value a failure message shows (its start and its end)."""
 
 
 class WaitError(AssertionError):
@@ -49,7 +52,10 @@ def _nothing() -> str:
 
 
 def _last(value: Any) -> str:
-    return f"{value!r:.{SHOWN}}"
+    text = repr(value)
+    if len(text) <= SHOWN:
+        return text
+    return f"{text[: SHOWN // 2]} ... {text[-SHOWN // 2 :]}"
 
 
 def _describe(
@@ -155,7 +161,7 @@ async def until_async(
     ok: Callable[[T], object] = bool,
     *,
     within: float = WITHIN,
-    poll: float = POLL,
+    poll: float = POLL_ATTR,
 ) -> T:
     """`until` on the event loop: the other tasks run while it waits."""
 
@@ -171,7 +177,7 @@ async def stays_async(
     ok: Callable[[T], object] = bool,
     *,
     window: float,
-    poll: float = POLL,
+    poll: float = POLL_ATTR,
 ) -> T:
     """`stays` on the event loop (the window on the loop's clock: virtual under
     `tests.virtual_time`)."""
