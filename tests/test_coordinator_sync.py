@@ -21,6 +21,7 @@ from sdrpeer.plan import Placement, Plan
 from sdrpeer.record import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.loader import parse_system
 from tests.test_shutdown import coordinator_with
+from tests.wait import until_async
 
 
 async def test_a_failed_fetch_is_not_retried_at_once(
@@ -43,9 +44,13 @@ async def test_a_failed_fetch_is_not_retried_at_once(
     try:
         c.start()
         loop = asyncio.get_running_loop()
-        async with asyncio.timeout(30):
-            while not calls or loop.time() - calls[0] < DeployConfig().fetch_retry * 2.5:  # noqa: ASYNC110
-                await asyncio.sleep(0.01)
+        await until_async(
+            "2.5 fetch_retry periods since the first fetch",
+            lambda: calls,
+            lambda c: c and loop.time() - c[0] >= DeployConfig().fetch_retry * 2.5,
+            within=30,
+            poll=0.01,
+        )
         assert 2 <= len(calls) <= 4, len(calls)  # one now, then one per fetch_retry
         gaps = [b - a for a, b in itertools.pairwise(calls)]
         assert min(gaps) >= DeployConfig().fetch_retry
@@ -84,25 +89,23 @@ async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
     try:
         c.start()
         assert c.accept(old, source="robot-1")
-        async with asyncio.timeout(60):
-            while cnt_state() != "ACTIVE":  # noqa: ASYNC110
-                await asyncio.sleep(0.02)
+        await until_async("Cnt ACTIVE", cnt_state, lambda s: s == "ACTIVE", within=60, poll=0.02)
         running = InstanceInfo("Cnt", "Cnt", "active", "active", 1.0, 10**7, "tcp://127.0.0.1:7")
         state.alive["robot-2"] = replace(
             other, instances=(running,), plan=PlanInfo(2, 1, "d", "robot-2")
         )
         c.wake()
-        async with asyncio.timeout(30):
-            while cnt_state() != "INACTIVE":  # noqa: ASYNC110
-                await asyncio.sleep(0.02)
+        await until_async(
+            "Cnt stood down", cnt_state, lambda s: s == "INACTIVE", within=30, poll=0.02
+        )
         assert c.store.plan is old  # not fetched: gossip alone made it yield
         (event,) = [e for e in c.events.since(0) if e["kind"] == "plan.superseded"]
         assert event["detail"] == {"instance": "Cnt", "newer": ["robot-2"]}
         state.alive["robot-2"] = replace(other, plan=PlanInfo(2, 1, "d", "robot-2"))
         c.wake()  # the newer copy is gone (and its plan never came): robot-1's runs again
-        async with asyncio.timeout(30):
-            while cnt_state() != "ACTIVE":  # noqa: ASYNC110
-                await asyncio.sleep(0.02)
+        await until_async(
+            "Cnt ACTIVE again", cnt_state, lambda s: s == "ACTIVE", within=30, poll=0.02
+        )
     finally:
         await c.stop()
         await manager.stop()

@@ -15,7 +15,7 @@ from sdrpeer.dataplane.testing import RecordingPort, make_policy
 from sdrpeer.sdk.acks import AckState
 from sdrpeer.sdk.inport import InPortRuntime
 from sdrpeer.sdk.policy import ConnectorPolicy
-from tests.wait import until_async
+from tests.wait import stays_async, until_async
 
 # ---- the pure parts ------------------------------------------------------------------------
 
@@ -397,11 +397,12 @@ async def test_the_window_stops_the_sender_until_frames_are_taken(
     sender = asyncio.create_task(publish(conn, 500))
     try:
         await until_async("conn.seq >= 50", lambda: conn.seq, lambda v: v >= 50)
-        await asyncio.sleep(0.1)
-        assert conn.seq == 50
-        assert conn.unacked == 50
-        assert conn.pending == 10
-        assert not sender.done()
+        await stays_async(  # seq, unacked, pending, sender done
+            "the sender held at the window",
+            lambda: (conn.seq, conn.unacked, conn.pending, sender.done()),
+            lambda seen: seen == (50, 50, 10, False),
+            window=0.1,
+        )
         inst.resume()
         await asyncio.wait_for(sender, 10)
         await until_async("len(inst.taken) == 500", lambda: len(inst.taken), lambda v: v == 500)

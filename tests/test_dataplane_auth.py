@@ -14,7 +14,7 @@ from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello
 from sdrpeer.dataplane.testing import RecordingPort, make_policy
-from tests.wait import until_async
+from tests.wait import stays_async, until_async
 
 K1 = derive_data_key(b"\x01" * 32)
 K2 = derive_data_key(b"\x02" * 32)
@@ -93,9 +93,12 @@ async def test_a_sender_without_the_key_gets_nothing_in(rx: Rx, keys: list[bytes
             lambda: rx.server.counters["refused_auth"],
             lambda v: v > 0,
         )
-        await asyncio.sleep(0.05)
-        assert rx.port.frames == []
-        assert not conn.connected
+        await stays_async(
+            "nothing in, not connected",
+            lambda: (rx.port.frames, conn.connected),
+            lambda seen: seen == ([], False),
+            window=0.05,
+        )
         assert "authenticat" in (conn.last_error or "") or "proof" in (conn.last_error or "")
     finally:
         await conn.close()

@@ -13,7 +13,7 @@ import pytest
 
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.testing import RecordingPort, StalledReceiver, make_policy
-from tests.wait import until_async
+from tests.wait import stays_async, until_async
 
 FILLER = b"f" * 256 * 1024
 
@@ -82,8 +82,8 @@ async def test_block_makes_the_sender_wait(tmp_path: Path) -> None:
     assert conn.dropped == 0
     assert not conn.offer(1)  # full: not queued, not dropped
     drain = asyncio.create_task(conn.drain())
-    await asyncio.sleep(0.05)
-    assert not drain.done()  # still blocked while the receiver reads nothing
+    # still blocked while the receiver reads nothing
+    await stays_async("drain blocked", drain.done, lambda done: not done, window=0.05)
     rx.release()
     async with asyncio.timeout(5):
         await drain
