@@ -21,12 +21,14 @@ from sdrpeer.plan import Placement, Plan
 from sdrpeer.record import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
 from sdrpeer.system.loader import parse_system
 from tests.test_shutdown import coordinator_with
+from tests.virtual_time import run_virtual
 from tests.wait import until_async
 
 
-async def test_a_failed_fetch_is_not_retried_at_once(
+def test_a_failed_fetch_is_not_retried_at_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """On virtual loop time (tests/virtual_time.py): the fetch times are exact."""
     calls: list[float] = []
 
     async def refused(api: str, token: str) -> Plan:
@@ -40,23 +42,21 @@ async def test_a_failed_fetch_is_not_retried_at_once(
     )
     me = RobotRecord(metrics, LinkSummary(), "http://127.0.0.1:8", 0, ())
     state = ClusterState({"robot-1": me, "robot-2": offers}, ["robot-1", "robot-2"])
-    c, manager = await coordinator_with(tmp_path, state)
-    try:
-        c.start()
-        loop = asyncio.get_running_loop()
-        await until_async(
-            "2.5 fetch_retry periods since the first fetch",
-            lambda: calls,
-            lambda c: c and loop.time() - c[0] >= DeployConfig().fetch_retry * 2.5,
-            within=30,
-            poll=0.01,
-        )
-        assert 2 <= len(calls) <= 4, len(calls)  # one now, then one per fetch_retry
-        gaps = [b - a for a, b in itertools.pairwise(calls)]
-        assert min(gaps) >= DeployConfig().fetch_retry
-    finally:
-        await c.stop()
-        await manager.stop()
+    retry = DeployConfig().fetch_retry
+
+    async def scenario() -> None:
+        c, manager = await coordinator_with(tmp_path, state)
+        try:
+            c.start()
+            await asyncio.sleep(retry * 2.5)
+        finally:
+            await c.stop()
+            await manager.stop()
+
+    run_virtual(scenario())
+    # one now, then one per fetch_retry, at the first tick (0.01 s) it is due
+    assert calls == pytest.approx([0.0, retry, 2 * retry], abs=0.011)
+    assert all(b - a >= retry for a, b in itertools.pairwise(calls))
 
 
 async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
