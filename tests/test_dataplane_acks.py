@@ -396,10 +396,12 @@ async def test_the_window_stops_the_sender_until_frames_are_taken(
     conn.start()
     sender = asyncio.create_task(publish(conn, 500))
     try:
-        await until_async("conn.seq >= 50", lambda: conn.seq, lambda v: v >= 50)
-        await stays_async(  # seq, unacked, pending, sender done
+        held = lambda: (conn.seq, conn.unacked, conn.pending, sender.done())  # noqa: E731
+        # 50 sent and unacked, 10 more queued behind the window, the publisher blocked ...
+        await until_async("the window full", held, lambda seen: seen == (50, 50, 10, False))
+        await stays_async(  # ... and so it stays while nothing is taken
             "the sender held at the window",
-            lambda: (conn.seq, conn.unacked, conn.pending, sender.done()),
+            held,
             lambda seen: seen == (50, 50, 10, False),
             window=0.1,
         )

@@ -93,6 +93,7 @@ async def test_a_sender_without_the_key_gets_nothing_in(rx: Rx, keys: list[bytes
             lambda: rx.server.counters["refused_auth"],
             lambda v: v > 0,
         )
+        await until_async("the sender told no", lambda: conn.connected, lambda up: not up)
         await stays_async(
             "nothing in, not connected",
             lambda: (rx.port.frames, conn.connected),
