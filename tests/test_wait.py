@@ -92,3 +92,13 @@ def test_the_async_forms_use_the_loops_clock() -> None:
         assert await until_answer("two", answer, lambda n: n == 2) == 2
 
     run_virtual(scenario())
+
+
+def test_a_long_last_value_shows_its_start_and_its_end() -> None:
+    log = "started\n" + "x" * 5000 + "\nthe error at the end"
+    with pytest.raises(WaitError) as err:
+        until("'ready' in the log", lambda: log, lambda text: "ready" in text, within=0)
+    message = str(err.value)
+    assert "'started" in message
+    assert "the error at the end'" in message
+    assert len(message) < 1400
