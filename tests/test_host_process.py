@@ -206,8 +206,7 @@ def test_footprint(tmp_path: Path) -> None:
     asserts behaviour only, with a memory guard well above the target so a loaded machine or
     another Python build cannot make it flaky.
     """
-    startup, rss_kib = measure(f"{FX}:Counter", tmp_path, idle=0.5)
-    assert startup > 0
+    _, rss_kib = measure(f"{FX}:Counter", tmp_path, idle=0.5)  # fails unless it reaches INACTIVE
     assert rss_kib / 1024 <= 35.0, f"idle RSS {rss_kib / 1024:.1f} MiB: a heavy import crept in?"
 
 
