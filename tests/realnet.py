@@ -19,7 +19,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Iterable, Sequence
@@ -30,11 +29,12 @@ from typing import Any, TypeVar
 import pytest
 
 from sdrpeer.gossip.wire import Keyring, format_key
+from tests import wait
 
 REPO = Path(__file__).resolve().parents[1]
 POLL = 0.1
 WAIT = 15.0
-START_WAIT = 10.0
+START_WAIT = 15.0
 NETNS_ONLY = pytest.mark.skipif(
     os.geteuid() != 0 or not all(shutil.which(t) for t in ("ip", "iptables", "tc")),
     reason="NAMESPACE LAB NOT TESTED: needs root with ip, iptables and tc "
@@ -177,6 +177,18 @@ class RealCluster:
     ) -> Agent:
         """Start an agent (data dir `name` or `name.run<N>`), wait for its agent.json;
         `insecure`: without the cluster key (`--insecure`); `flags`: more `sdrpeer agent` flags."""
+        return self.started(self.spawn(name, join, run=run, insecure=insecure, flags=flags))
+
+    def spawn(
+        self,
+        name: str,
+        join: Iterable[Agent] = (),
+        *,
+        run: int = 0,
+        insecure: bool = False,
+        flags: Sequence[str] = (),
+    ) -> Agent:
+        """Start an agent's process as `start` does, without waiting for it (see `started`)."""
         data_dir = self.root / (name if run == 0 else f"{name}.run{run}")
         data_dir.mkdir(parents=True)
         command = [
@@ -217,29 +229,35 @@ class RealCluster:
             )
         agent = Agent(name, data_dir, proc)
         self.agents.append(agent)
-        deadline = time.monotonic() + START_WAIT
-        while True:
-            info = _read_json(data_dir / "agent.json")
-            if info is not None and info.get("gossip") and info.get("api"):
-                agent.gossip = str(info["gossip"])
-                agent.api = str(info["api"]).rstrip("/")
-                agent.pid = int(info["pid"])
-                return agent
-            if proc.poll() is not None:
-                raise RealnetError(
-                    f"{name}: agent exited with code {proc.returncode} while starting:\n"
-                    + log_tail(agent.log)
-                )
-            if time.monotonic() > deadline:
-                raise RealnetError(
-                    f"{name}: no agent.json within {START_WAIT:g} s:\n" + log_tail(agent.log)
-                )
-            time.sleep(POLL)
+        return agent
+
+    def started(self, agent: Agent) -> Agent:
+        """`agent` once its agent.json names its addresses (fails if it exits meanwhile)."""
+
+        def exited() -> str | None:
+            code = agent.proc.poll()
+            return None if code is None else f"{agent.name} exited with code {code}"
+
+        info = wait.until(
+            f"{agent.name}'s agent.json",
+            lambda: _read_json(agent.data_dir / "agent.json") or {},
+            lambda doc: bool(doc.get("gossip") and doc.get("api")),
+            within=START_WAIT,
+            poll=0.05,
+            abort=exited,
+            context=lambda: log_tail(agent.log),
+        )
+        agent.gossip = str(info["gossip"])
+        agent.api = str(info["api"]).rstrip("/")
+        agent.pid = int(info["pid"])
+        return agent
 
     def start_many(self, n: int) -> list[Agent]:
-        """robot-1 .. robot-n, the others joining robot-1, and wait until all see n alive."""
+        """robot-1 .. robot-n, the others joining robot-1, and wait until all see n alive.
+        The others start side by side (each waits only for robot-1's address)."""
         first = self.start("robot-1")
-        others = [self.start(f"robot-{i}", join=[first]) for i in range(2, n + 1)]
+        spawned = [self.spawn(f"robot-{i}", join=[first]) for i in range(2, n + 1)]
+        others = [self.started(agent) for agent in spawned]
         agents = [first, *others]
         names = {a.name for a in agents}
         for agent in agents:
@@ -287,31 +305,36 @@ class RealCluster:
         what: str,
         timeout: float = WAIT,
     ) -> T:
-        """Poll `probe()` every 0.1 s until `ok(value)`; fail after `timeout` s with the logs."""
-        deadline = time.monotonic() + timeout
-        last: Any = "(never answered)"
-        while True:
-            try:
-                value = probe()
-            except (OSError, RealnetError, ValueError, LookupError) as exc:  # URLError: OSError
-                last = f"error: {exc}"
-            else:
-                if ok(value):
-                    return value
-                last = value
-            if time.monotonic() > deadline:
-                raise RealnetError(
-                    f"timed out after {timeout:g} s waiting for {what}; last seen: {last!r:.1500}\n"
-                    + self.logs()
-                )
-            crashed = [a for a in self.agents if not a.stopped and not a.running()]
-            if crashed:
-                a = crashed[0]
-                raise RealnetError(
-                    f"{a.name} exited with code {a.proc.returncode} while waiting for {what}\n"
-                    + self.logs()
-                )
-            time.sleep(POLL)
+        """`tests.wait.until` every 0.1 s with the logs on failure; an agent exiting on its own
+        fails it at once; an unanswered or refused request is "not yet"."""
+        return wait.until(
+            what,
+            probe,
+            ok,
+            within=timeout,
+            poll=POLL,
+            retry=(OSError, RealnetError, ValueError, LookupError),  # URLError: OSError
+            abort=self._crashed,
+            context=self.logs,
+        )
+
+    def _crashed(self) -> str | None:
+        """Which agent exited without being stopped, if one did."""
+        crashed = [a for a in self.agents if not a.stopped and not a.running()]
+        if crashed:
+            return f"{crashed[0].name} exited with code {crashed[0].proc.returncode}"
+        return None
+
+    def wait_traffic(self, agents: Sequence[Agent], messages: int, what: str = "") -> None:
+        """Wait until every one of `agents` has taken in `messages` more gossip messages than
+        now (traffic flowed: a condition, where a fixed sleep would assume a rate)."""
+        start = {a.name: a.agent_info()["messages"]["in"] for a in agents}
+        for a in agents:
+            self.wait_until(
+                lambda a=a: a.agent_info()["messages"]["in"] - start[a.name],  # type: ignore[misc]
+                lambda n: n >= messages,
+                f"{messages} more messages into {a.name}" + (f" ({what})" if what else ""),
+            )
 
     def wait_states(
         self, agent: Agent, expected: dict[str, str], what: str = "", timeout: float = WAIT

@@ -7,6 +7,7 @@ import asyncio
 
 from sdrpeer.api.server import serve_api
 from tests.test_api import FakeView
+from tests.wait import until_async
 
 
 async def closed_by_server(reader: asyncio.StreamReader, within: float = 20.0) -> bool:
@@ -25,9 +26,7 @@ async def test_excess_and_idle_connections_are_closed_and_the_api_serves_on() ->
     )
     try:
         held = [await asyncio.open_connection("127.0.0.1", site.port) for _ in range(4)]
-        async with asyncio.timeout(10):
-            while len(site.connections()) < 4:  # noqa: ASYNC110 - the server's own count
-                await asyncio.sleep(0.01)
+        await until_async("four connections", lambda: len(site.connections()), lambda n: n >= 4)
         extra = [await asyncio.open_connection("127.0.0.1", site.port) for _ in range(2)]
         for reader, _ in extra:
             async with asyncio.timeout(20):

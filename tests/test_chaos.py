@@ -120,6 +120,7 @@ def test_the_chaos_system_pairs_cameras_and_detectors_with_standbys() -> None:
 
 
 @pytest.mark.realnet
+@pytest.mark.slow
 def test_a_60_second_soak_ends_without_violations() -> None:
     report = run_chaos(ChaosOptions(robots=5, components=8, minutes=1.0, seed=2), say=print)
     print(format_report(report))

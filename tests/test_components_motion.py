@@ -9,9 +9,9 @@ import pytest
 
 from components.position_estimation import Area, Estimator, PositionEstimation
 from components.red_controller import Odometry, REDController, decide, integrate, wrap_angle
-from sdrpeer.dataplane.testing import until
 from sdrpeer.sdk import CallbackError, ComponentRunner, LifecycleState
 from tests.test_components_vision import ListSink
+from tests.wait import until_async
 
 
 @pytest.mark.parametrize(
@@ -110,22 +110,26 @@ async def test_controller_drives_stops_on_alarm_and_outside_and_integrates() -> 
     ctl = REDController(params={"rate": 200.0, "speed": 0.5, "turn": 0.0, "drift": 0.0})
     runner, sinks = await start(ctl, "cmd", "odometry")
     cmd, odo = sinks["cmd"].values, sinks["odometry"].values
-    await until(lambda: len(cmd) >= 10)
+    await until_async("len(cmd) >= 10", lambda: len(cmd), lambda v: v >= 10)
     assert cmd[0]["stopped"] is False
     assert (cmd[0]["v"], cmd[0]["w"], cmd[0]["reason"]) == (0.5, 0.0, None)
-    await until(lambda: odo[-1]["x"] > 0.02)
+    await until_async("odo[-1]['x'] > 0.02", lambda: odo[-1]["x"], lambda v: v > 0.02)
     assert odo[-1]["y"] == 0.0
     ctl.alarm.deliver({"alarm": True, "ts": 0.0, "where": [1, 2], "source": 7}, 1, "det")
-    await until(lambda: cmd[-1]["reason"] == "alarm")
+    await until_async(
+        "cmd[-1]['reason'] == 'alarm'", lambda: cmd[-1]["reason"], lambda v: v == "alarm"
+    )
     assert (cmd[-1]["v"], cmd[-1]["w"], cmd[-1]["stopped"]) == (0.0, 0.0, True)
     n = len(odo)
-    await until(lambda: len(odo) > n + 5)
+    await until_async("len(odo) > n + 5", lambda: len(odo), lambda v: v > n + 5)
     assert odo[-1]["x"] == odo[-4]["x"]  # standing still
     ctl.alarm.deliver({"alarm": False, "ts": 0.0, "where": None, "source": 8}, 2, "det")
     ctl.pose.deliver({"x": 3.0, "y": 0.0, "theta": 0.0, "inside": False, "ts": 0.0}, 1, "pe")
-    await until(lambda: cmd[-1]["reason"] == "outside")
+    await until_async(
+        "cmd[-1]['reason'] == 'outside'", lambda: cmd[-1]["reason"], lambda v: v == "outside"
+    )
     ctl.pose.deliver({"x": 0.0, "y": 0.0, "theta": 0.0, "inside": True, "ts": 0.0}, 2, "pe")
-    await until(lambda: not cmd[-1]["stopped"])
+    await until_async("not cmd[-1]['stopped']", lambda: not cmd[-1]["stopped"])
     assert ctl.stops == 1  # alarm, then outside without driving in between: one stop
     assert [c["reason"] for c in cmd if c["stopped"]][-1] == "outside"
     # Odometry is the integral of the commands: x grows by v * elapsed while driving.
@@ -146,13 +150,17 @@ async def test_position_estimation_flags_leaving_the_area() -> None:
     poses = sinks["pose"].values
     for seq, x in enumerate((0.0, 0.4, 0.8, 1.2, 0.9), start=1):
         pe.odometry.deliver({"x": x, "y": 0.0, "theta": 0.0, "ts": 0.0}, seq, "ctl")
-        await until(lambda n=seq: len(poses) == n)  # type: ignore[misc]
+        await until_async(
+            f"pose {seq}",
+            lambda: len(poses),
+            lambda v, n=seq: v == n,  # type: ignore[misc]
+        )
     assert [p["inside"] for p in poses] == [True, True, True, False, True]
     assert [p["x"] for p in poses] == pytest.approx([0.0, 0.4, 0.8, 1.2, 0.9])
     assert set(poses[0]) == {"x", "y", "theta", "inside", "ts"}
     await runner.set_params({"area": "-2,-2,2,2"})
     pe.odometry.deliver({"x": 1.3, "y": 0.0, "theta": 0.0, "ts": 0.0}, 6, "ctl")
-    await until(lambda: len(poses) == 6)
+    await until_async("len(poses) == 6", lambda: len(poses), lambda v: v == 6)
     assert poses[-1]["inside"] is True
     await runner.finalize()
 

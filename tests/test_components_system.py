@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,10 +13,10 @@ from components.anomaly_detection import AnomalyDetection
 from components.camera import Camera, OmnidirectionalCamera
 from components.position_estimation import PositionEstimation
 from components.red_controller import REDController
-from sdrpeer.dataplane.testing import until
 from sdrpeer.sdk import Component, ComponentRunner, InPortRuntime
 from tests.hostctl import HostPool, HostProc
 from tests.test_components_vision import ListSink
+from tests.wait import until, until_async
 
 MIB = 1024 * 1024
 FAST = {"rate": "20", "hazard_period": "1.0", "hazard_on": "0.4"}
@@ -86,8 +85,16 @@ async def test_five_components_in_process_alarm_stop_and_leave_the_area() -> Non
     for r in reversed(runners):  # consumers first, as an agent would
         await r.activate()
     try:
-        await until(lambda: any(not p["inside"] for p in poses.values), within=10.0)
-        await until(lambda: any("outside" in (c["reason"] or "") for c in cmds.values), 10.0)
+        await until_async(
+            "any(not p['inside'] for p in poses.values)",
+            lambda: any(not p["inside"] for p in poses.values),
+            within=10.0,
+        )
+        await until_async(
+            "any('outside' in (c['reason'] or '') for c in cmds.values)",
+            lambda: any("outside" in (c["reason"] or "") for c in cmds.values),
+            within=10.0,
+        )
     finally:
         for r in runners:
             await r.finalize()
@@ -142,13 +149,20 @@ def test_five_real_hosts_over_the_data_plane(hosts: HostPool) -> None:
         assert procs[src].command("connect", conn=conn)["ok"] is True
     for name in reversed(specs):
         assert procs[name].command("activate")["ok"] is True
-    deadline = time.monotonic() + 15.0
-    while "left the area" not in procs["Estimator"].log_text():
-        assert time.monotonic() < deadline, procs["Estimator"].log_text()[-2000:]
-        time.sleep(0.1)
-    while "stop: outside" not in procs["Controller"].log_text():
-        assert time.monotonic() < deadline, procs["Controller"].log_text()[-2000:]
-        time.sleep(0.1)
+    until(
+        "the Estimator to see the robot leave the area",
+        procs["Estimator"].log_text,
+        lambda log: "left the area" in log,
+        within=15.0,
+        poll=0.1,
+    )
+    until(
+        "the Controller to stop outside",
+        procs["Controller"].log_text,
+        lambda log: "stop: outside" in log,
+        within=15.0,
+        poll=0.1,
+    )
     assert counted(procs["Detector"], "image", "frames_in", 10)["lost"] == 0
     counted(procs["Detector"], "alarm", "frames_out", 10)
     counted(procs["Controller"], "alarm", "frames_in", 10)

@@ -4,7 +4,6 @@ does (the same capture finds them: the search can fail)."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import msgpack
@@ -65,7 +64,10 @@ def capture_gossip(cluster: RealCluster, insecure: bool) -> tuple[Capture, list[
                 lambda comps: "SecretSurveyCam" in comps,
                 "the component in gossip",
             )
-        time.sleep(1.0)  # more vitals and probes on the wire
+        captured = len(capture.payloads)  # then more vitals and probes on the wire
+        cluster.wait_until(
+            lambda: len(capture.payloads), lambda n: n >= captured + 40, "40 more datagrams"
+        )
     return capture, [first, second]
 
 

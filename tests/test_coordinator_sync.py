@@ -22,11 +22,14 @@ from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, R
 from sdrpeer.system.loader import parse_system
 from sdrpeer.vocabulary import LifecycleState
 from tests.test_shutdown import coordinator_with
+from tests.virtual_time import run_virtual
+from tests.wait import until_async
 
 
-async def test_a_failed_fetch_is_not_retried_at_once(
+def test_a_failed_fetch_is_not_retried_at_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """On virtual loop time (tests/virtual_time.py): the fetch times are exact."""
     calls: list[float] = []
 
     async def refused(api: str, token: str) -> Plan:
@@ -40,19 +43,21 @@ async def test_a_failed_fetch_is_not_retried_at_once(
     )
     me = RobotRecord(metrics, LinkSummary(), "http://127.0.0.1:8", 0, ())
     state = ClusterState({"robot-1": me, "robot-2": offers}, ["robot-1", "robot-2"])
-    c, manager = await coordinator_with(tmp_path, state)
-    try:
-        c.start()
-        loop = asyncio.get_running_loop()
-        async with asyncio.timeout(30):
-            while not calls or loop.time() - calls[0] < DeployConfig().fetch_retry * 2.5:  # noqa: ASYNC110
-                await asyncio.sleep(0.01)
-        assert 2 <= len(calls) <= 4, len(calls)  # one now, then one per fetch_retry
-        gaps = [b - a for a, b in itertools.pairwise(calls)]
-        assert min(gaps) >= DeployConfig().fetch_retry
-    finally:
-        await c.stop()
-        await manager.stop()
+    retry = DeployConfig().fetch_retry
+
+    async def scenario() -> None:
+        c, manager = await coordinator_with(tmp_path, state)
+        try:
+            c.start()
+            await asyncio.sleep(retry * 2.5)
+        finally:
+            await c.stop()
+            await manager.stop()
+
+    run_virtual(scenario())
+    # one now, then one per fetch_retry, at the first tick (0.01 s) it is due
+    assert calls == pytest.approx([0.0, retry, 2 * retry], abs=0.011)
+    assert all(b - a >= retry for a, b in itertools.pairwise(calls))
 
 
 async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
@@ -85,9 +90,7 @@ async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
     try:
         c.start()
         assert c.accept(old, source="robot-1")
-        async with asyncio.timeout(60):
-            while cnt_state() != "ACTIVE":  # noqa: ASYNC110
-                await asyncio.sleep(0.02)
+        await until_async("Cnt ACTIVE", cnt_state, lambda s: s == "ACTIVE", within=60, poll=0.02)
         running = InstanceInfo(
             "Cnt", "Cnt", LifecycleState.ACTIVE, "active", 1.0, 10**7, "tcp://127.0.0.1:7"
         )
@@ -95,17 +98,17 @@ async def test_the_old_side_of_a_heal_stands_down_before_it_has_the_newer_plan(
             other, instances=(running,), plan=PlanInfo(2, 1, "d", "robot-2")
         )
         c.wake()
-        async with asyncio.timeout(30):
-            while cnt_state() != "INACTIVE":  # noqa: ASYNC110
-                await asyncio.sleep(0.02)
+        await until_async(
+            "Cnt stood down", cnt_state, lambda s: s == "INACTIVE", within=30, poll=0.02
+        )
         assert c.store.plan is old  # not fetched: gossip alone made it yield
         (event,) = [e for e in c.events.since(0) if e["kind"] == "plan.superseded"]
         assert event["detail"] == {"instance": "Cnt", "newer": ["robot-2"]}
         state.alive["robot-2"] = replace(other, plan=PlanInfo(2, 1, "d", "robot-2"))
         c.wake()  # the newer copy is gone (and its plan never came): robot-1's runs again
-        async with asyncio.timeout(30):
-            while cnt_state() != "ACTIVE":  # noqa: ASYNC110
-                await asyncio.sleep(0.02)
+        await until_async(
+            "Cnt ACTIVE again", cnt_state, lambda s: s == "ACTIVE", within=30, poll=0.02
+        )
     finally:
         await c.stop()
         await manager.stop()

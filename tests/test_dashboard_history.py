@@ -136,8 +136,25 @@ def test_moments_are_kept_for_the_window() -> None:
     assert m.observe(13.0, None) == []  # no status (an agent that deploys nothing): no moments
 
 
-@pytest.mark.parametrize("field", ["allocator", "plan", "components"])
-def test_missing_fields_are_no_crash(field: str) -> None:
+@pytest.mark.parametrize(
+    ("field", "lost", "found"),
+    [
+        # an allocator that vanishes is an election of nobody; one that appears, of its leader
+        ("allocator", [("election", None, None)], [("election", "r2", None)]),
+        # a plan that vanishes says nothing (no allocation happened); one that appears is one
+        ("plan", [], [("allocation", None, None)]),
+        # components that vanish are gone; that appear, are news in their states
+        (
+            "components",
+            [("state", "Cam", "gone"), ("state", "Cam-s1", "gone")],
+            [("state", "Cam", "active"), ("state", "Cam-s1", "inactive")],
+        ),
+    ],
+)
+def test_a_missing_field_reads_as_absent_not_as_a_crash(
+    field: str, lost: list[tuple[Any, ...]], found: list[tuple[Any, ...]]
+) -> None:
     partial = {k: v for k, v in STATUS.items() if k != field}
-    diff_status(STATUS, partial, 1.0)
-    diff_status(partial, STATUS, 1.0)
+    assert kinds(diff_status(STATUS, partial, 1.0)) == lost
+    assert kinds(diff_status(partial, STATUS, 1.0)) == found
+    assert diff_status(partial, partial, 2.0) == []  # still missing: nothing new

@@ -11,10 +11,11 @@ import pytest
 
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.retention import Retention
-from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.dataplane.testing import RecordingPort, make_policy
 from sdrpeer.sdk.acks import AckState
 from sdrpeer.sdk.inport import InPortRuntime
 from sdrpeer.sdk.policy import ConnectorPolicy
+from tests.wait import stays_async, until_async
 
 # ---- the pure parts ------------------------------------------------------------------------
 
@@ -267,7 +268,11 @@ async def test_planned_moves_lose_and_duplicate_nothing(
     sender = asyncio.create_task(publish(conn, n))
     try:
         for _ in range(moves):
-            await until(lambda c=current: len(c.taken) > 10 or conn.seq >= n)  # type: ignore[misc]
+            await until_async(
+                "ten frames taken, or all sent",
+                lambda c=current: (len(c.taken), conn.seq),  # type: ignore[misc]
+                lambda seen: seen[0] > 10 or seen[1] >= n,
+            )
             await asyncio.sleep(0.01)
             nxt = await new_instance(instances, tmp_path)
             await current.deactivate()  # the plan moved it: it stops taking frames
@@ -276,7 +281,7 @@ async def test_planned_moves_lose_and_duplicate_nothing(
             current = nxt
         await asyncio.wait_for(sender, 30)
         taken = lambda: [v for inst in instances for v in inst.taken]  # noqa: E731
-        await until(lambda: len(taken()) >= n, within=20)
+        await until_async("len(taken()) >= n", lambda: len(taken()), lambda v: v >= n, within=20)
         assert sorted(taken()) == list(range(1, n + 1))  # every frame once, none lost
         assert conn.replayed > 0  # the moves did leave frames to replay
         assert all(inst.port.duplicates == 0 for inst in instances)
@@ -295,16 +300,22 @@ async def test_a_deactivated_receiver_lets_its_sender_go_at_once(
     conn.start()
     sender = asyncio.create_task(publish(conn, 100_000, every=10))
     try:
-        await until(lambda: len(first.taken) > 200)
+        await until_async("len(first.taken) > 200", lambda: len(first.taken), lambda v: v > 200)
         await first.deactivate()
-        await until(lambda: conn.unacked > 0)
+        await until_async("conn.unacked > 0", lambda: conn.unacked, lambda v: v > 0)
         second = await new_instance(instances, tmp_path)
         t0 = asyncio.get_running_loop().time()
         conn.repoint(second.address("tcp"))
-        await until(lambda: len(second.taken) > 0, within=3)
+        await until_async(
+            "len(second.taken) > 0", lambda: len(second.taken), lambda v: v > 0, within=3
+        )
         assert asyncio.get_running_loop().time() - t0 < conn.drain_timeout / 2
         sender.cancel()
-        await until(lambda: conn.unacked == 0 and not conn.pending, within=5)
+        await until_async(
+            "conn.unacked == 0 and not conn.pending",
+            lambda: conn.unacked == 0 and not conn.pending,
+            within=5,
+        )
         taken = first.taken + second.taken
         assert sorted(taken) == list(range(1, len(taken) + 1))  # none lost, none twice
     finally:
@@ -321,12 +332,17 @@ async def test_a_crashed_receiver_loses_nothing_the_window_held(
     conn.start()
     sender = asyncio.create_task(publish(conn, n))
     try:
-        await until(lambda: len(first.taken) > 1000)
+        await until_async("len(first.taken) > 1000", lambda: len(first.taken), lambda v: v > 1000)
         await first.crash()
         second = await new_instance(instances, tmp_path)
         conn.repoint(second.address("tcp"))
         await asyncio.wait_for(sender, 30)
-        await until(lambda: len(set(first.taken) | set(second.taken)) >= n, within=20)
+        await until_async(
+            "len(set(first.taken) | set(second.taken)) >= n",
+            lambda: len(set(first.taken) | set(second.taken)),
+            lambda v: v >= n,
+            within=20,
+        )
         assert set(first.taken) | set(second.taken) == set(range(1, n + 1))
         assert sorted(second.taken) == second.taken  # in order
     finally:
@@ -344,15 +360,26 @@ async def test_a_reconnect_to_the_same_instance_replays_without_duplicates(
     sender = asyncio.create_task(publish(conn, n, every=10))
     try:
         for k in range(3):
-            await until(lambda k=k: len(inst.taken) > (k + 1) * 300)  # type: ignore[misc]
+            await until_async(
+                f"more than {(k + 1) * 300} taken",
+                lambda: len(inst.taken),
+                lambda v, goal=(k + 1) * 300: v > goal,  # type: ignore[misc]
+            )
             await inst.deactivate()  # frames arriving now are delivered, not taken
-            await until(lambda: conn.unacked > 0)
+            await until_async("conn.unacked > 0", lambda: conn.unacked, lambda v: v > 0)
             for receiver in list(inst.server._receivers):
                 receiver.abort()  # the network broke; the instance lives on
-            await until(lambda k=k: conn.reconnects > k, within=10)  # type: ignore[misc]
+            await until_async(
+                f"reconnect {k + 1}",
+                lambda: conn.reconnects,
+                lambda v, k=k: v > k,  # type: ignore[misc]
+                within=10,
+            )
             inst.resume()
         await asyncio.wait_for(sender, 30)
-        await until(lambda: len(inst.taken) >= n, within=20)
+        await until_async(
+            "len(inst.taken) >= n", lambda: len(inst.taken), lambda v: v >= n, within=20
+        )
         assert inst.taken == list(range(1, n + 1))
         assert conn.replayed > 0
     finally:
@@ -369,15 +396,18 @@ async def test_the_window_stops_the_sender_until_frames_are_taken(
     conn.start()
     sender = asyncio.create_task(publish(conn, 500))
     try:
-        await until(lambda: conn.seq >= 50)
-        await asyncio.sleep(0.1)
-        assert conn.seq == 50
-        assert conn.unacked == 50
-        assert conn.pending == 10
-        assert not sender.done()
+        held = lambda: (conn.seq, conn.unacked, conn.pending, sender.done())  # noqa: E731
+        # 50 sent and unacked, 10 more queued behind the window, the publisher blocked ...
+        await until_async("the window full", held, lambda seen: seen == (50, 50, 10, False))
+        await stays_async(  # ... and so it stays while nothing is taken
+            "the sender held at the window",
+            held,
+            lambda seen: seen == (50, 50, 10, False),
+            window=0.1,
+        )
         inst.resume()
         await asyncio.wait_for(sender, 10)
-        await until(lambda: len(inst.taken) == 500)
+        await until_async("len(inst.taken) == 500", lambda: len(inst.taken), lambda v: v == 500)
         assert inst.taken == list(range(1, 501))
     finally:
         sender.cancel()
@@ -396,7 +426,7 @@ async def test_a_receiver_that_does_not_acknowledge_gets_a_plain_stream(tmp_path
         await asyncio.wait_for(conn.wait_connected(), 5)
         for value in range(20):
             assert conn.offer(value)
-        await until(lambda: len(port.frames) == 20)
+        await until_async("len(port.frames) == 20", lambda: len(port.frames), lambda v: v == 20)
         assert conn.unacked == 0
         assert server.counters["acked"] == 0
     finally:

@@ -11,9 +11,10 @@ import pytest
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello
-from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.dataplane.testing import RecordingPort, make_policy
 from sdrpeer.keys.datakeys import keys_from_env, keys_to_env
 from sdrpeer.keys.derive import data_key
+from tests.wait import stays_async, until_async
 
 K1 = data_key(b"\x01" * 32)
 K2 = data_key(b"\x02" * 32)
@@ -76,7 +77,7 @@ async def send(to: str, keys: list[bytes] | None, n: int = 5) -> Connection:
 async def test_a_sender_with_a_key_of_the_ring_gets_in(rx: Rx) -> None:
     conn = await send(rx.to, [K2, K1])  # signs with K2, still holds K1 (a rotation)
     try:
-        await until(lambda: len(rx.port.frames) == 5)
+        await until_async("len(rx.port.frames) == 5", lambda: len(rx.port.frames), lambda v: v == 5)
         assert rx.port.values == [0, 1, 2, 3, 4]
         assert rx.server.counters["refused_auth"] == 0
     finally:
@@ -87,10 +88,18 @@ async def test_a_sender_with_a_key_of_the_ring_gets_in(rx: Rx) -> None:
 async def test_a_sender_without_the_key_gets_nothing_in(rx: Rx, keys: list[bytes] | None) -> None:
     conn = await send(rx.to, keys)
     try:
-        await until(lambda: rx.server.counters["refused_auth"] > 0)
-        await asyncio.sleep(0.05)
-        assert rx.port.frames == []
-        assert not conn.connected
+        await until_async(
+            "rx.server.counters['refused_auth'] > 0",
+            lambda: rx.server.counters["refused_auth"],
+            lambda v: v > 0,
+        )
+        await until_async("the sender told no", lambda: conn.connected, lambda up: not up)
+        await stays_async(
+            "nothing in, not connected",
+            lambda: (rx.port.frames, conn.connected),
+            lambda seen: seen == ([], False),
+            window=0.05,
+        )
         assert "authenticat" in (conn.last_error or "") or "proof" in (conn.last_error or "")
     finally:
         await conn.close()
@@ -101,7 +110,9 @@ async def test_a_sender_with_a_key_refuses_a_receiver_without_one() -> None:
     await open_rx.server.start()
     conn = await send(open_rx.to, [K1])
     try:
-        await until(lambda: conn.last_error is not None)
+        await until_async(
+            "conn.last_error is not None", lambda: conn.last_error, lambda v: v is not None
+        )
         assert "did not authenticate" in (conn.last_error or "")
         assert open_rx.port.frames == []
     finally:
@@ -134,7 +145,11 @@ async def test_a_replayed_handshake_opens_nothing(rx: Rx) -> None:
         return made
 
     await handshake(None)
-    await until(lambda: len(rx.port.frames) == 1)
+    await until_async("len(rx.port.frames) == 1", lambda: len(rx.port.frames), lambda v: v == 1)
     await handshake(captured[0])  # the same proof, against a fresh receiver nonce
-    await until(lambda: rx.server.counters["refused_auth"] == 1)
+    await until_async(
+        "rx.server.counters['refused_auth'] == 1",
+        lambda: rx.server.counters["refused_auth"],
+        lambda v: v == 1,
+    )
     assert len(rx.port.frames) == 1

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.dataplane import Connection
-from sdrpeer.dataplane.testing import RecordingPort, StalledReceiver, make_policy, until
+from sdrpeer.dataplane.testing import RecordingPort, StalledReceiver, make_policy
+from tests.wait import stays_async, until_async
 
 FILLER = b"f" * 256 * 1024
 
@@ -44,8 +45,12 @@ def markers(port: RecordingPort) -> list[int]:
 
 async def finish(rx: StalledReceiver, conn: Connection) -> None:
     rx.release()
-    await until(lambda: conn.pending == 0)
-    await until(lambda: len(rx.port.frames) == conn.frames_out)
+    await until_async("conn.pending == 0", lambda: conn.pending, lambda v: v == 0)
+    await until_async(
+        "len(rx.port.frames) == conn.frames_out",
+        lambda: len(rx.port.frames),
+        lambda v: v == conn.frames_out,
+    )
     assert rx.port.seqs == list(range(1, conn.seq + 1))  # seqs number what was written
     await conn.close()
     await rx.close()
@@ -77,8 +82,8 @@ async def test_block_makes_the_sender_wait(tmp_path: Path) -> None:
     assert conn.dropped == 0
     assert not conn.offer(1)  # full: not queued, not dropped
     drain = asyncio.create_task(conn.drain())
-    await asyncio.sleep(0.05)
-    assert not drain.done()  # still blocked while the receiver reads nothing
+    # still blocked while the receiver reads nothing
+    await stays_async("drain blocked", drain.done, lambda done: not done, window=0.05)
     rx.release()
     async with asyncio.timeout(5):
         await drain

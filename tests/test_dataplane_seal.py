@@ -14,10 +14,11 @@ import pytest
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer
-from sdrpeer.dataplane.testing import RecordingPort, until
+from sdrpeer.dataplane.testing import RecordingPort
 from sdrpeer.errors import FrameError
 from sdrpeer.keys.derive import data_key, stream_keys
 from sdrpeer.sdk.policy import ConnectorPolicy
+from tests.wait import until_async
 
 K1 = data_key(b"\x01" * 32)
 PATTERN = b"SECRET-FRAME-PAYLOAD-"
@@ -114,7 +115,9 @@ async def test_a_keyed_tcp_stream_shows_no_payload_to_an_eavesdropper() -> None:
         values = [PATTERN + bytes([i]) * 80 for i in range(50)] + [PATTERN * 20_000]
         for v in values:
             conn.offer(v)
-        await until(lambda: len(port.frames) == len(values))
+        await until_async(
+            "len(port.frames) == len(values)", lambda: len(port.frames), lambda v: v == len(values)
+        )
         assert port.values == values
         assert len(relay.seen) > sum(map(len, values))  # everything passed the relay...
         assert PATTERN not in relay.seen  # ...and none of it in clear
@@ -137,7 +140,11 @@ async def test_an_altered_byte_breaks_the_stream_and_delivers_nothing_changed() 
         values = [PATTERN + bytes([i]) * 200 for i in range(60)]
         for v in values:
             conn.offer(v)
-        await until(lambda: server.counters["refused_malformed"] >= 1)
+        await until_async(
+            "server.counters['refused_malformed'] >= 1",
+            lambda: server.counters["refused_malformed"],
+            lambda v: v >= 1,
+        )
         assert all(v in values for v in port.values)  # what came is what was sent
         assert len(port.values) < len(values)  # the broken record was not delivered
     finally:
@@ -152,7 +159,7 @@ async def test_a_connection_may_turn_encryption_off_and_stays_authenticated() ->
     port, server, relay, conn = await stream_through(encrypt=False)
     try:
         conn.offer(PATTERN * 10)
-        await until(lambda: len(port.frames) == 1)
+        await until_async("len(port.frames) == 1", lambda: len(port.frames), lambda v: v == 1)
         assert PATTERN in relay.seen
         assert server.counters["refused_auth"] == 0
     finally:

@@ -17,8 +17,9 @@ import pytest
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.frames import Hello, encode_hello
 from sdrpeer.dataplane.shm import ReceiverRing, SenderRing, ref_frame, sweep
-from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.dataplane.testing import RecordingPort, make_policy
 from sdrpeer.errors import FrameError
+from tests.wait import until_async
 
 ROOT = Path(__file__).resolve().parent.parent
 SHM = Path("/dev/shm")
@@ -131,7 +132,11 @@ async def test_unix_connection_takes_the_ring_unless_refused(tmp_path: Path, shm
     conn.start()
     values = VALUES * 20
     await offer_all(conn, values)
-    await until(lambda: len(rx.port.frames) == len(values))
+    await until_async(
+        "len(rx.port.frames) == len(values)",
+        lambda: len(rx.port.frames),
+        lambda v: v == len(values),
+    )
     assert rx.port.values == values
     assert rx.port.seqs == list(range(1, len(values) + 1))
     assert rx.server.counters["shm"] == (1 if shm else 0)
@@ -148,7 +153,11 @@ async def test_tcp_connection_never_offers_a_ring(tmp_path: Path) -> None:
     conn = Connection("c", rx.address("tcp"), "in", "a.b", make_policy("fifo", 4, "block"))
     conn.start()
     await offer_all(conn, VALUES)
-    await until(lambda: len(rx.port.frames) == len(VALUES))
+    await until_async(
+        "len(rx.port.frames) == len(VALUES)",
+        lambda: len(rx.port.frames),
+        lambda v: v == len(VALUES),
+    )
     assert rx.port.values == VALUES
     assert rx.server.counters["shm"] == 0
     await conn.close()
@@ -170,14 +179,23 @@ async def test_repoint_between_ring_and_tcp_loses_nothing(tmp_path: Path) -> Non
             # frames only flow through a link that is up: 30 more after the last repoint mean
             # that link's dial (and its ring) was made, however fast the sender runs
             goal = min(mark + 30, len(values))
-            await until(lambda goal=goal: conn.seq >= goal)  # type: ignore[misc]
+            await until_async(
+                f"seq {goal} sent",
+                lambda: conn.seq,
+                lambda v, goal=goal: v >= goal,  # type: ignore[misc]
+            )
             conn.repoint(to)
             mark = conn.seq
         await asyncio.wait_for(sender, 20)
         # the sender may finish before the last repoint's dial: wait for that link
         await asyncio.wait_for(conn.wait_connected(), 5)
         received = lambda: first.port.frames + second.port.frames  # noqa: E731
-        await until(lambda: len(received()) == len(values), within=20)
+        await until_async(
+            "len(received()) == len(values)",
+            lambda: len(received()),
+            lambda v: v == len(values),
+            within=20,
+        )
         by_seq = sorted(received(), key=lambda frame: frame[0])
         assert [seq for seq, _, _ in by_seq] == list(range(1, len(values) + 1))  # no gap, twice
         assert [value for _, value, _ in by_seq] == values
@@ -203,7 +221,11 @@ async def test_bad_ring_frame_refused_and_closed(tmp_path: Path) -> None:
     assert pos is not None
     writer.write(ref_frame(1, pos, 5) + ref_frame(2, 4000, 500))  # the second is outside
     assert await reader.read(100) == msgpack.packb(5)  # the credit for the first
-    await until(lambda: rx.server.counters["refused_malformed"] == 1)
+    await until_async(
+        "rx.server.counters['refused_malformed'] == 1",
+        lambda: rx.server.counters["refused_malformed"],
+        lambda v: v == 1,
+    )
     assert rx.port.values == ["fine"]
     assert rx.port.refused == 1
     assert await reader.read(100) == b""  # closed
@@ -253,11 +275,15 @@ async def test_sigkilled_sender_leaves_no_segment(tmp_path: Path) -> None:
     await rx.server.start()
     proc = spawn("send", rx.address("unix"))
     try:
-        await until(lambda: len(rx.port.frames) > 20, within=20)
+        await until_async(
+            "len(rx.port.frames) > 20", lambda: len(rx.port.frames), lambda v: v > 20, within=20
+        )
         assert rx.server.counters["shm"] == 1
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
-        await until(lambda: rx.server.connections == 0)
+        await until_async(
+            "rx.server.connections == 0", lambda: rx.server.connections, lambda v: v == 0
+        )
         assert segments(proc.pid) == []
         assert mapped_segments() == []  # the receiver unmapped it: the memory is free
     finally:
@@ -277,11 +303,13 @@ async def test_sigkilled_receiver_leaves_no_segment(tmp_path: Path) -> None:
         conn.start()
         value = os.urandom(500_000)
         await offer_all(conn, [value] * 50)
-        await until(lambda: conn.connected and conn.seq >= 20)
+        await until_async(
+            "conn.connected and conn.seq >= 20", lambda: conn.connected and conn.seq >= 20
+        )
         assert mapped_segments() != []
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
-        await until(lambda: not conn.connected)
+        await until_async("not conn.connected", lambda: not conn.connected)
         assert segments(os.getpid()) == segments(proc.pid) == []
         assert mapped_segments() == []
     finally:

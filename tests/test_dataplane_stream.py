@@ -13,7 +13,8 @@ import pytest
 
 from sdrpeer.dataplane import Connection, DataServer, FrameError
 from sdrpeer.dataplane.frames import Hello, encode_frame, encode_hello
-from sdrpeer.dataplane.testing import RecordingPort, make_policy, until
+from sdrpeer.dataplane.testing import RecordingPort, make_policy
+from tests.wait import until_async
 
 
 class Receiver:
@@ -70,7 +71,9 @@ def tcp_target(rx: Receiver) -> tuple[str, int]:
 async def test_frames_arrive_in_order_with_seq(receiver: Receiver, kind: str) -> None:
     conn = connect(receiver.address(kind), push="fifo", buffer=64, full="block")
     await offer_all(conn, range(1, 2001))
-    await until(lambda: len(receiver.port.frames) == 2000)
+    await until_async(
+        "len(receiver.port.frames) == 2000", lambda: len(receiver.port.frames), lambda v: v == 2000
+    )
     assert receiver.port.seqs == list(range(1, 2001))
     assert receiver.port.values == list(range(1, 2001))
     assert {c for _, _, c in receiver.port.frames} == {"c1"}
@@ -92,7 +95,9 @@ async def test_hello_ok_and_unknown_port_error(receiver: Receiver) -> None:
         "c2", receiver.address("tcp"), "nope", "a.b", make_policy(), backoff=(0.01, 0.05)
     )
     conn.start()
-    await until(lambda: conn.last_error is not None)
+    await until_async(
+        "conn.last_error is not None", lambda: conn.last_error, lambda v: v is not None
+    )
     assert "unknown in-port 'nope'" in (conn.last_error or "")
     assert not conn.connected
     await conn.close()
@@ -106,10 +111,16 @@ async def test_repoint_live_connection_loses_nothing(tmp_path: Path, kind: str) 
     conn = connect(first.address(kind), push="fifo", buffer=32, full="block")
     total = 20000
     sender = asyncio.create_task(offer_all(conn, range(1, total + 1)))
-    await until(lambda: len(first.port.frames) > 2000)
+    await until_async(
+        "len(first.port.frames) > 2000", lambda: len(first.port.frames), lambda v: v > 2000
+    )
     conn.repoint(second.address(kind))
     await asyncio.wait_for(sender, 10)
-    await until(lambda: len(first.port.frames) + len(second.port.frames) >= total)
+    await until_async(
+        "len(first.port.frames) + len(second.port.frames) >= total",
+        lambda: len(first.port.frames) + len(second.port.frames),
+        lambda v: v >= total,
+    )
     seqs = first.port.seqs + second.port.seqs
     assert sorted(seqs) == list(range(1, total + 1))  # no gap, no duplicate
     assert second.port.seqs[0] == first.port.seqs[-1] + 1  # seq continues
@@ -129,13 +140,13 @@ async def test_reconnect_after_receiver_restart(tmp_path: Path) -> None:
     )
     conn.start()
     await offer_all(conn, range(1, 101))
-    await until(lambda: len(rx.port.frames) == 100)
+    await until_async("len(rx.port.frames) == 100", lambda: len(rx.port.frames), lambda v: v == 100)
     await rx.server.close()
-    await until(lambda: not conn.connected)
+    await until_async("not conn.connected", lambda: not conn.connected)
     await offer_all(conn, range(101, 111))  # queued while the receiver is away
     rx2 = Receiver(path)
     await rx2.server.start()
-    await until(lambda: len(rx2.port.frames) == 10)
+    await until_async("len(rx2.port.frames) == 10", lambda: len(rx2.port.frames), lambda v: v == 10)
     assert rx2.port.values == list(range(101, 111))
     assert rx2.port.seqs == list(range(101, 111))  # seq continues on the new link
     assert conn.reconnects == 1
@@ -171,7 +182,7 @@ async def test_bad_frame_refused_counted_closed_others_unaffected(
     assert rx.server.counters[reason] == 1
     assert rx.port.refused == 1
     await offer_all(good, range(11, 21))
-    await until(lambda: len(rx.port.frames) == 21)
+    await until_async("len(rx.port.frames) == 21", lambda: len(rx.port.frames), lambda v: v == 21)
     assert [v for v in rx.port.values if v != b"fine"] == list(range(1, 21))
     await good.close()
     await rx.server.close()
@@ -204,7 +215,11 @@ async def test_big_and_small_values_mixed_arrive_intact(receiver: Receiver, kind
     values: list[object] = [1, big[0], big[1], "s", big[2], big[2], {"k": big[3]}, big[3], b"x", 2]
     conn = connect(receiver.address(kind), push="fifo", buffer=4, full="block")
     await offer_all_values(conn, values)
-    await until(lambda: len(receiver.port.frames) == len(values))
+    await until_async(
+        "len(receiver.port.frames) == len(values)",
+        lambda: len(receiver.port.frames),
+        lambda v: v == len(values),
+    )
     assert receiver.port.values == values
     assert receiver.port.seqs == list(range(1, len(values) + 1))
     await conn.close()
@@ -219,7 +234,9 @@ async def test_big_value_header_split_from_its_bytes(receiver: Receiver) -> None
         sock.sendall(frame[:cut])
         frame = frame[cut:]
         await asyncio.sleep(0.01)
-    await until(lambda: len(receiver.port.frames) == 3)
+    await until_async(
+        "len(receiver.port.frames) == 3", lambda: len(receiver.port.frames), lambda v: v == 3
+    )
     assert receiver.port.values == [value, value, "end"]
     sock.close()
 
@@ -229,7 +246,11 @@ async def test_big_value_over_the_maximum_refused() -> None:
     await rx.server.start()
     sock, _ = await raw_hello(tcp_target(rx), "in")
     sock.sendall(encode_frame(1, b"ok") + encode_frame(2, os.urandom(150_000)))
-    await until(lambda: rx.server.counters["refused_oversized"] == 1)
+    await until_async(
+        "rx.server.counters['refused_oversized'] == 1",
+        lambda: rx.server.counters["refused_oversized"],
+        lambda v: v == 1,
+    )
     assert rx.port.values == [b"ok"]
     assert rx.port.refused == 1
     sock.close()

@@ -11,7 +11,7 @@ from sdrpeer.cli.main import main
 from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import load_timeline
 
-pytestmark = pytest.mark.realnet
+pytestmark = [pytest.mark.realnet, pytest.mark.slow]
 
 FIG3 = {
     "OmnidirectionalCameraRTC": "robot-1",

@@ -15,6 +15,7 @@ import pytest
 
 from sdrpeer.demo.timeline import TimelineRecorder, load_timeline
 from tests.test_demo_collect import member
+from tests.wait import until
 
 CAM = ("Cam-1", "Camera", "active", "active")
 CAM_OFF = ("Cam-1", "Camera", "inactive", "active")
@@ -82,10 +83,13 @@ def agents() -> Iterator[dict[str, FakeAgent]]:
 def settle(rec: TimelineRecorder, rounds: int = 2) -> None:
     """Wait until `rounds` more poll rounds have been written (a condition, not a duration)."""
     target = rec.rounds + rounds
-    deadline = time.monotonic() + 20
-    while rec.rounds < target:
-        assert time.monotonic() < deadline, "the recorder made no progress"
-        time.sleep(0.01)
+    until(
+        f"{rounds} more poll rounds",
+        lambda: rec.rounds,
+        lambda n: n >= target,
+        within=20,
+        poll=0.01,
+    )
 
 
 def test_recorder_writes_samples_states_events_marks_and_survives_a_dead_agent(

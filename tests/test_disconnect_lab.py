@@ -8,22 +8,25 @@ from __future__ import annotations
 import os
 import signal
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import pytest
 
-from sdrpeer.client import AgentClient, post_when_elected, wait_for
+from sdrpeer.client import AgentClient, post_when_elected
 from sdrpeer.errors import ApiError
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from sdrpeer.netlab.plan import PART_CHAIN
 from sdrpeer.system.loader import parse_system
 from tests.realnet import NETNS_ONLY
+from tests.wait import until
 
 pytestmark = pytest.mark.realnet
-T = TypeVar("T")
+WITHIN, POLL = 30.0, 0.1
+NOT_YET = (ApiError,)
+"""An agent that is still starting answers with an API error: not yet."""
 
 SYSTEM = """name: cut
 components:
@@ -44,10 +47,6 @@ components:
     prefer: [robot-3]
     disconnect: {reconcile: keep_original}
 """
-
-
-def until(probe: Callable[[], T], ok: Callable[[T], bool], what: str, within: float = 30) -> T:
-    return wait_for(probe, ok, what, within, poll=0.1)
 
 
 @pytest.fixture
@@ -83,22 +82,39 @@ def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: Runni
     one, three = clients["robot-1"], clients["robot-3"]
     system = parse_system(SYSTEM, "cut.yaml").to_json()
     post_when_elected(one, "/v1/deploy", {"system": system}, 30.0)
-    until(lambda: actives(three), lambda a: a == {"Cam", "Keep", "Back"}, "actives on robot-3")
+    until(
+        "actives on robot-3",
+        lambda: actives(three),
+        lambda a: a == {"Cam", "Keep", "Back"},
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
+    )
     allocator = one.get("/v1/status")["allocator"]["name"]  # robot-3 (top priority) or not yet
 
     plan = lab.net
     assert plan is not None
     net.run(plan.partition([["robot-3"], ["robot-1", "robot-2"]]))
     # the side cut off: Cam and Back held INACTIVE, Keep (replace: false) running, no allocator
-    until(lambda: actives(three), lambda a: a == {"Keep"}, "robot-3 standing Cam and Back down")
+    until(
+        "robot-3 standing Cam and Back down",
+        lambda: actives(three),
+        lambda a: a == {"Keep"},
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
+    )
     status3 = three.get("/v1/status")
     assert status3["cut_off"] is True
     assert status3["allocator"]["name"] is None  # abdicated if it was the allocator
     # the fleet: Cam and Back active elsewhere, Keep still placed on robot-3
     fleet = until(
+        "the fleet replacing Cam and Back",
         lambda: actives(one) | actives(clients["robot-2"]),
         lambda a: {"Cam", "Back"} <= a,
-        "the fleet replacing Cam and Back",
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
     )
     assert "Keep" not in fleet
     assert placed(one.get("/v1/status"))["Keep"] == "robot-3"
@@ -109,29 +125,38 @@ def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: Runni
     net.run([plan.in_ns(r, "iptables", "-F", PART_CHAIN) for r in plan.names()])
     healed = time.monotonic()
     twice: list[tuple[float, str]] = []
-    # until robot-3 is back in touch and holds the fleet's plan: Cam never ACTIVE twice
-    for _ in range(400):  # bounded: 400 looks, and 40 s
+
+    def rejoined() -> tuple[bool, bool]:
+        """(cut off, holds the fleet's plan) of robot-3; notes every component ACTIVE twice."""
         seen = {name: actives(c) for name, c in clients.items()}
-        twice += [
+        twice.extend(
             (round(time.monotonic() - healed, 2), comp)
             for comp in ("Cam", "Keep", "Back")
             if sum(comp in a for a in seen.values()) > 1
-        ]
+        )
         status = three.get("/v1/status")
-        if not status["cut_off"] and status["plan"] == one.get("/v1/status")["plan"]:
-            break
-        if time.monotonic() - healed > 40:
-            break
-        time.sleep(0.05)
+        return status["cut_off"], status["plan"] == one.get("/v1/status")["plan"]
+
+    # until robot-3 is back in touch and holds the fleet's plan: Cam never ACTIVE twice
+    until(
+        "robot-3 back in touch, with the fleet's plan",
+        rejoined,
+        lambda seen: seen == (False, True),
+        within=40,
+        poll=0.05,
+        retry=NOT_YET,
+    )
     assert not any(comp == "Cam" for _, comp in twice), twice  # stood down: never two Cams
     assert "Cam" not in actives(three)
     # keep_original: Back goes back to robot-3 (a planned move, once robot-3's link is judged
     # sound again: the loss measured across the cut makes it degraded for a while)
     until(
+        "Back moved back to robot-3",
         lambda: (placed(one.get("/v1/status"))["Back"], actives(three)),
         lambda x: x[0] == "robot-3" and "Back" in x[1],
-        "Back moved back to robot-3",
-        60,
+        within=60,
+        poll=POLL,
+        retry=NOT_YET,
     )
     assert "Keep" in actives(three)  # never replaced, also not while robot-3 was degraded
     kinds = [e["kind"] for e in three.events(0, 1000)]
@@ -149,23 +174,43 @@ def test_an_agent_restarted_into_the_fleet_launches_nothing_from_its_old_plan(
     one, three = clients["robot-1"], clients["robot-3"]
     system = parse_system(SYSTEM, "cut.yaml").to_json()
     post_when_elected(one, "/v1/deploy", {"system": system}, 30.0)
-    until(lambda: actives(three), lambda a: a == {"Cam", "Keep", "Back"}, "actives on robot-3")
+    until(
+        "actives on robot-3",
+        lambda: actives(three),
+        lambda a: a == {"Cam", "Keep", "Back"},
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
+    )
     os.killpg(lab.procs["robot-3"].pid, signal.SIGKILL)
     lab.procs["robot-3"].wait(10)
     until(
+        "the fleet re-placing Cam",
         lambda: placed(one.get("/v1/status")),
         lambda p: p["Cam"] not in (None, "robot-3"),
-        "the fleet re-placing Cam",
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
     )
     log = Path(lab.lab.robot("robot-3").log)  # type: ignore[union-attr]
     before = len(log.read_text().splitlines())
     lab.restart("robot-3")
     until(
+        "robot-3 holding the fleet's plan",
         lambda: (three.get("/v1/status")["plan"], one.get("/v1/status")["plan"]),
         lambda p: p[0] is not None and p[0] == p[1],
-        "robot-3 holding the fleet's plan",
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
     )
-    until(lambda: actives(three), lambda a: "Keep" in a, "Keep (replace: false) back")
+    until(
+        "Keep (replace: false) back",
+        lambda: actives(three),
+        lambda a: "Keep" in a,
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
+    )
     lines = log.read_text().splitlines()[before:]
     touch = next(i for i, line in enumerate(lines) if "fleet.in_touch" in line)
     started = [i for i, line in enumerate(lines) if "started pid" in line]

@@ -6,23 +6,22 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
-from typing import TypeVar
 
 import pytest
 
-from sdrpeer.client import AgentClient, wait_for
+from sdrpeer.client import AgentClient
+from sdrpeer.errors import ApiError
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from tests.realnet import NETNS_ONLY
+from tests.wait import until
 
 pytestmark = [pytest.mark.realnet, NETNS_ONLY]
-T = TypeVar("T")
-
-
-def until(probe: Callable[[], T], ok: Callable[[T], bool], what: str, within: float = 20) -> T:
-    return wait_for(probe, ok, what, within, poll=0.2)
+WITHIN, POLL = 20.0, 0.2
+NOT_YET = (ApiError,)
+"""An agent that is still starting answers with an API error: not yet."""
 
 
 def states(lab: RunningLab, robot: str) -> dict[str, str]:
@@ -73,16 +72,33 @@ def test_robots_live_in_their_namespaces_and_faults_act_on_the_network(
     assert states(lab, "robot-1") == dict.fromkeys(plan.names(), "alive")
 
     sdrpeer("lab", "partition", "robot-1", "/", "robot-2,robot-3", "--dir", lab_dir)
-    until(lambda: states(lab, "robot-1"), lambda s: s["robot-2"] == s["robot-3"] == "dead", "cut")
-    until(lambda: states(lab, "robot-2"), lambda s: s["robot-1"] == "dead", "cut, other side")
+    until(
+        "cut",
+        lambda: states(lab, "robot-1"),
+        lambda s: s["robot-2"] == s["robot-3"] == "dead",
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
+    )
+    until(
+        "cut, other side",
+        lambda: states(lab, "robot-2"),
+        lambda s: s["robot-1"] == "dead",
+        within=WITHIN,
+        poll=POLL,
+        retry=NOT_YET,
+    )
     assert states(lab, "robot-2")["robot-3"] == "alive"  # inside a side nothing changes
 
     sdrpeer("lab", "heal", "--dir", lab_dir)
     for name in plan.names():
         until(
+            f"healed, as {name} sees it",
             lambda name=name: states(lab, name),  # type: ignore[misc]
             lambda s: set(s.values()) == {"alive"},
-            f"healed, as {name} sees it",
+            within=WITHIN,
+            poll=POLL,
+            retry=NOT_YET,
         )
 
     out = sdrpeer("lab", "fault", "robot-2", "loss", "60%", "--dir", lab_dir)
@@ -95,7 +111,14 @@ def test_robots_live_in_their_namespaces_and_faults_act_on_the_network(
         members = {m["name"]: m for m in AgentClient(str(api), timeout=2).members()}
         return float(members["robot-1"]["links"].get("robot-2", {}).get("loss") or 0)
 
-    until(loss_seen, lambda x: x >= 0.2, "robot-1 measuring loss to robot-2", 30)
+    until(
+        "robot-1 measuring loss to robot-2",
+        loss_seen,
+        lambda x: x >= 0.2,
+        within=30,
+        poll=POLL,
+        retry=NOT_YET,
+    )
     sdrpeer("lab", "fault", "robot-2", "bandwidth", "1mbit", "--dir", lab_dir)
     qdisc = output(["tc", "qdisc", "show", "dev", plan.veth("robot-2")])
     assert "tbf" in qdisc
@@ -115,8 +138,22 @@ def test_lab_down_removes_everything_after_the_lab_process_died(tmp_path: Path) 
         stderr=subprocess.DEVNULL,
     )  # fmt: skip
     try:
-        until(lambda: net.load(lab_dir), lambda p: p is not None, "netns.json")
-        until(lambda: text_of(lab_dir / "lab.json"), lambda t: '"api": "http' in t, "agents")
+        until(
+            "netns.json",
+            lambda: net.load(lab_dir),
+            lambda p: p is not None,
+            within=WITHIN,
+            poll=POLL,
+            retry=NOT_YET,
+        )
+        until(
+            "agents",
+            lambda: text_of(lab_dir / "lab.json"),
+            lambda t: '"api": "http' in t,
+            within=WITHIN,
+            poll=POLL,
+            retry=NOT_YET,
+        )
     except BaseException:
         up.kill()
         net.destroy(lab_dir)  # a failure here must not leave namespaces behind either

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import sys
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.vocabulary import LifecycleState
+from tests.wait import until_answer
 
 TOKEN = "tok"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -64,17 +65,6 @@ async def setup(tmp_path: Path) -> AsyncIterator[tuple[TestClient[Any, Any], Ins
     finally:
         await client.close()
         await asyncio.wait_for(manager.stop(), 10)
-
-
-async def until(what: str, probe: Callable[[], Awaitable[Any]], cond: Callable[[Any], bool]) -> Any:
-    value = None
-    try:
-        async with asyncio.timeout(WAIT):
-            while not cond(value := await probe()):  # noqa: ASYNC110
-                await asyncio.sleep(0.05)
-    except TimeoutError:
-        raise AssertionError(f"waited {WAIT}s for {what}; last: {value!r}") from None
-    return value
 
 
 async def states(client: TestClient[Any, Any]) -> dict[str, str]:
@@ -136,7 +126,7 @@ async def test_converge_act_logs_and_remove(setup):
     resp = await client.post("/v1/instances", json=body, headers=AUTH)
     assert resp.status == 200
     assert (await resp.json())["desired"] == ["A", "B"]
-    await until(
+    await until_answer(
         "both ACTIVE", lambda: states(client), lambda s: s == {"A": "ACTIVE", "B": "ACTIVE"}
     )
     status = {i["name"]: i for i in await (await client.get("/v1/instances")).json()}
@@ -159,12 +149,12 @@ async def test_converge_act_logs_and_remove(setup):
     resp = await client.post("/v1/instances/A/deactivate", headers=AUTH)
     assert resp.status == 200
     assert (await resp.json())["desired"] == "inactive"
-    await until("A INACTIVE", lambda: states(client), lambda s: s["A"] == "INACTIVE")
+    await until_answer("A INACTIVE", lambda: states(client), lambda s: s["A"] == "INACTIVE")
     resp = await client.post("/v1/instances/A/reset", headers=AUTH)
     assert resp.status == 200  # the fake host accepts reset in any state
     resp = await client.post("/v1/instances/B/restart", headers=AUTH)
     assert resp.status == 200
-    await until("B ACTIVE again", lambda: states(client), lambda s: s["B"] == "ACTIVE")
+    await until_answer("B ACTIVE again", lambda: states(client), lambda s: s["B"] == "ACTIVE")
     b_again = next(i for i in await (await client.get("/v1/instances")).json() if i["name"] == "B")
     assert b_again["pid"] != b["pid"]
     new_addr = f"unix://{b_again['data']['unix']}"
@@ -174,18 +164,18 @@ async def test_converge_act_logs_and_remove(setup):
         listing = await (await client.get("/v1/instances")).json()
         return str(next(i for i in listing if i["name"] == "A")["connections"][0]["addr"])
 
-    await until("A repointed to B's new address", a_addr, lambda addr: addr == new_addr)
+    await until_answer("A repointed to B's new address", a_addr, lambda addr: addr == new_addr)
     assert "got repoint" in (await (await client.get("/v1/instances/A/logs")).text())
 
     resp = await client.delete("/v1/instances/B", headers=AUTH)
     assert resp.status == 200
-    await until("B gone", lambda: states(client), lambda s: "B" not in s)
+    await until_answer("B gone", lambda: states(client), lambda s: "B" not in s)
 
 
 async def test_logs_follow_streams_new_output(setup):
     client, _ = setup
     await client.post("/v1/instances", json={"instances": [fake("A")]}, headers=AUTH)
-    await until("A ACTIVE", lambda: states(client), lambda s: s.get("A") == "ACTIVE")
+    await until_answer("A ACTIVE", lambda: states(client), lambda s: s.get("A") == "ACTIVE")
     resp = await client.get("/v1/instances/A/logs", params={"tail": "1", "follow": "1"})
     assert resp.status == 200
     first = await asyncio.wait_for(resp.content.readany(), WAIT)

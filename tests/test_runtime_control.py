@@ -16,6 +16,7 @@ import pytest
 
 from sdrpeer.errors import CommandError
 from sdrpeer.runtime.control import MAX_MESSAGE, ControlChannel, ControlDecoder, ProtocolError
+from tests.wait import until_async
 
 FAKE_HOST = Path(__file__).with_name("fake_host.py")
 WAIT = 5.0
@@ -70,12 +71,18 @@ class Link:
 
     async def report(self, t: str, **match: Any) -> dict[str, Any]:
         """The first report of type t with the given fields (bounded wait)."""
-        async with asyncio.timeout(WAIT):
-            while True:
-                for r in self.reports:
-                    if r["t"] == t and all(r.get(k) == v for k, v in match.items()):
-                        return r
-                await asyncio.sleep(0.01)
+
+        def matches(r: dict[str, Any]) -> bool:
+            return r["t"] == t and all(r.get(k) == v for k, v in match.items())
+
+        seen = await until_async(
+            f"a {t} report with {match}",
+            lambda: list(self.reports),
+            lambda reports: any(map(matches, reports)),
+            within=WAIT,
+            poll=0.01,
+        )
+        return next(r for r in seen if matches(r))
 
 
 async def open_link(mode: str = "", reply_wait: float = WAIT) -> Link:
@@ -175,7 +182,9 @@ async def test_pending_command_fails_when_the_host_dies(links):
     links.append(link)
     await link.report("hello")
     task = asyncio.create_task(link.channel.command("activate"))
-    await asyncio.sleep(0.05)
+    await until_async(
+        "activate sent", lambda: link.channel.pending_since({"activate"}), lambda t: t is not None
+    )
     link.proc.kill()
     with pytest.raises(CommandError) as info:
         await asyncio.wait_for(task, WAIT)

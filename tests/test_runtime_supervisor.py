@@ -22,9 +22,9 @@ from sdrpeer.runtime.config import SupervisorConfig
 from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.runtime.supervisor import Supervisor
+from tests.wait import stays_async, until_async
 
 FAKE_HOST = str(Path(__file__).with_name("fake_host.py"))
-WAIT = 10.0
 
 
 WITH_EXEC = LaunchPolicy(("python", "exec"))
@@ -34,15 +34,6 @@ WITH_EXEC = LaunchPolicy(("python", "exec"))
 def fake(name: str = "A", mode: str = "", heartbeat: float = 0.5) -> InstanceSpec:
     argv = [sys.executable, FAKE_HOST, f"--mode={mode}", f"--heartbeat={heartbeat}"]
     return InstanceSpec.from_json({"name": name, "launcher": "exec", "target": argv})
-
-
-async def until(what: str, cond: Callable[[], object], wait: float = WAIT) -> None:
-    try:
-        async with asyncio.timeout(wait):
-            while not cond():  # noqa: ASYNC110 (polls plain attributes)
-                await asyncio.sleep(0.005)
-    except TimeoutError:
-        raise AssertionError(f"waited {wait}s for {what}") from None
 
 
 @pytest.fixture
@@ -68,20 +59,21 @@ async def sups(tmp_path: Path) -> AsyncIterator[Callable[..., Supervisor]]:
 async def test_start_states_commands_and_log(sups, tmp_path):
     sup = sups(fake())
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     assert sup.pid is not None
     assert sup.hello["pid"] == sup.pid
     assert sup.data_address() is not None
     assert sup.start_latency is not None
     assert 0 < sup.start_latency < 5
     await sup.command("activate")
-    await until("ACTIVE", lambda: sup.state == "ACTIVE")
+    await until_async("ACTIVE", lambda: sup.state, lambda s: s == "ACTIVE")
     assert [s for _, s in sup.history] == ["STARTING", "CREATED", "INACTIVE", "ACTIVE"]
     assert all(a <= b for (a, _), (b, _) in zip(sup.history, list(sup.history)[1:], strict=False))
-    await until("a heartbeat", lambda: sup.ports)
+    await until_async("a heartbeat", lambda: sup.ports)
     cpu, rss = sup.sample()
     assert rss > 1_000_000
-    assert cpu >= 0
+    assert cpu > 0  # the meter was primed at the fork: the host's start-up since then counts
+    assert (sup.cpu_pct, sup.rss) == (cpu, rss)
     log = (tmp_path / "instances" / "A.log").read_text()
     assert "sdrpeer: starting A:" in log
     assert "fake-host: got activate" in log
@@ -89,20 +81,25 @@ async def test_start_states_commands_and_log(sups, tmp_path):
     assert sup.state == "STOPPED"
     assert sup.last_exit == 0
     assert sup.pid is None
+    assert sup.sample() == (0.0, 0)  # nothing to measure
 
 
 async def test_sigkill_is_noticed_at_once_and_restarted_with_backoff(sups):
     sup = sups(fake())
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     old = sup.pid
     loop = asyncio.get_running_loop()
     killed = loop.time()
     os.kill(old, signal.SIGKILL)
-    await until("the exit", lambda: sup.exit_noticed is not None)
+    await until_async("the exit", lambda: sup.exit_noticed, lambda t: t is not None)
     assert sup.exit_noticed >= killed
     assert sup.last_error == "killed by SIGKILL"  # seen as an exit, not by the watchdog (hung)
-    await until("the restart", lambda: sup.state == "INACTIVE" and sup.pid != old)
+    await until_async(
+        "the restart",
+        lambda: (sup.state, sup.pid),
+        lambda seen: seen[0] == "INACTIVE" and seen[1] != old,
+    )
     assert sup.restarts == 1
     states = [s for _, s in sup.history]
     assert states[states.index("BACKOFF") + 1] == "STARTING"
@@ -115,11 +112,13 @@ async def test_fast_failures_give_up_then_restart_tries_again(sups):
     config = replace(supervisor_fast(), restart=RestartConfig(0.01, 2, 0.05, 5, 3))
     sup = sups(spec, config)
     sup.start()
-    await until("FAILED", lambda: sup.state == "FAILED")
+    await until_async("FAILED", lambda: sup.state, lambda s: s == "FAILED")
     assert sup.restarts == 2
     assert sup.last_error == "exited with code 3"
     await sup.restart()
-    await until("FAILED again", lambda: sup.state == "FAILED" and sup.restarts == 4)
+    await until_async(
+        "FAILED again", lambda: (sup.state, sup.restarts), lambda seen: seen == ("FAILED", 4)
+    )
 
 
 async def test_missing_executable_fails(sups):
@@ -127,7 +126,7 @@ async def test_missing_executable_fails(sups):
     config = replace(supervisor_fast(), restart=RestartConfig(0.01, 2, 0.05, 5, 2))
     sup = sups(spec, config)
     sup.start()
-    await until("FAILED", lambda: sup.state == "FAILED")
+    await until_async("FAILED", lambda: sup.state, lambda s: s == "FAILED")
     assert "cannot start" in (sup.last_error or "")
 
 
@@ -141,7 +140,7 @@ async def test_graceful_stop_escalates(sups, mode, code):
         config = replace(config, exit_timeout=10.0, term_timeout=10.0)
     sup = sups(fake(mode=mode), config)
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     loop = asyncio.get_running_loop()
     t0 = loop.time()
     await sup.stop()
@@ -152,15 +151,18 @@ async def test_graceful_stop_escalates(sups, mode, code):
         code, config.exit_timeout + config.term_timeout
     )  # the timeouts it had to wait out before the next step
     assert waited <= took < waited + 10.0
-    await asyncio.sleep(0.2)
-    assert sup.state == "STOPPED"  # a stop is not a failure: no restart
-    assert sup.restarts == 0
+    await stays_async(  # a stop is not a failure: no restart
+        "STOPPED, no restart",
+        lambda: (sup.state, sup.restarts),
+        lambda seen: seen == ("STOPPED", 0),
+        window=0.2,
+    )
 
 
 async def test_protocol_error_kills_and_restarts(sups):
     sup = sups(fake(mode="garbage"))
     sup.start()
-    await until("a restart", lambda: sup.restarts >= 1)
+    await until_async("a restart", lambda: sup.restarts, lambda n: n >= 1)
     assert sup.protocol_errors >= 1
     assert "protocol error" in (sup.last_error or "")
 
@@ -169,7 +171,7 @@ async def test_no_hello_is_killed(sups):
     config = replace(supervisor_fast(), hello_timeout=0.3)
     sup = sups(fake(mode="no_hello"), config)
     sup.start()
-    await until("a kill", lambda: sup.last_exit is not None)
+    await until_async("a kill", lambda: sup.last_exit, lambda code: code is not None)
     assert sup.last_exit == -9
     assert "no hello within 0.3s" in (sup.last_error or "")
 
@@ -183,7 +185,7 @@ async def test_commands_fail_cleanly_when_not_running(sups):
 async def test_the_agents_process_tree_meter_counts_hosts(sups):
     sup = sups(fake())
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     _, host_rss = sup.sample()
     _, tree_rss = ProcessTreeMeter(os.getpid(), include_root=False).measure()
     assert tree_rss >= host_rss > 0
@@ -206,7 +208,7 @@ async def test_a_stop_while_the_host_is_being_made_leaves_no_orphan(
     monkeypatch.setattr(asyncio, "create_subprocess_exec", slow)
     sup = sups(fake())
     sup.start()
-    await until("the fork", lambda: forked)
+    await until_async("the fork", lambda: forked)
     await asyncio.wait_for(sup.stop(), 5.0)
     assert sup.state == "STOPPED"
     with pytest.raises(ProcessLookupError):  # reaped: not even a zombie left
@@ -237,11 +239,11 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
     await manager.start()
     try:
         manager.set_desired([fake("A")])
-        await until("the start under way", lambda: entered)
+        await until_async("the start under way", lambda: entered)
         assert manager.status_of("A")["state"] == "STARTING"  # not STOPPED from before
         manager.remove("A")  # dropped before its host exists
-        await until("the fork", lambda: forked)
-        await until("the host gone and forgotten", lambda: manager.status() == [])
+        await until_async("the fork", lambda: forked)
+        await until_async("the host gone and forgotten", manager.status, lambda rows: rows == [])
 
         def gone() -> bool:
             try:
@@ -250,7 +252,7 @@ async def test_an_instance_dropped_while_its_host_starts_is_stopped_not_forgotte
                 return True
             return False
 
-        await until("the host process reaped", gone)
+        await until_async("the host process reaped", gone)
     finally:
         await manager.stop()
 
@@ -261,8 +263,8 @@ async def watched(sups, seen: list[str]):
     sup = sups(fake(heartbeat=0.1), replace(supervisor_fast(), heartbeat_timeout=0.6))
     sup.on_problem = lambda s, cause: seen.append(cause)
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
-    await until("a heartbeat", lambda: sup.ports)
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
+    await until_async("a heartbeat", lambda: sup.ports)
     return sup
 
 
@@ -275,13 +277,19 @@ async def test_a_stopped_host_is_killed_by_the_watchdog_as_hung_and_restarted(su
     loop = asyncio.get_running_loop()
     stopped = loop.time()
     os.kill(old, signal.SIGSTOP)
-    await until("the watchdog's kill", lambda: sup.exit_noticed is not None, wait=5.0)
+    await until_async(
+        "the watchdog's kill", lambda: sup.exit_noticed, lambda t: t is not None, within=5.0
+    )
     took = sup.exit_noticed - stopped
     assert took >= 0.6 - 0.5  # silent since its last heartbeat, at most 0.5 s before the stop
     assert sup.last_error.startswith("hung: no heartbeat for "), sup.last_error
     assert "killed by SIGKILL" in sup.last_error
     assert seen == ["crashed"]
-    await until("the restart", lambda: sup.state == "INACTIVE" and sup.pid != old)
+    await until_async(
+        "the restart",
+        lambda: (sup.state, sup.pid),
+        lambda seen: seen[0] == "INACTIVE" and seen[1] != old,
+    )
 
 
 async def test_a_stall_of_the_agents_own_loop_does_not_make_its_hosts_hung(sups):
@@ -294,7 +302,11 @@ async def test_a_stall_of_the_agents_own_loop_does_not_make_its_hosts_hung(sups)
     for _ in range(3):
         time.sleep(1.2)  # noqa: ASYNC251 - the point: this loop does nothing for 1.2 s
         beats = sup.ports
-        await until("a heartbeat after the stall", lambda b=beats: sup.ports is not b)  # type: ignore[misc]
+        await until_async(
+            "a heartbeat after the stall",
+            lambda: sup.ports,
+            lambda ports, before=beats: ports is not before,  # type: ignore[misc]
+        )
     assert sup.exit_noticed is None
     assert sup.pid == pid
     assert seen == []
@@ -304,19 +316,22 @@ async def test_a_watchdog_of_zero_never_fires_and_an_instance_value_wins(sups):
     spec = replace(fake("Off"), watchdog_s=0.0)
     sup = sups(spec, replace(supervisor_fast(), heartbeat_timeout=0.5))
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     assert sup.silence_limit() == 0
     pid = sup.pid
     os.kill(pid, signal.SIGSTOP)
     try:
-        await asyncio.sleep(1.5)  # three deadlines of the default: still not killed
-        assert sup.pid == pid
-        assert sup.exit_noticed is None
+        await stays_async(  # three deadlines of the default: still not killed
+            "not killed",
+            lambda: (sup.pid, sup.exit_noticed),
+            lambda seen: seen == (pid, None),
+            window=1.5,
+        )
     finally:
         os.kill(pid, signal.SIGCONT)
     long = sups(replace(fake("Long"), watchdog_s=30.0))
     long.start()
-    await until("INACTIVE", lambda: long.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: long.state, lambda s: s == "INACTIVE")
     assert long.silence_limit() == 30.0
 
 
@@ -324,7 +339,7 @@ async def test_a_host_still_initializing_has_the_hello_timeout_not_the_heartbeat
     sup = sups(fake(heartbeat=0.1), replace(supervisor_fast(), heartbeat_timeout=0.5))
     assert sup.silence_limit() == sup.config.hello_timeout  # not yet initialized
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     assert sup.silence_limit() == 0.5
 
 
@@ -336,12 +351,14 @@ async def test_a_long_lifecycle_call_is_not_hung(sups):
         replace(supervisor_fast(), heartbeat_timeout=0.5),
     )
     sup.start()
-    await until("INACTIVE", lambda: sup.state == "INACTIVE")
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     pid = sup.pid
     await sup.command("activate")  # 1.5 s without a heartbeat, three deadlines
-    await until("ACTIVE", lambda: sup.state == "ACTIVE")
+    await until_async("ACTIVE", lambda: sup.state, lambda s: s == "ACTIVE")
     assert sup.pid == pid
     assert sup.exit_noticed is None
     os.kill(pid, signal.SIGSTOP)  # silent outside a command: the watchdog fires
-    await until("the watchdog's kill", lambda: sup.exit_noticed is not None, wait=5.0)
+    await until_async(
+        "the watchdog's kill", lambda: sup.exit_noticed, lambda t: t is not None, within=5.0
+    )
     assert sup.last_error.startswith("hung: ")

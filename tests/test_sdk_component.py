@@ -23,6 +23,7 @@ from sdrpeer.sdk import (
 )
 from sdrpeer.sdk.errors import ComponentError, PortError
 from tests.virtual_time import run_virtual
+from tests.wait import stays_async, until_async
 
 S = LifecycleState
 
@@ -90,13 +91,6 @@ def rec(r: ComponentRunner) -> Recorder:
     return r.component
 
 
-async def until(predicate: Any, within: float = 10.0) -> None:
-    """Poll `predicate` (bounded: fail after `within` seconds)."""
-    async with asyncio.timeout(within):
-        while not predicate():  # noqa: ASYNC110 - polling state the test does not own
-            await asyncio.sleep(0.002)
-
-
 def state_of(r: ComponentRunner) -> LifecycleState:
     """The runner's state (a call, so mypy does not narrow it across awaits)."""
     return r.state
@@ -113,7 +107,9 @@ async def test_full_lifecycle_calls_callbacks_and_reports_each_state(
     assert runner.state is S.CREATED
     await runner.initialize()
     await runner.activate()
-    await until(lambda: rec(runner).calls.count("on_execute") >= 2)
+    await until_async(
+        "two executions", lambda: rec(runner).calls.count("on_execute"), lambda n: n >= 2
+    )
     await runner.deactivate()
     await runner.finalize()
     calls = [c for c in rec(runner).calls if c != "on_execute"]
@@ -176,7 +172,7 @@ async def test_exception_in_on_execute_is_reported_in_the_same_loop_iteration(
     runner.on_state(lambda s, e: events.append(f"{s}:{e}"))
     await runner.initialize()
     await runner.activate()
-    await until(lambda: "next iteration" in events)
+    await until_async("the next iteration", lambda: events, lambda e: "next iteration" in e)
     assert events[2:4] == [
         "ERROR:on_execute: ValueError: sensor unplugged",
         "next iteration",
@@ -193,7 +189,7 @@ async def test_error_calls_on_aborting_once_then_on_error_per_period_and_reset_r
     comp.fail.add("on_execute")
     await runner.initialize()
     await runner.activate()
-    await until(lambda: comp.calls.count("on_error") >= 3)
+    await until_async("three on_error", lambda: comp.calls, lambda c: c.count("on_error") >= 3)
     assert runner.state is S.ERROR
     assert comp.calls.count("on_aborting") == 1
     assert comp.calls.count("on_execute") == 1  # never called again while in ERROR
@@ -207,7 +203,9 @@ async def test_error_calls_on_aborting_once_then_on_error_per_period_and_reset_r
     assert comp.calls[-1] == "on_reset"
     await runner.activate()
     n = comp.calls.count("on_execute")
-    await until(lambda: comp.calls.count("on_execute") > n + 2)
+    await until_async(
+        "three more executions", lambda: comp.calls.count("on_execute"), lambda k: k > n + 2
+    )
     assert state_of(runner) is S.ACTIVE
 
 
@@ -359,17 +357,19 @@ async def test_on_input_runs_once_per_frame_and_only_while_active() -> None:
     runner = ComponentRunner(comp)
     await runner.initialize()
     comp.inp.deliver(100, 1, "c")  # INACTIVE: queued, no execution
-    await asyncio.sleep(0.02)
-    assert sink.got == []
+    await stays_async(
+        "no output while INACTIVE", lambda: sink.got, lambda got: got == [], window=0.02
+    )
     comp.inp.get_nowait()
     await runner.activate()
     comp.inp.deliver(1, 2, "c")
-    await until(lambda: len(sink.got) == 1)
+    await until_async("one output", lambda: sink.got, lambda got: len(got) == 1)
     for seq in range(3, 6):  # a burst: one execution per frame
         comp.inp.deliver(seq, seq, "c")
-    await until(lambda: len(sink.got) == 4)
-    await asyncio.sleep(0.02)
-    assert sink.got == [2, 6, 8, 10]
+    await until_async("four outputs", lambda: sink.got, lambda got: len(got) == 4)
+    await stays_async(
+        "one output per frame", lambda: sink.got, lambda got: got == [2, 6, 8, 10], window=0.02
+    )
     assert runner.executions == 4
     await runner.finalize()
 
@@ -415,12 +415,12 @@ async def test_async_callbacks_work() -> None:
     await runner.initialize()
     await runner.activate()
     comp.inp.deliver(3, 1, "c")
-    await until(lambda: 3 in comp.log_)
+    await until_async("3 executed", lambda: comp.log_, lambda log: 3 in log)
     await runner.set_params({"scale": "10"})
     comp.inp.deliver(4, 2, "c")
-    await until(lambda: 40 in comp.log_)
+    await until_async("4 scaled by 10", lambda: comp.log_, lambda log: 40 in log)
     comp.inp.deliver("boom", 3, "c")
-    await until(lambda: "aborting" in comp.log_)
+    await until_async("on_aborting", lambda: comp.log_, lambda log: "aborting" in log)
     assert comp.log_ == ["init", "activated", 3, {"scale": 10}, 40, "aborting"]
     assert states == [S.INACTIVE, S.ACTIVE, S.ERROR]
     assert runner.last_error == "on_execute: KeyError: 'boom'"
@@ -539,13 +539,12 @@ async def test_on_input_calls_on_error_per_frame_while_in_error() -> None:
     await runner.initialize()
     await runner.activate()
     comp.inp.deliver(1, 1, "c")
-    await until(lambda: state_of(runner) is S.ERROR)
+    await until_async("ERROR", lambda: state_of(runner), lambda s: s is S.ERROR)
     assert runner.last_error == "on_execute: RuntimeError: bad frame 1"
     comp.inp.deliver(2, 2, "c")
     comp.inp.deliver(3, 3, "c")
-    await until(lambda: comp.errors == 2)
-    await asyncio.sleep(0.02)
-    assert comp.errors == 2
+    await until_async("two on_error", lambda: comp.errors, lambda n: n == 2)
+    await stays_async("one on_error per frame", lambda: comp.errors, lambda n: n == 2, window=0.02)
     await runner.finalize()
 
 
@@ -572,11 +571,14 @@ async def test_deactivate_waits_for_a_running_async_on_execute() -> None:
     runner = ComponentRunner(comp)
     await runner.initialize()
     await runner.activate()
-    await until(lambda: comp.inside)
+    await until_async("on_execute running", lambda: comp.inside)
     stopping = asyncio.ensure_future(runner.deactivate())
-    await asyncio.sleep(0.02)
-    assert not stopping.done()
-    assert state_of(runner) is S.ACTIVE
+    await stays_async(
+        "deactivate waiting for on_execute",
+        lambda: (stopping.done(), state_of(runner)),
+        lambda seen: seen == (False, S.ACTIVE),
+        window=0.02,
+    )
     comp.release.set()
     await asyncio.wait_for(stopping, 1.0)
     assert not comp.overlapped

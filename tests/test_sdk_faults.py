@@ -28,6 +28,7 @@ from sdrpeer.sdk import (
     Periodic,
 )
 from sdrpeer.sdk.faults import moves_to_error
+from tests.wait import stays_async, until_async
 
 S = LifecycleState
 
@@ -99,12 +100,6 @@ def fault_of(r: ComponentRunner) -> str | None:
     return r.fault
 
 
-async def until(predicate: Any, within: float = 10.0) -> None:
-    async with asyncio.timeout(within):
-        while not predicate():  # noqa: ASYNC110 - polling state the test does not own
-            await asyncio.sleep(0.002)
-
-
 def record(r: ComponentRunner) -> tuple[list[tuple[str, str]], list[tuple[S, str | None, Any]]]:
     faults: list[tuple[str, str]] = []
     states: list[tuple[S, str | None, Any]] = []
@@ -153,9 +148,9 @@ async def test_emergency_stop_from_on_execute_reports_at_once_then_errors_throug
     await r.initialize()
     await r.activate()
     bot(r).fault_on_execute = ("emergency_stop", "bumper pressed")
-    await until(lambda: faults)
+    await until_async("the fault", lambda: faults)
     assert faults == [("emergency_stop", "bumper pressed")]
-    await until(lambda: state_of(r) is S.ERROR)
+    await until_async("ERROR", lambda: state_of(r), lambda s: s is S.ERROR)
     assert states[-1] == (S.ERROR, "emergency_stop: bumper pressed", "emergency_stop")
     assert r.fault == "emergency_stop"
     assert r.last_error == "emergency_stop: bumper pressed"
@@ -173,10 +168,9 @@ async def test_abnormal_behaviour_only_reports(runner: ComponentRunner) -> None:
     await runner.initialize()
     await runner.activate()
     bot(runner).fault_on_execute = ("abnormal_behaviour", "turning without a command")
-    await until(lambda: faults)
-    await asyncio.sleep(0.05)
+    await until_async("the fault", lambda: faults)
     assert faults == [("abnormal_behaviour", "turning without a command")]
-    assert state_of(runner) is S.ACTIVE
+    await stays_async("ACTIVE", lambda: state_of(runner), lambda s: s is S.ACTIVE, window=0.05)
     assert "on_aborting" not in bot(runner).calls
     assert [s for s, _, _ in states] == [S.INACTIVE, S.ACTIVE]
 
@@ -188,7 +182,7 @@ async def test_hardware_failure_from_a_thread_while_inactive(runner: ComponentRu
     thread = threading.Thread(target=bot(runner).hardware_failure, args=("lidar gone",))
     thread.start()
     thread.join()
-    await until(lambda: state_of(runner) is S.ERROR)
+    await until_async("ERROR", lambda: state_of(runner), lambda s: s is S.ERROR)
     assert seen_on == [threading.get_ident()]  # handed over to the loop's thread
     assert runner.last_error == "hardware_failure: lidar gone"
     assert "on_aborting" not in bot(runner).calls  # it was not ACTIVE
@@ -205,7 +199,7 @@ async def test_many_threads_reporting_at_once_lose_nothing(runner: ComponentRunn
         t.start()
     for t in threads:
         t.join()
-    await until(lambda: len(faults) == 8)
+    await until_async("eight faults", lambda: faults, lambda f: len(f) == 8)
     assert sorted(d for _, d in faults) == [f"t{i}" for i in range(8)]
 
 
@@ -215,7 +209,7 @@ async def test_fault_during_on_initialize_errors_after_it() -> None:
     r = ComponentRunner(comp)
     _faults, states = record(r)
     await r.initialize()  # on_initialize itself returned: the transition completes
-    await until(lambda: state_of(r) is S.ERROR)
+    await until_async("ERROR", lambda: state_of(r), lambda s: s is S.ERROR)
     assert [s for s, _, _ in states] == [S.INACTIVE, S.ERROR]
     await r.finalize()
 
@@ -245,9 +239,10 @@ async def test_a_fault_in_error_is_reported_but_changes_nothing(runner: Componen
     await runner.initialize()
     await runner.activate()
     bot(runner).emergency_stop("first")
-    await until(lambda: state_of(runner) is S.ERROR)
+    await until_async("ERROR", lambda: state_of(runner), lambda s: s is S.ERROR)
     bot(runner).hardware_failure("second")
-    await asyncio.sleep(0.02)
+    await until_async("the second fault", lambda: faults, lambda f: len(f) == 2)
+    await stays_async("one move to ERROR", lambda: states, lambda s: len(s) == 3, window=0.02)
     assert [k for k, _ in faults] == ["emergency_stop", "hardware_failure"]
     assert [s for s, _, _ in states].count(S.ERROR) == 1
     assert runner.last_error == "emergency_stop: first"
@@ -293,13 +288,6 @@ async def managed(tmp_path: Path) -> AsyncIterator[tuple[InstanceManager, Seen]]
         await asyncio.wait_for(manager.stop(), 10)
 
 
-async def wait_for(what: str, cond: Any, within: float = 10.0) -> None:
-    try:
-        await until(cond, within)
-    except TimeoutError:
-        raise AssertionError(f"waited {within}s for {what}") from None
-
-
 def state(manager: InstanceManager, name: str) -> str:
     return str(manager.status_of(name)["state"])
 
@@ -309,15 +297,15 @@ async def test_emergency_stop_reaches_the_managers_hook_and_errors_without_a_pro
 ) -> None:
     manager, seen = managed
     manager.set_desired([fixture_spec("Stop1", "Reporter", kinds="emergency_stop")])
-    await wait_for("the fault", lambda: seen.faults)
+    await until_async("the fault", lambda: seen.faults)
     assert seen.faults == [("Stop1", "emergency_stop", "#0")]
-    await wait_for("ERROR", lambda: state(manager, "Stop1") == "ERROR")
+    await until_async("ERROR", lambda: state(manager, "Stop1"), lambda s: s == "ERROR")
     status = manager.status_of("Stop1")
     assert status["last_error"] == "emergency_stop: #0"
     assert [(f["kind"], f["detail"]) for f in status["faults"]] == [("emergency_stop", "#0")]
     assert status["faults"][0]["ts"] <= status["faults"][0]["received"] + 1
-    await asyncio.sleep(0.2)
-    assert seen.problems == []  # the fault's hook already told; no component_error on top
+    # the fault's hook already told; no component_error on top (the manager checks every 0.1 s)
+    await stays_async("no instance problem", lambda: seen.problems, lambda p: p == [], window=0.2)
 
 
 async def test_faults_from_a_thread_in_order_and_the_status_keeps_the_last_few(
@@ -326,7 +314,7 @@ async def test_faults_from_a_thread_in_order_and_the_status_keeps_the_last_few(
     manager, seen = managed
     kinds = ",".join(["abnormal_behaviour"] * 5)
     manager.set_desired([fixture_spec("Odd", "Reporter", kinds=kinds, thread=True)])
-    await wait_for("five faults", lambda: len(seen.faults) == 5)
+    await until_async("five faults", lambda: seen.faults, lambda f: len(f) == 5)
     assert [d for _, _, d in seen.faults] == ["#0", "#1", "#2", "#3", "#4"]
     assert [f["detail"] for f in manager.status_of("Odd")["faults"]] == ["#2", "#3", "#4"]
     assert state(manager, "Odd") == "ACTIVE"  # abnormal_behaviour only reports
@@ -337,15 +325,19 @@ async def test_a_failing_callback_is_a_component_error_and_a_kill_a_crash(
 ) -> None:
     manager, seen = managed
     manager.set_desired([fixture_spec("Crash", "Crasher", after=3), fixture_spec("Pub", "Counter")])
-    await wait_for("component_error", lambda: ("Crash", "component_error") in seen.problems)
+    await until_async(
+        "component_error", lambda: seen.problems, lambda p: ("Crash", "component_error") in p
+    )
     assert state(manager, "Crash") == "ERROR"
-    await wait_for("Pub ACTIVE", lambda: state(manager, "Pub") == "ACTIVE")
+    await until_async("Pub ACTIVE", lambda: state(manager, "Pub"), lambda s: s == "ACTIVE")
     pid = manager.status_of("Pub")["pid"]
     os.kill(pid, signal.SIGKILL)
-    await wait_for("crashed", lambda: ("Pub", "crashed") in seen.problems)
+    await until_async("crashed", lambda: seen.problems, lambda p: ("Pub", "crashed") in p)
     assert seen.problems.count(("Crash", "component_error")) == 1
     assert seen.faults == []
-    await wait_for("Pub restarted", lambda: manager.status_of("Pub")["pid"] not in (None, pid))
+    await until_async(
+        "Pub restarted", lambda: manager.status_of("Pub")["pid"], lambda p: p not in (None, pid)
+    )
     await manager.stop()
     assert seen.problems[-1] == ("Pub", "crashed")  # stopping on purpose is no problem
 

@@ -74,6 +74,8 @@ def sim_fleet(n: int, vitals_per_s: float) -> dict[str, float]:
     return {"bytes": statistics.mean(sent), "vitals": (p1["vitals"] - p0["vitals"]) / WINDOW / n}
 
 
+@pytest.mark.realnet
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [10, 25])
 def test_simulated_traffic_matches_real_agents(n: int, tmp_path: Path) -> None:
     real = real_fleet(n, tmp_path)

@@ -36,6 +36,7 @@ from sdrpeer.sdk import (
     OutPort,
 )
 from tests.hostctl import HostPool
+from tests.wait import stays_async, until_answer, until_async
 
 S = LifecycleState
 PE = "components.position_estimation:PositionEstimation"
@@ -81,7 +82,7 @@ async def test_snapshot_and_restore_by_state() -> None:
     await r.restore({"n": 6})  # while ACTIVE too
     assert await r.snapshot() == {"n": 6}
     r.component.emergency_stop("test")
-    await asyncio.sleep(0.01)
+    await until_async("ERROR", lambda: r.state, lambda state: state is S.ERROR)
     assert await r.snapshot() == {"n": 6}  # in ERROR: a successor may still want it
     with pytest.raises(
         LifecycleError, match=r"cannot restore: component is ERROR \(reset it first"
@@ -174,19 +175,14 @@ class Sink:
         return True
 
 
-async def until(cond: Callable[[], object], within: float = 5.0) -> None:
-    async with asyncio.timeout(within):
-        while not cond():  # noqa: ASYNC110 - polls plain attributes
-            await asyncio.sleep(0.002)
-
-
 async def feed(
     pe: PositionEstimation, sink: Sink, samples: list[dict[str, float]], seq0: int
 ) -> None:
     for i, sample in enumerate(samples):
         n = len(sink.values)
         pe.odometry.deliver(sample, seq0 + i, "ctl")
-        await until(lambda n=n: len(sink.values) > n)  # type: ignore[misc]
+        grew = lambda v: len(v) > n  # noqa: B023, E731 - awaited before the loop moves on
+        await until_async(f"pose {seq0 + i}", lambda: sink.values, grew)
 
 
 async def test_position_estimation_migrated_mid_path_continues_the_estimate() -> None:
@@ -230,13 +226,13 @@ async def test_red_controller_odometry_continues_after_a_restore() -> None:
     await r_new.initialize()
     assert await r_old.snapshot() is None  # never activated: nothing to hand over
     await r_old.activate()
-    await until(lambda: old.odo.x > 0.05)
+    await until_async("the robot moving", lambda: old.odo.x, lambda x: x > 0.05)
     await r_old.deactivate()
     state = await r_old.snapshot()
     assert state == {"v": 1, "odometry": [old.odo.x, 0.0, 0.0], "stops": 0}
     await r_new.restore(state)
     await r_new.activate()
-    await until(lambda: len(sink.values) >= 3)
+    await until_async("three odometry samples", lambda: sink.values, lambda v: len(v) >= 3)
     xs = [v["x"] for v in sink.values]
     assert xs[0] == state["odometry"][0]  # not the origin
     assert xs == sorted(xs)
@@ -245,7 +241,7 @@ async def test_red_controller_odometry_continues_after_a_restore() -> None:
     await r_new.deactivate()
     await r_new.activate()  # a later activation starts afresh again
     n = len(sink.values)
-    await until(lambda: len(sink.values) > n)
+    await until_async("a new sample", lambda: sink.values, lambda v: len(v) > n)
     assert sink.values[n]["x"] == 0.0
     await r_old.finalize()
     await r_new.finalize()
@@ -310,10 +306,12 @@ async def sups(tmp_path: Path) -> AsyncIterator[Callable[..., Supervisor]]:
 
 
 async def ready(sup: Supervisor, state: str = "INACTIVE") -> None:
-    try:
-        await until(lambda: sup.state == state, 15.0)
-    except TimeoutError:
-        raise AssertionError(f"{sup.name}: no {state}; {sup.state}, {sup.last_error}") from None
+    await until_async(
+        f"{sup.name} {state}",
+        lambda: (sup.state, sup.last_error),
+        lambda seen: seen[0] == state,
+        within=15.0,
+    )
 
 
 async def test_a_running_position_estimation_migrates_with_its_pose(sups: Any) -> None:
@@ -333,15 +331,11 @@ async def test_a_running_position_estimation_migrates_with_its_pose(sups: Any) -
     conn = {"id": "odo", "out": "odometry", "to": old.data_address(), "in": "odometry"}
     await ctl.command("connect", conn=conn)
     await ctl.command("activate")
-    snapshots: list[Any] = []
-
-    async def moved() -> bool:
-        snapshots.append(await old.snapshot())  # while it runs
-        return bool(snapshots[-1] and snapshots[-1]["pose"][0] > 0.1)
-
-    async with asyncio.timeout(10):
-        while not await moved():  # noqa: ASYNC110 - polls the host
-            await asyncio.sleep(0.02)
+    await until_answer(
+        "PE1's pose past x 0.1",
+        old.snapshot,  # while it runs
+        lambda snap: bool(snap and snap["pose"][0] > 0.1),
+    )
     await old.command("deactivate")
     state = await old.snapshot()
     await new.restore(state)
@@ -353,13 +347,9 @@ async def test_a_running_position_estimation_migrates_with_its_pose(sups: Any) -
     await ctl.command("repoint", conn_id="odo", to=new.data_address())
     await new.command("activate")
 
-    async def progressed() -> Any:
-        now = await new.snapshot()
-        return now if now["prev"] != state["prev"] else None
-
-    async with asyncio.timeout(10):
-        while (after := await progressed()) is None:  # noqa: ASYNC110 - polls the host
-            await asyncio.sleep(0.02)
+    after = await until_answer(
+        "PE2 past the handed-over sample", new.snapshot, lambda now: now["prev"] != state["prev"]
+    )
     assert after["glitches"] == state["glitches"]  # no re-anchoring: it continued
     assert math.dist(after["pose"][:2], (x + 10.0, y)) < 1.0
 
@@ -394,8 +384,12 @@ async def test_a_malformed_state_is_refused_and_the_host_lives_on(sups: Any) -> 
     for bad in ({"v": 1, "pose": "here"}, [1, 2, 3]):
         with pytest.raises(CommandError, match="on_restore failed: ValueError"):
             await pe.restore(bad)
-    await asyncio.sleep(0.1)
-    assert (pe.alive, pe.pid, pe.state) == (True, pid, "ACTIVE")
+    await stays_async(
+        "PE alive and ACTIVE",
+        lambda: (pe.alive, pe.pid, pe.state),
+        lambda seen: seen == (True, pid, "ACTIVE"),
+        window=0.1,
+    )
     assert (await pe.snapshot())["v"] == 1
 
 

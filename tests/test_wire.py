@@ -595,11 +595,12 @@ VALID = Codec("a", None, seq_start=1).encode(PACKETS[-1], T)
 VALID_SIGNED = Codec("a", Keyring([KEY_A]), seq_start=1).encode(PACKETS[1], T)
 
 
-@FUZZ
-@given(st.integers(min_value=0, max_value=len(VALID)), st.integers(0, len(VALID_SIGNED)))
-def test_truncations_only_raise_wire_error(cut: int, cut_signed: int) -> None:
-    decode_or_wire_error(Codec("b", None), VALID[:cut])
-    decode_or_wire_error(Codec("b", Keyring([KEY_A])), VALID_SIGNED[:cut_signed])
+def test_truncations_only_raise_wire_error() -> None:
+    """Every cut of a valid datagram, plain and signed: all of them, fewer than a fuzz tries."""
+    for cut in range(len(VALID) + 1):
+        decode_or_wire_error(Codec("b", None), VALID[:cut])
+    for cut in range(len(VALID_SIGNED) + 1):
+        decode_or_wire_error(Codec("b", Keyring([KEY_A])), VALID_SIGNED[:cut])
 
 
 @FUZZ
