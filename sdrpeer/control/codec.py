@@ -37,6 +37,7 @@ __all__ = [
     "encode_all",
     "id_of",
     "to_map",
+    "type_of",
 ]
 
 Message = Command | Report | Part
@@ -237,6 +238,11 @@ def decode_command(raw: Mapping[str, Any]) -> Command:
 def decode_part(raw: Mapping[str, Any]) -> Part:
     """The `part` in `raw`; ProtocolError if `of` is not an integer or `data` not bytes."""
     return _decode(Part, Part.T, raw)
+
+
+def type_of(raw: Mapping[str, Any]) -> str:
+    """A map's `"t"` (the framing made sure it is a str)."""
+    return str(raw["t"])
 
 
 def id_of(raw: Mapping[str, Any]) -> int | None:

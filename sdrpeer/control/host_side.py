@@ -31,7 +31,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sdrpeer.control.codec import decode_command, decode_part, encode, encode_all, id_of
+from sdrpeer.control.codec import (
+    decode_command,
+    decode_part,
+    encode,
+    encode_all,
+    id_of,
+    type_of,
+)
 from sdrpeer.control.messages import Command, Heartbeat, Part, Report, Restore
 from sdrpeer.control.parts import MAX_BLOB, PartAssembler
 from sdrpeer.control.stream import MAX_MESSAGE, MessageStream
@@ -94,12 +101,12 @@ class ControlDecoder:
         out: list[Request | Refusal] = []
         for raw in self._stream.feed(data):
             ident = id_of(raw)
-            if ident is None and raw["t"] == Part.T:
+            if ident is None and type_of(raw) == Part.T:
                 part = decode_part(raw)
                 self._parts.add(part.of, part.data, self.max_blob)
             elif ident is None:
                 self.ignored += 1
-                log.warning("control: %r without an integer id ignored", raw["t"])
+                log.warning("control: %r without an integer id ignored", type_of(raw))
             else:
                 out.append(self._request(raw, ident))
         return out
@@ -109,7 +116,7 @@ class ControlDecoder:
             command = decode_command(raw)
         except ProtocolError as exc:
             self._parts.drop(ident)
-            return Refusal(ident, raw["t"], str(exc))
+            return Refusal(ident, type_of(raw), str(exc))
         if not isinstance(command, Restore):
             return Request(ident, command)
         try:
