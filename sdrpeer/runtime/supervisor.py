@@ -37,7 +37,19 @@ import psutil
 
 from sdrpeer.control import messages
 from sdrpeer.control.agent_side import ControlChannel
-from sdrpeer.control.messages import Command, Exit, Heartbeat, Hello, Reply, Report, State
+from sdrpeer.control.messages import (
+    Activate,
+    Command,
+    Deactivate,
+    Exit,
+    Heartbeat,
+    Hello,
+    Reply,
+    Report,
+    Reset,
+    Restore,
+    State,
+)
 from sdrpeer.errors import CommandError, ConfigError
 from sdrpeer.runtime import problems
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy
@@ -57,7 +69,7 @@ from sdrpeer.runtime.launch import (
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
 
 log = logging.getLogger(__name__)
-LIFECYCLE = ("activate", "deactivate", "reset", "exit", "restore")
+LIFECYCLE = tuple(c.T for c in (Activate, Deactivate, Reset, Exit, Restore))
 """Commands whose callbacks may hold the host's loop for a while (the watchdog waits for them,
 up to the command timeout)."""
 _EOF_GRACE = 1.0  # seconds a host may live on after closing its control channel
