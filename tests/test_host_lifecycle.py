@@ -95,7 +95,7 @@ def test_set_params_visible(hosts: HostPool) -> None:
     assert "nope" in unknown["error"]
     not_a_map = host.command("set_params", params=[1])
     assert not_a_map["ok"] is False
-    assert "'params' must be a dict" in not_a_map["error"]
+    assert not_a_map["error"] == "set_params: 'params' must be a map, got [1]"
     host.command("exit")
     host.wait_exit()
     assert "params changed: [('gain', 7.5), ('mode', 'slow')]" in host.log_text()
@@ -154,7 +154,9 @@ def test_unknown_and_malformed_commands(hosts: HostPool) -> None:
             "connect", conn={"id": "c", "out": "out", "to": "carrier-pigeon", "in": "x"}
         )["error"]
     )
-    assert "'conn' must be a dict" in host.command("connect", conn="c")["error"]
+    assert "'conn' must be a map" in host.command("connect", conn="c")["error"]
+    bad_to = host.command("connect", conn={"id": "c", "out": "out", "to": 5, "in": "x"})
+    assert bad_to["error"] == "connect: 'conn.to' must be a string, got 5"
     assert "no connection 'zz'" in host.command("disconnect", conn_id="zz")["error"]
     host.send({"t": "activate"})  # no id: logged and skipped, the channel stays up
     assert host.command("activate")["ok"] is True

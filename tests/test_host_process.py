@@ -213,7 +213,7 @@ def test_footprint(tmp_path: Path) -> None:
 _GET_PDEATHSIG = """
 import ctypes, sys
 sys.path.insert(0, sys.argv[1])
-from sdrpeer.host.control import arm_parent_death_signal
+from sdrpeer.control.host_side import arm_parent_death_signal
 assert arm_parent_death_signal()
 value = ctypes.c_int(0)
 ctypes.CDLL(None).prctl(2, ctypes.byref(value), 0, 0, 0)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from sdrpeer.control.messages import Activate
 from sdrpeer.errors import CommandError
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.monitor.procstats import ProcessTreeMeter
@@ -61,11 +62,12 @@ async def test_start_states_commands_and_log(sups, tmp_path):
     sup.start()
     await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     assert sup.pid is not None
-    assert sup.hello["pid"] == sup.pid
+    assert sup.hello is not None
+    assert sup.hello.pid == sup.pid
     assert sup.data_address() is not None
     assert sup.start_latency is not None
     assert 0 < sup.start_latency < 5
-    await sup.command("activate")
+    await sup.command(Activate())
     await until_async("ACTIVE", lambda: sup.state, lambda s: s == "ACTIVE")
     assert [s for _, s in sup.history] == ["STARTING", "CREATED", "INACTIVE", "ACTIVE"]
     assert all(a <= b for (a, _), (b, _) in zip(sup.history, list(sup.history)[1:], strict=False))
@@ -179,7 +181,7 @@ async def test_no_hello_is_killed(sups):
 async def test_commands_fail_cleanly_when_not_running(sups):
     sup = sups(fake())
     with pytest.raises(CommandError, match="closed"):
-        await sup.command("activate")
+        await sup.command(Activate())
 
 
 async def test_the_agents_process_tree_meter_counts_hosts(sups):
@@ -353,7 +355,7 @@ async def test_a_long_lifecycle_call_is_not_hung(sups):
     sup.start()
     await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
     pid = sup.pid
-    await sup.command("activate")  # 1.5 s without a heartbeat, three deadlines
+    await sup.command(Activate())  # 1.5 s without a heartbeat, three deadlines
     await until_async("ACTIVE", lambda: sup.state, lambda s: s == "ACTIVE")
     assert sup.pid == pid
     assert sup.exit_noticed is None

@@ -19,6 +19,7 @@ import pytest
 
 from components.position_estimation import Estimator, PositionEstimation
 from components.red_controller import Odometry, REDController
+from sdrpeer.control.messages import Activate, Conn, Connect, Deactivate, Repoint
 from sdrpeer.control.parts import PART_SIZE, PartAssembler, parts
 from sdrpeer.errors import CommandError, PartError, StateError
 from sdrpeer.runtime.config import SupervisorConfig
@@ -253,13 +254,13 @@ async def test_red_controller_odometry_continues_after_a_restore() -> None:
 def test_parts_reassemble_and_bad_transfers_say_why() -> None:
     blob = os.urandom(2 * PART_SIZE + 5)
     msgs = parts(3, blob)
-    assert [len(m["data"]) for m in msgs] == [PART_SIZE, PART_SIZE, 5]
+    assert [len(m.data) for m in msgs] == [PART_SIZE, PART_SIZE, 5]
     asm = PartAssembler()
     for m in msgs:
-        asm.add(m["of"], m["data"], limit=len(blob))
+        asm.add(m.of, m.data, limit=len(blob))
     assert asm.take(3, len(blob)) == blob
     for m in msgs:
-        asm.add(m["of"], m["data"], limit=len(blob) - 1)
+        asm.add(m.of, m.data, limit=len(blob) - 1)
     with pytest.raises(PartError, match=f"over the limit of {len(blob) - 1} bytes"):
         asm.take(3, len(blob))
     asm.add(4, b"abc", 10)
@@ -327,16 +328,17 @@ async def test_a_running_position_estimation_migrates_with_its_pose(sups: Any) -
     old, new = sups(pe_spec("PE1")), sups(pe_spec("PE2"))
     for sup in (ctl, old, new):
         await ready(sup)
-    await old.command("activate")
-    conn = {"id": "odo", "out": "odometry", "to": old.data_address(), "in": "odometry"}
-    await ctl.command("connect", conn=conn)
-    await ctl.command("activate")
+    await old.command(Activate())
+    to = old.data_address()
+    assert to is not None
+    await ctl.command(Connect(Conn("odo", "odometry", to, "odometry")))
+    await ctl.command(Activate())
     await until_answer(
         "PE1's pose past x 0.1",
         old.snapshot,  # while it runs
         lambda snap: bool(snap and snap["pose"][0] > 0.1),
     )
-    await old.command("deactivate")
+    await old.command(Deactivate())
     state = await old.snapshot()
     await new.restore(state)
     assert await new.snapshot() == state  # the same pose, through two hosts
@@ -344,8 +346,10 @@ async def test_a_running_position_estimation_migrates_with_its_pose(sups: Any) -
     # anchor on the controller's raw odometry, near the origin).
     x, y, theta = state["pose"]
     await new.restore({**state, "pose": [x + 10.0, y, theta]})
-    await ctl.command("repoint", conn_id="odo", to=new.data_address())
-    await new.command("activate")
+    to = new.data_address()
+    assert to is not None
+    await ctl.command(Repoint("odo", to))
+    await new.command(Activate())
 
     after = await until_answer(
         "PE2 past the handed-over sample", new.snapshot, lambda now: now["prev"] != state["prev"]
@@ -379,7 +383,7 @@ async def test_a_big_state_travels_in_parts_and_an_oversized_one_is_refused(sups
 async def test_a_malformed_state_is_refused_and_the_host_lives_on(sups: Any) -> None:
     pe = sups(pe_spec("PE"))
     await ready(pe)
-    await pe.command("activate")
+    await pe.command(Activate())
     pid = pe.pid
     for bad in ({"v": 1, "pose": "here"}, [1, 2, 3]):
         with pytest.raises(CommandError, match="on_restore failed: ValueError"):

@@ -42,7 +42,6 @@ CODECS = {
     "sdrpeer/record/robot.py": "instance states and roles in gossip records and their JSON",
     "sdrpeer/gossip/wire.py": "member states as small ints in packets",
     "sdrpeer/runtime/spec.py": "a spec's `desired` in spec files and the API",
-    "sdrpeer/runtime/control.py": "the host's `state` reports",
 }
 """Modules that may spell the words (path relative to the repository)."""
 

@@ -47,7 +47,10 @@ from typing import Any
 import msgpack
 import yaml
 
-from sdrpeer.control.stream import encode
+from sdrpeer.control import messages as control
+from sdrpeer.control.agent_side import ControlDecoder as AgentDecoder
+from sdrpeer.control.codec import to_map
+from sdrpeer.control.host_side import ControlDecoder as HostDecoder
 from sdrpeer.dataplane.frames import (
     AckOffer,
     FrameDecoder,
@@ -78,12 +81,10 @@ from sdrpeer.gossip.messages import (
     Sync,
 )
 from sdrpeer.gossip.wire import MAGIC, PROTOCOL_VERSION, Codec, format_key, packet_body
-from sdrpeer.host.control import ControlDecoder as HostDecoder
 from sdrpeer.keys.keyring import Keyring
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.virtual import RobotFile
 from sdrpeer.record.robot import decode_record, encode_record, reference_record
-from sdrpeer.runtime.control import ControlDecoder as AgentDecoder
 from sdrpeer.system.loader import parse_system
 
 NOW = 1_800_000_000.0
@@ -276,20 +277,19 @@ class ControlSurface:
 
     def __init__(self, rng: random.Random) -> None:
         self.rng = rng
+        hello = control.Hello(
+            pid=42, component="C", ports={"in": [], "out": ["o"]}, params={}, data={"tcp": "h:1"}
+        )
         self.seeds = [
-            {"t": "hello", "protocol": 1, "pid": 42, "data": {"tcp": "127.0.0.1:1"}, "ports": {}},
-            {"t": "state", "state": "ACTIVE", "ts": 1.5},
-            {"t": "reply", "id": 3, "ok": True},
-            {"t": "heartbeat", "ts": 2.0, "ports": {"out": {"frames_out": 1, "bytes_out": 9}}},
-            {"t": "fault", "kind": "emergency_stop", "detail": "x", "ts": 1.0},
-            {"t": "part", "id": 4, "seq": 0, "data": b"abc"},
-            {"t": "activate", "id": 1},
-            {
-                "t": "connect",
-                "id": 2,
-                "conn": {"id": "c", "out": "o", "to": "tcp://h:1", "in": "i"},
-            },
-            {"t": "restore", "id": 5, "size": 3},
+            to_map(hello),
+            to_map(control.State("ACTIVE", 1.5)),
+            to_map(control.Reply(3, True)),
+            to_map(control.Heartbeat(2.0, {"out": {"frames_out": 1, "bytes_out": 9}})),
+            to_map(control.Fault("emergency_stop", "x", 1.0)),
+            to_map(control.Part(5, b"abc")),
+            to_map(control.Activate(), 1),
+            to_map(control.Connect(control.Conn("c", "o", "tcp://h:1", "i")), 2),
+            to_map(control.Restore(3), 5),
         ]
         self.reasons: Counter[str] = Counter()
 
@@ -299,7 +299,7 @@ class ControlSurface:
             return rng.randbytes(rng.randrange(0, 3000))
         msgs = rng.sample(self.seeds, rng.randrange(1, 4))
         if kind == 1:
-            return mutate_bytes(rng, b"".join(encode(m) for m in msgs))
+            return mutate_bytes(rng, b"".join(msgpack.packb(m, use_bin_type=True) for m in msgs))
         values: list[Any] = [dict(m) for m in msgs]
         k = rng.randrange(len(values))
         values[k] = mutate_tree(rng, values[k])

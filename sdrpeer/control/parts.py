@@ -2,14 +2,14 @@
 
 How it works: a control message is at most 1 MiB; a component's state may be bigger (the agent
 allows 16 MiB by default). The sender encodes the value with msgpack once, cuts the bytes into
-`PART_SIZE` pieces (`parts`), and writes the `{"t": "part", "of": ID, "data": piece}` maps right
-before the message they belong to, in the same write, so nothing comes between them: the command
-`{"id": ID, ...}` (agent to host) or the `reply` to command ID (host to agent). That message
-carries `"size"`, the total number of bytes. The receiver's `PartAssembler` collects one transfer
-at a time (a part of another id drops the unfinished one), holds at most the limit it is given
-(past it, the transfer is remembered as too big and its bytes dropped), and `take(ID, size)`
-returns the bytes or raises PartError saying what was wrong. `encode_value`/`decode_value` are
-the value codec both ends use (exactly one msgpack value; map keys of any type). Pure: no I/O,
+`PART_SIZE` pieces (`parts`: `Part` messages, `{"t": "part", "of": ID, "data": piece}` on the wire)
+and writes them right before the message they belong to, in the same write, so nothing comes between
+them: the command `{"id": ID, ...}` (agent to host) or the `reply` to command ID (host to agent).
+That message carries `"size"`, the total number of bytes. The receiver's `PartAssembler` collects
+one transfer at a time (a part of another id drops the unfinished one), holds at most the limit it
+is given (past it, the transfer is remembered as too big and its bytes dropped), and `take(ID,
+size)` returns the bytes or raises PartError saying what was wrong. `encode_value`/`decode_value`
+are the value codec both ends use (exactly one msgpack value; map keys of any type). Pure: no I/O,
 no clock.
 """
 
@@ -19,6 +19,7 @@ from typing import Any, Final
 
 import msgpack
 
+from sdrpeer.control.messages import Part
 from sdrpeer.errors import PartError
 
 __all__ = [
@@ -26,7 +27,6 @@ __all__ = [
     "PART_SIZE",
     "PartAssembler",
     "PartError",
-    "check_part",
     "decode_value",
     "encode_value",
     "parts",
@@ -37,23 +37,10 @@ PART_SIZE: Final = 256 * 1024
 MAX_BLOB: Final = 64 << 20
 """The most a host holds for one transfer (the agent's own limit is usually lower)."""
 
-Message = dict[str, Any]
 
-
-def parts(ident: int, blob: bytes) -> list[Message]:
+def parts(ident: int, blob: bytes) -> list[Part]:
     """The `part` messages carrying `blob` for message `ident` (none for an empty blob)."""
-    return [
-        {"t": "part", "of": ident, "data": blob[i : i + PART_SIZE]}
-        for i in range(0, len(blob), PART_SIZE)
-    ]
-
-
-def check_part(msg: Message) -> tuple[int, bytes]:
-    """`(of, data)` of a part message; PartError if either field has the wrong type."""
-    of, data = msg.get("of"), msg.get("data")
-    if type(of) is not int or not isinstance(data, bytes):
-        raise PartError("part: 'of' must be an integer and 'data' bytes")
-    return of, data
+    return [Part(ident, blob[i : i + PART_SIZE]) for i in range(0, len(blob), PART_SIZE)]
 
 
 class PartAssembler:
@@ -78,6 +65,13 @@ class PartAssembler:
             self._too_big, self._buf = (ident, limit), bytearray()
             return
         self._buf += data
+
+    def drop(self, ident: int) -> None:
+        """Forget transfer `ident` (its message was refused before its bytes were taken)."""
+        if ident == self._id:
+            self._id, self._buf = None, bytearray()
+        if self._too_big is not None and self._too_big[0] == ident:
+            self._too_big = None
 
     def take(self, ident: int, size: object) -> bytes:
         """The bytes of transfer `ident`, which must be `size` long; PartError otherwise."""

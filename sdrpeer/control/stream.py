@@ -5,27 +5,26 @@ How it works: the channel is a stream of msgpack maps, each with a string "t" (d
 the unpacker in pieces, so a message over the limit fails before it is buffered; each message's
 size is measured exactly (`Unpacker.tell()`), so `max_message` bytes pass and one more fails.
 Anything else — undecodable bytes, a value that is not a map, a map without a string "t" — raises
-`ProtocolError`, and the caller closes the channel. Pure: no I/O, no clock. Kept free of
-heavy imports: the host process imports it.
+`ProtocolError`, and the caller closes the channel. The maps go on to the codec (codec.py), which
+makes messages of them. Pure: no I/O, no clock. Kept free of heavy imports: the host process
+imports it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import msgpack
 
 from sdrpeer.errors import ProtocolError
 
-PROTOCOL = 1
-"""Version of the control channel, sent in `hello`."""
 MAX_MESSAGE = 1 << 20
 """Largest control message accepted, in bytes."""
 _PIECE = 64 * 1024
 """Incoming bytes are fed to the unpacker in pieces of at most this size (bounds its buffer)."""
 
-Message = dict[str, Any]
+Map = dict[str, Any]
+"""One message as the framing delivers it (a map with a str "t"), before the codec reads it."""
 
 
 class MessageStream:
@@ -36,9 +35,9 @@ class MessageStream:
         self._unpacker = msgpack.Unpacker(raw=False, max_buffer_size=max_message + _PIECE)
         self._offset = 0
 
-    def feed(self, data: bytes) -> list[Message]:
+    def feed(self, data: bytes) -> list[Map]:
         """Consume `data`; return the complete messages in it; raise ProtocolError."""
-        out: list[Message] = []
+        out: list[Map] = []
         view = memoryview(data)
         for start in range(0, len(view), _PIECE):
             try:
@@ -48,7 +47,7 @@ class MessageStream:
             self._drain(out)
         return out
 
-    def _drain(self, out: list[Message]) -> None:
+    def _drain(self, out: list[Map]) -> None:
         while True:
             try:
                 value = self._unpacker.unpack()
@@ -67,8 +66,3 @@ class MessageStream:
             if not isinstance(value.get("t"), str):
                 raise ProtocolError("map without a str 't'")
             out.append(value)
-
-
-def encode(msg: Mapping[str, Any]) -> bytes:
-    """One control message as msgpack."""
-    return bytes(msgpack.packb(dict(msg), use_bin_type=True))

@@ -1,14 +1,15 @@
 """One hosted component instance: its runner, its runtime ports, its outgoing connections.
 
-How it works: `HostedInstance` turns control commands into calls on the SDK's `ComponentRunner`
+How it works: `HostedInstance` turns control commands (the dataclasses of sdrpeer.control.messages,
+their fields' types already checked by the codec) into calls on the SDK's `ComponentRunner`
 (lifecycle, parameters) and on the data plane (`Connection` objects attached to our OutPorts). It
 reports every lifecycle change and fault through the `report` callback the moment the runner
-announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for
-a heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `restore` are
-sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot),
-else None. It raises `CommandRefused` (our peer's mistake: a bad field, an unknown port or
-connection) or whatever the runner raised (an illegal transition, a failing callback); the caller
-turns either into `reply ok=false`. The data server's `resolve` is `in_port`.
+announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for a
+heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `restore` are
+sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot), else
+None. It raises `CommandRefused` (our peer's mistake: a bad value, an unknown port or connection) or
+whatever the runner raised (an illegal transition, a failing callback); the caller turns either into
+`reply ok=false`. The data server's `resolve` is `in_port`.
 """
 
 from __future__ import annotations
@@ -17,19 +18,37 @@ import asyncio
 import inspect
 import logging
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from typing import Any
 
+from sdrpeer.control.host_side import Request
+from sdrpeer.control.messages import (
+    Activate,
+    Conn,
+    Connect,
+    DataKeys,
+    Deactivate,
+    Disconnect,
+    Exit,
+    Fault,
+    Repoint,
+    Report,
+    Reset,
+    Restore,
+    SetParams,
+    Snapshot,
+    State,
+)
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.errors import CommandRefused, SdrpeerError
-from sdrpeer.host import control, handoff
+from sdrpeer.host import handoff
 from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
 from sdrpeer.vocabulary import LifecycleState
 
 log = logging.getLogger("sdrpeer.host")
 
-Report = Callable[[control.Message], None]
+ReportTo = Callable[[Report], None]
 
 
 async def maybe_await(value: object) -> None:
@@ -44,14 +63,6 @@ def _state_name(value: object) -> str:
     return name if isinstance(name, str) else str(value)
 
 
-def _field(msg: control.Message, key: str, kind: type, where: str = "") -> Any:
-    """`msg[key]` if it has type `kind`, else CommandRefused."""
-    value = msg.get(key)
-    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
-        raise CommandRefused(f"{where}{key!r} must be a {kind.__name__}, got {value!r}")
-    return value
-
-
 class HostedInstance:
     """A component instance as the host drives it."""
 
@@ -60,7 +71,7 @@ class HostedInstance:
         name: str,
         component: Component,
         runner: ComponentRunner,
-        report: Report,
+        report: ReportTo,
         *,
         clock: Callable[[], float] = time.time,
         auth: DataAuth | None = None,
@@ -80,20 +91,6 @@ class HostedInstance:
         self.out_ports = {n: component.outport(n) for n in names["out"]}
         self.connections: dict[str, tuple[Connection, OutPortRuntime]] = {}
         self.state = _state_name(runner.state)
-        self._handlers: dict[str, Callable[[control.Message], Awaitable[None]]] = {
-            "activate": lambda _m: self.runner.activate(),
-            "deactivate": lambda _m: self.runner.deactivate(),
-            "reset": lambda _m: self.runner.reset(),
-            "set_params": self._set_params,
-            "connect": self._connect,
-            "disconnect": self._disconnect,
-            "repoint": self._repoint,
-            "data_keys": self._data_keys,
-        }
-        self._blob_handlers: dict[str, Callable[[control.Command], Awaitable[bytes | None]]] = {
-            "snapshot": lambda c: handoff.snapshot(self.runner, c),
-            "restore": lambda c: handoff.restore(self.runner, c),
-        }
 
     def watch(self) -> None:
         """Start reporting state changes and faults (after `hello` went out)."""
@@ -111,11 +108,11 @@ class HostedInstance:
         text = None if error is None else (str(error) or type(error).__name__)
         log.info("state %s%s", name, f" ({text})" if text else "")
         fault = self.runner.fault if name == LifecycleState.ERROR else None
-        self.report(control.state(name, self.clock(), text, fault))
+        self.report(State(name, self.clock(), text, fault))
 
     def _on_fault(self, kind: str, detail: str) -> None:
         """The component reported a fault: pass it on."""
-        self.report(control.fault(str(kind), str(detail), self.clock()))
+        self.report(Fault(str(kind), str(detail), self.clock()))
 
     def ports(self) -> dict[str, list[str]]:
         """Port names by direction, for `hello`."""
@@ -133,33 +130,37 @@ class HostedInstance:
         """Per-port counters, for heartbeats."""
         return self.component.port_counters()
 
-    def handles(self, t: str) -> bool:
-        """True if `t` is a command this instance carries out."""
-        return t in self._handlers or t in self._blob_handlers
-
-    async def execute(self, command: control.Command) -> bytes | None:
+    async def execute(self, request: Request) -> bytes | None:
         """Carry out a command; the bytes it sends back, or None (raises if it failed)."""
-        blob_handler = self._blob_handlers.get(command.t)
-        if blob_handler is not None:
-            return await blob_handler(command)
-        await maybe_await(self._handlers[command.t](command.msg))
+        match request.command:
+            case Activate():
+                await maybe_await(self.runner.activate())
+            case Deactivate():
+                await maybe_await(self.runner.deactivate())
+            case Reset():
+                await maybe_await(self.runner.reset())
+            case SetParams(params=params):
+                await maybe_await(self.runner.set_params(params))
+            case Connect(conn=conn):
+                await self._connect(conn)
+            case Disconnect(conn_id=conn_id):
+                await self._disconnect(conn_id)
+            case Repoint(conn_id=conn_id, to=to):
+                self._repoint(conn_id, to)
+            case DataKeys(keys=keys):
+                self._data_keys(keys)
+            case Snapshot() as snapshot:
+                return await handoff.snapshot(self.runner, snapshot)
+            case Restore():
+                await handoff.restore(self.runner, request.blob or b"")
+            case Exit():
+                raise CommandRefused("exit is the host's to carry out")
         return None
 
-    async def _set_params(self, msg: control.Message) -> None:
-        """Change typed parameters."""
-        params = _field(msg, "params", dict)
-        await maybe_await(self.runner.set_params(params))
-
-    async def _connect(self, msg: control.Message) -> None:
+    async def _connect(self, conn: Conn) -> None:
         """Open a data stream from one of our OutPorts."""
-        conn = _field(msg, "conn", dict)
-        conn_id = _field(conn, "id", str, "conn ")
-        out = _field(conn, "out", str, "conn ")
-        to = _field(conn, "to", str, "conn ")
-        in_port = _field(conn, "in", str, "conn ")
-        policy_map = conn.get("policy") or {}
-        if not isinstance(policy_map, dict):
-            raise CommandRefused(f"conn 'policy' must be a map, got {policy_map!r}")
+        conn_id, out, to, in_port = conn.id, conn.out_port, conn.to, conn.in_port
+        policy_map = conn.policy or {}
         if conn_id in self.connections:
             raise CommandRefused(f"connection {conn_id!r} already exists")
         port = self.out_ports.get(out)
@@ -180,39 +181,36 @@ class HostedInstance:
         self.connections[conn_id] = (connection, port)
         log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
 
-    def _lookup(self, msg: control.Message) -> tuple[str, Connection, OutPortRuntime]:
+    def _lookup(self, conn_id: str) -> tuple[Connection, OutPortRuntime]:
         """The connection a command names."""
-        conn_id = _field(msg, "conn_id", str)
         if conn_id not in self.connections:
             raise CommandRefused(f"no connection {conn_id!r}")
-        return (conn_id, *self.connections[conn_id])
+        return self.connections[conn_id]
 
-    async def _disconnect(self, msg: control.Message) -> None:
+    async def _disconnect(self, conn_id: str) -> None:
         """Close a data stream."""
-        conn_id, connection, port = self._lookup(msg)
+        connection, port = self._lookup(conn_id)
         del self.connections[conn_id]
         port.detach(connection)
         await maybe_await(connection.close())
         log.info("connection %s closed", conn_id)
 
-    async def _repoint(self, msg: control.Message) -> None:
+    def _repoint(self, conn_id: str, to: str) -> None:
         """Send the next frames of a connection to a new address."""
-        conn_id, connection, _port = self._lookup(msg)
-        to = _field(msg, "to", str)
+        connection, _port = self._lookup(conn_id)
         try:
             connection.repoint(to)
         except ValueError as exc:
             raise CommandRefused(f"'to': {exc}") from None
         log.info("connection %s repointed to %s", conn_id, to)
 
-    async def _data_keys(self, msg: control.Message) -> None:
+    def _data_keys(self, keys: tuple[str, ...]) -> None:
         """New data keys (the agent's keys rotated): every later handshake uses them."""
-        keys = _field(msg, "keys", list)
         try:
-            parsed = [bytes.fromhex(k) for k in keys if isinstance(k, str)]
+            parsed = [bytes.fromhex(k) for k in keys]
         except ValueError:
             raise CommandRefused("'keys': expected hex strings") from None
-        if len(parsed) != len(keys) or not all(16 <= len(k) <= 64 for k in parsed):
+        if not all(16 <= len(k) <= 64 for k in parsed):
             raise CommandRefused("'keys': expected hex strings of 16 to 64 bytes")
         if not parsed and self.auth.enabled:
             raise CommandRefused("'keys': a host with data keys cannot be left without any")

@@ -19,8 +19,8 @@ import os
 import shutil
 import sys
 
+from sdrpeer.control.host_side import arm_parent_death_signal
 from sdrpeer.errors import LoadError, SdrpeerError
-from sdrpeer.host import control
 from sdrpeer.host.config import parse_args
 from sdrpeer.host.loader import load_component_class
 
@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run a host; returns the exit code."""
     config = parse_args(sys.argv[1:] if argv is None else argv, dict(os.environ))
     if config.control_fd is not None:
-        control.arm_parent_death_signal()
+        arm_parent_death_signal()
     setup_logging(config.name or config.target)
     from sdrpeer.sdk import Component  # noqa: PLC0415 - after logging, so import errors show
 

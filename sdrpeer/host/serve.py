@@ -23,12 +23,13 @@ import signal
 import time
 from typing import Any
 
+from sdrpeer.control.host_side import ControlChannel, Refusal, Request
+from sdrpeer.control.messages import Exit, Hello, Reply, Report
 from sdrpeer.control.parts import parts
 from sdrpeer.dataplane import DataServer
 from sdrpeer.dataplane.auth import DataAuth
-from sdrpeer.host import control
 from sdrpeer.host.config import FINALIZE_TIMEOUT, STANDALONE_REPORT_INTERVAL, HostConfig
-from sdrpeer.host.instance import HostedInstance, Report, maybe_await
+from sdrpeer.host.instance import HostedInstance, ReportTo, maybe_await
 from sdrpeer.sdk import Component, ComponentRunner
 from sdrpeer.vocabulary import LifecycleState
 
@@ -43,10 +44,11 @@ class Host:
         self.component = component
         self.name = component.instance_name
         self.tmp_dir: str | None = None
-        self.channel: control.ControlChannel | None = None
+        self.channel: ControlChannel | None = None
         self.stop = asyncio.Event()
-        self.exit_command: control.Command | None = None
-        self._queue: asyncio.Queue[control.Command] = asyncio.Queue()
+        self.exit_request: tuple[int, Exit] | None = None
+        """The `exit` command that ends us (its id and itself), if one does."""
+        self._queue: asyncio.Queue[Request | Refusal] = asyncio.Queue()
         self._error = "finalize failed"
 
     async def run(self) -> int:
@@ -55,10 +57,10 @@ class Host:
         component = self.component
         runner = ComponentRunner(component)
         if self.config.control_fd is not None:
-            self.channel = await control.ControlChannel.open(
+            self.channel = await ControlChannel.open(
                 self.config.control_fd, self._on_command, self._on_closed, self._counters
             )
-            report: Report = self.channel.send
+            report: ReportTo = self.channel.send
         else:
             report = _no_report  # standalone: state changes are logged by the instance
         auth = DataAuth(self.config.data_keys)
@@ -75,7 +77,7 @@ class Host:
         data = dict(server.addresses)
         if self.channel is not None:
             self.channel.send(
-                control.hello(
+                Hello(
                     pid=os.getpid(),
                     component=type(component).__name__,
                     ports=self.inst.ports(),
@@ -109,9 +111,9 @@ class Host:
         except Exception as exc:
             log.error("start failed: %s", exc)
 
-    def _on_command(self, command: control.Command) -> None:
-        """The channel decoded a command: queue it."""
-        self._queue.put_nowait(command)
+    def _on_command(self, request: Request | Refusal) -> None:
+        """The channel decoded a command (or one it cannot read): queue it."""
+        self._queue.put_nowait(request)
 
     def _on_closed(self, reason: str) -> None:
         """The control channel ended: a host never outlives its agent."""
@@ -128,34 +130,33 @@ class Host:
         """Run queued commands in order, answering each one."""
         assert self.channel is not None
         while True:
-            command = await self._queue.get()
-            if command.t == "exit":
-                self.exit_command = command
+            request = await self._queue.get()
+            if isinstance(request, Refusal):
+                log.warning("%s (id %d) refused: %s", request.t, request.id, request.error)
+                self.channel.send(Reply(request.id, False, request.error))
+                continue
+            if isinstance(request.command, Exit):
+                self.exit_request = (request.id, request.command)
                 self.stop.set()
                 return
-            if not self.inst.handles(command.t):
-                self.channel.send(
-                    control.reply(command.id, False, f"unknown command {command.t!r}")
-                )
-                continue
             try:
-                blob = await self.inst.execute(command)
+                blob = await self.inst.execute(request)
             except Exception as exc:
-                log.warning("%s (id %d) failed: %s", command.t, command.id, exc)
-                self.channel.send(control.reply(command.id, False, str(exc) or repr(exc)))
+                log.warning("%s (id %d) failed: %s", request.command.T, request.id, exc)
+                self.channel.send(Reply(request.id, False, str(exc) or repr(exc)))
             else:
                 if blob is None:
-                    self.channel.send(control.reply(command.id, True))
+                    self.channel.send(Reply(request.id, True))
                 else:
-                    done = control.reply(command.id, True, size=len(blob))
-                    self.channel.send(done, *parts(command.id, blob))
+                    done = Reply(request.id, True, size=len(blob))
+                    self.channel.send(done, *parts(request.id, blob))
 
     def _exit_timeout(self) -> float:
         """Seconds finalizing may take: the `exit` command's timeout, else the default."""
-        if self.exit_command is not None:
-            timeout = self.exit_command.msg.get("timeout")
-            if isinstance(timeout, int | float) and not isinstance(timeout, bool) and timeout > 0:
-                return float(timeout)
+        if self.exit_request is not None:
+            timeout = self.exit_request[1].timeout
+            if timeout is not None and timeout > 0:
+                return timeout
         return FINALIZE_TIMEOUT
 
     async def _finalize(self, runner: ComponentRunner) -> int:
@@ -179,12 +180,12 @@ class Host:
         """Answer `exit` and close the channel once the last report is written."""
         if self.channel is None:
             return
-        if self.exit_command is not None:
+        if self.exit_request is not None:
             error = None if code == 0 else self._error
-            self.channel.send(control.reply(self.exit_command.id, code == 0, error))
+            self.channel.send(Reply(self.exit_request[0], code == 0, error))
         while not self._queue.empty():  # every command gets exactly one reply
             late = self._queue.get_nowait()
-            self.channel.send(control.reply(late.id, False, "the host is exiting"))
+            self.channel.send(Reply(late.id, False, "the host is exiting"))
         self.channel.close()
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(1.0):  # wait_for can swallow a cancel on 3.11
@@ -207,7 +208,7 @@ class Host:
             log.info("ports %s", _compact(self.inst.counters()))
 
 
-def _no_report(msg: control.Message) -> None:
+def _no_report(report: Report) -> None:
     """Standalone: nobody to report to (the instance and the component log what matters)."""
 
 

@@ -3,7 +3,7 @@
 How it works: `run_profile` drives a `_Session` through start, wire, measure and stop. It starts
 the component the way an agent does: the `python` launcher
 (sdrpeer.launch.launchers) builds the `python -m sdrpeer.host` command, the host inherits one end
-of a socket pair as its control channel (sdrpeer.runtime.control.ControlChannel on our end) and
+of a socket pair as its control channel (sdrpeer.control.agent_side.ControlChannel on our end) and
 reports `hello` and `state INACTIVE`. Every OutPort is then connected (a `connect` command) to
 an in-process `DataServer` that counts and discards, so frames really cross a socket; every
 InPort is fed by an in-process data-plane `Connection` at `input_rate` Hz with values from an
@@ -56,12 +56,23 @@ from typing import Any
 import psutil
 import yaml
 
+from sdrpeer.control.agent_side import ControlChannel
+from sdrpeer.control.messages import (
+    Activate,
+    Conn,
+    Connect,
+    Deactivate,
+    Exit,
+    Heartbeat,
+    Hello,
+    Report,
+    State,
+)
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.errors import ProfileError, SdrpeerError
 from sdrpeer.launch.launchers import get_launcher, host_env
 from sdrpeer.monitor.procstats import ProcessTreeMeter
 from sdrpeer.profiling.inputs import GENERATORS, Source, make_source
-from sdrpeer.runtime.control import ControlChannel, Report
 from sdrpeer.runtime.launch import private_dir
 from sdrpeer.sdk.policy import ConnectorPolicy
 from sdrpeer.units import format_size
@@ -168,7 +179,7 @@ class _Session:
     def __init__(self, req: ProfileRequest) -> None:
         loop = asyncio.get_running_loop()
         self.req = req
-        self.hello: asyncio.Future[Report] = loop.create_future()
+        self.hello: asyncio.Future[Hello] = loop.create_future()
         self.inactive: asyncio.Future[None] = loop.create_future()
         self.error: str | None = None
         self.beats: list[Beat] = []
@@ -187,7 +198,7 @@ class _Session:
         text = self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
         return text[-2000:]
 
-    async def start(self) -> Report:
+    async def start(self) -> Hello:
         """Launch the host like an agent; its hello once it reported INACTIVE."""
         req = self.req
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -209,8 +220,7 @@ class _Session:
                 stderr=log,
             )
         theirs.close()
-        handlers = {"hello": self.hello.set_result, "state": self._state, "heartbeat": self._beat}
-        self.channel = ControlChannel(ours, handlers, self._closed, name="profile")
+        self.channel = ControlChannel(ours, self._report, self._closed, name="profile")
         await self.channel.open()
         await self.server.start()
         try:
@@ -223,15 +233,15 @@ class _Session:
             raise ProfileError(f"{req.target} failed to initialize: {self.error}")
         return hello
 
-    async def wire(self, hello: Report) -> None:
+    async def wire(self, hello: Hello) -> None:
         """Connect every OutPort to our sink and start feeding every InPort."""
         assert self.channel is not None
         sink = f"unix://{self.server.addresses['unix']}"
-        for port in hello["ports"]["out"]:
-            conn = {"id": f"profile-{port}", "out": port, "to": sink, "in": port, "policy": {}}
-            await self.channel.command("connect", conn=conn)
-        to = f"unix://{hello['data']['unix']}"
-        for port in hello["ports"]["in"]:
+        for port in hello.ports["out"]:
+            conn = Conn(f"profile-{port}", port, sink, port, {})
+            await self.channel.command(Connect(conn))
+        to = f"unix://{hello.data['unix']}"
+        for port in hello.ports["in"]:
             source, self.inputs[port] = make_source(port, self.req.inputs.get(port, ""))
             feeder = Connection(f"profile-{port}", to, port, f"profile.{port}", ConnectorPolicy())
             feeder.start()
@@ -244,7 +254,7 @@ class _Session:
         assert self.proc is not None
         meter = ProcessTreeMeter(self.proc.pid)
         meter.measure()  # psutil's cpu_percent measures from the previous call
-        await self.channel.command("activate")
+        await self.channel.command(Activate())
         self.recording = True
         loop = asyncio.get_running_loop()
         cpu: list[float] = []
@@ -270,7 +280,7 @@ class _Session:
             await feeder.close(linger=0.1)
         if self.channel is not None:
             with contextlib.suppress(SdrpeerError):
-                await self.channel.command("exit", timeout=2.0, wait=4.0)
+                await self.channel.command(Exit(2.0), wait=4.0)
         if self.proc is not None:
             try:
                 async with asyncio.timeout(5.0):
@@ -283,19 +293,30 @@ class _Session:
         await self.server.close()
         shutil.rmtree(self.run_dir, ignore_errors=True)
 
-    def _state(self, msg: Report) -> None:
-        if msg.get("state") == LifecycleState.ERROR:
-            self.error = str(msg.get("error"))
+    def _report(self, report: Report) -> None:
+        match report:
+            case Hello() if not self.hello.done():
+                self.hello.set_result(report)
+            case State():
+                self._state(report)
+            case Heartbeat():
+                self._beat(report)
+            case _:
+                pass
+
+    def _state(self, msg: State) -> None:
+        if msg.state == LifecycleState.ERROR:
+            self.error = str(msg.error)
         if (
-            msg.get("state") in (LifecycleState.INACTIVE, LifecycleState.ERROR)
+            msg.state in (LifecycleState.INACTIVE, LifecycleState.ERROR)
             and not self.inactive.done()
         ):
             self.inactive.set_result(None)
 
-    def _beat(self, msg: Report) -> None:
+    def _beat(self, msg: Heartbeat) -> None:
         if self.recording:
             sent = {name: c.bytes_out for name, c in self.feeders.items()}
-            self.beats.append((float(msg["ts"]), msg.get("ports", {}), sent))
+            self.beats.append((msg.ts, msg.ports, sent))
 
     def _closed(self, reason: str | None) -> None:
         for fut in (self.hello, self.inactive):
@@ -315,21 +336,21 @@ async def run_profile(req: ProfileRequest) -> dict[str, Any]:
         ports = port_rates(
             session.beats,
             {
-                **dict.fromkeys(hello["ports"]["out"], "out"),
-                **dict.fromkeys(hello["ports"]["in"], "in"),
+                **dict.fromkeys(hello.ports["out"], "out"),
+                **dict.fromkeys(hello.ports["in"], "in"),
             },
         )
         assert session.channel is not None
         with contextlib.suppress(SdrpeerError):
-            await session.channel.command("deactivate")
+            await session.channel.command(Deactivate())
     except ProfileError as exc:
         raise ProfileError(f"{exc}; host log:\n{session.log_tail()}") from None
     finally:
         await session.stop()
     return {
-        "component": hello.get("component", req.target.rpartition(":")[2]),
+        "component": hello.component,
         "target": req.target,
-        "params": hello.get("params", {}),
+        "params": hello.params,
         "seconds": req.seconds,
         "cpu": {
             "mean_pct": round(sum(cpu) / len(cpu), 2),

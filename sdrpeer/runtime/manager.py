@@ -28,6 +28,16 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from sdrpeer.control.messages import (
+    Activate,
+    Conn,
+    Connect,
+    DataKeys,
+    Deactivate,
+    Disconnect,
+    Repoint,
+    Reset,
+)
 from sdrpeer.errors import CommandError, LaunchRefused
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
@@ -122,7 +132,7 @@ class InstanceManager:
             sup = self._sups.get(name)
             if sup is None:
                 raise CommandError("reset", "closed", f"{name} is not running")
-            await sup.command("reset")
+            await sup.command(Reset())
         elif action == "restart":
             sup = self._sups.get(name)
             if sup is not None:
@@ -255,24 +265,26 @@ class InstanceManager:
                 self._sups.pop(a.instance, None)
             return
         conn = a.conn
-        if a.kind in ("activate", "deactivate"):
-            await sup.command(a.kind)
+        if a.kind == "activate":
+            await sup.command(Activate())
+        elif a.kind == "deactivate":
+            await sup.command(Deactivate())
         elif a.kind == "connect" and conn is not None and a.to is not None:
-            wire = {"id": conn.id, "out": conn.out_port, "to": a.to, "in": conn.in_port}
-            await sup.command("connect", conn={**wire, "policy": conn.policy_map()})
+            wire = Conn(conn.id, conn.out_port, a.to, conn.in_port, conn.policy_map())
+            await sup.command(Connect(wire))
             sup.connections[conn.id] = (conn, a.to)
         elif a.kind == "repoint" and conn is not None and a.to is not None:
-            await sup.command("repoint", conn_id=conn.id, to=a.to)
+            await sup.command(Repoint(conn.id, a.to))
             sup.connections[conn.id] = (conn, a.to)
         elif a.kind == "disconnect" and conn is not None:
             sup.connections.pop(conn.id, None)
-            await sup.command("disconnect", conn_id=conn.id)
+            await sup.command(Disconnect(conn.id))
 
     def set_data_keys(self, keys: tuple[bytes, ...]) -> None:
         """New data keys (a key rotation): for hosts started from now on, and sent to every
         running one (`data_keys` command; a host that misses it keeps its old keys)."""
         self.data_keys = keys
-        wire = [k.hex() for k in keys]
+        wire = tuple(k.hex() for k in keys)
         for sup in self._sups.values():
             if sup.running:
                 task = asyncio.get_running_loop().create_task(self._give_keys(sup, wire))
@@ -280,9 +292,9 @@ class InstanceManager:
                 task.add_done_callback(self._actions.discard)
 
     @staticmethod
-    async def _give_keys(sup: Supervisor, wire: list[str]) -> None:
+    async def _give_keys(sup: Supervisor, wire: tuple[str, ...]) -> None:
         try:
-            await sup.command("data_keys", keys=wire)
+            await sup.command(DataKeys(wire))
         except CommandError as e:
             log.warning("%s: data keys not updated: %s", sup.name, e)
 
@@ -292,7 +304,7 @@ class InstanceManager:
         instance: docs/protocol.md, acknowledgements)."""
         try:
             async with asyncio.timeout(self.before_stop_timeout):
-                await sup.command("deactivate")
+                await sup.command(Deactivate())
         except (CommandError, TimeoutError) as e:
             log.info("%s: deactivate before stop failed (%s); stopping anyway", sup.name, e)
 
@@ -385,7 +397,7 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
         "restarts": sup.restarts,
         "since": round(sup.since, 3),
         "connections": conns,
-        "data": dict(sup.hello.get("data") or {}),
+        "data": {} if sup.hello is None else dict(sup.hello.data),
         "last_error": sup.last_error,
         "ports": sup.ports,
         "start_latency_s": None if sup.start_latency is None else round(sup.start_latency, 4),

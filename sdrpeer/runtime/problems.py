@@ -1,9 +1,10 @@
 """What the agent hears about trouble in one instance: reported faults and problems seen.
 
 How it works: a host forwards every fault its component reports as a `fault` report
-(docs/protocol.md); `fault_from_report` turns it into a `Fault` (kind and detail as sent, the
-detail cut to 500 characters, the host's `ts` and our arrival time). Independently the supervisor
-sees two *problems* of its own (`problem_of_state` is the rule for the first):
+(docs/protocol.md, `sdrpeer.control.messages.Fault`); `fault_from_report` turns it into a `Fault`
+(kind and detail as sent, the detail cut to 500 characters, the host's `ts` and our arrival
+time). Independently the supervisor sees two *problems* of its own (`problem_of_state` is the
+rule for the first):
 
 | cause             | when                                                                 |
 |-------------------|----------------------------------------------------------------------|
@@ -23,6 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Final
 
+from sdrpeer.control import messages
 from sdrpeer.vocabulary import InstanceState, LifecycleState
 
 __all__ = [
@@ -62,24 +64,18 @@ class Fault:
         return {"kind": self.kind, "detail": self.detail, "ts": self.ts, "received": self.received}
 
 
-def fault_from_report(msg: dict[str, Any], now: float) -> Fault:
+def fault_from_report(msg: messages.Fault, now: float) -> Fault:
     """The Fault in a `fault` report received at `now`."""
-    ts = msg.get("ts")
-    return Fault(
-        kind=str(msg.get("kind")),
-        detail=str(msg.get("detail") or "")[:DETAIL_MAX],
-        ts=float(ts) if isinstance(ts, int | float) and not isinstance(ts, bool) else None,
-        received=now,
-    )
+    return Fault(kind=msg.kind, detail=msg.detail[:DETAIL_MAX], ts=msg.ts, received=now)
 
 
-def problem_of_state(current: InstanceState, msg: dict[str, Any], stopping: bool) -> str | None:
+def problem_of_state(current: InstanceState, msg: messages.State, stopping: bool) -> str | None:
     """The problem a `state` report shows, given the supervisor's current state, or None."""
     if (
-        msg.get("state") != LifecycleState.ERROR
+        msg.state != LifecycleState.ERROR
         or current == LifecycleState.ERROR
         or stopping
-        or msg.get("fault")
+        or msg.fault
     ):
         return None
     return COMPONENT_ERROR

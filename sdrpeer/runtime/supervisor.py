@@ -34,11 +34,25 @@ from typing import Any
 
 import psutil
 
+from sdrpeer.control import messages
+from sdrpeer.control.agent_side import ControlChannel
+from sdrpeer.control.messages import (
+    Activate,
+    Command,
+    Deactivate,
+    Exit,
+    Heartbeat,
+    Hello,
+    Reply,
+    Report,
+    Reset,
+    Restore,
+    State,
+)
 from sdrpeer.errors import CommandError, ConfigError
 from sdrpeer.runtime import problems
 from sdrpeer.runtime.backoff import RestartPolicy
 from sdrpeer.runtime.config import SupervisorConfig
-from sdrpeer.runtime.control import ControlChannel, Report
 from sdrpeer.runtime.handoff import give_state, take_snapshot
 from sdrpeer.runtime.launch import (
     create_process,
@@ -56,7 +70,7 @@ from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
 from sdrpeer.vocabulary import InstanceState, LifecycleState, ProcessState
 
 log = logging.getLogger(__name__)
-LIFECYCLE = ("activate", "deactivate", "reset", "exit", "restore")
+LIFECYCLE = tuple(c.T for c in (Activate, Deactivate, Reset, Exit, Restore))
 """Commands whose callbacks may hold the host's loop for a while (the watchdog waits for them,
 up to the command timeout)."""
 
@@ -95,8 +109,9 @@ class Supervisor:
         self.last_error: str | None = None
         self.exit_noticed: float | None = None
         self.last_exit: int | None = None
-        self.hello: Report = {}
-        self.ports: dict[str, Any] = {}
+        self.hello: Hello | None = None
+        """The running host's hello (None until it said it)."""
+        self.ports: dict[str, dict[str, int]] = {}
         self.out_bps = 0.0
         """Bytes per second sent by the OutPorts between the last two `sample` calls."""
         self._last_sent: tuple[float, int] | None = None
@@ -195,19 +210,23 @@ class Supervisor:
         self.policy.reset()
         self.start()
 
-    async def command(self, t: str, **fields: Any) -> Report:
-        """Send a command to the host; CommandError if it is not running or refuses."""
+    def _live(self, t: str) -> ControlChannel:
+        """The channel to the running host; CommandError "closed" (saying `t`) if none is."""
         if self._channel is None or self._channel.closed:
             raise CommandError(t, "closed", f"{self.name} is {self.state}")
-        return await self._channel.command(t, **fields)
+        return self._channel
+
+    async def command(self, cmd: Command) -> Reply:
+        """Send a command to the host; CommandError if it is not running or refuses."""
+        return await self._live(cmd.T).command(cmd)
 
     async def snapshot(self) -> Any:
         """The component's state (its on_snapshot); CommandError if refused or over max_state."""
-        return await take_snapshot(self.command, self.config.max_state)
+        return await take_snapshot(self._live("snapshot"), self.config.max_state)
 
     async def restore(self, state: Any) -> None:
         """Hand `state` to the component's on_restore; StateError if too big, CommandError."""
-        await give_state(self.command, state, self.config.max_state)
+        await give_state(self._live("restore"), state, self.config.max_state)
 
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
@@ -284,18 +303,16 @@ class Supervisor:
             out.close()
             child.close()
         self._proc, self.pid, self._kill_reason = proc, proc.pid, None
-        self.hello, self.ports, self.connections, self.start_latency = {}, {}, {}, None
+        self.hello, self.ports, self.connections, self.start_latency = None, {}, {}, None
         try:
             self._ps = psutil.Process(proc.pid)
             self._ps.cpu_percent(None)
         except psutil.Error:
             self._ps = None
         self._set(ProcessState.STARTING)
-        handlers = {"hello": self._on_hello, "state": self._on_state}
-        handlers |= {"heartbeat": self._on_heartbeat, "fault": self._on_fault}
         self._channel = ControlChannel(
             parent,
-            handlers,
+            self._on_report,
             self._on_channel_closed,
             name=self.name,
             command_timeout=self.config.command_timeout,
@@ -315,7 +332,7 @@ class Supervisor:
             self.protocol_errors += self._channel.counters["protocol_errors"]
             await self._channel.close()
         self._channel, self._ps, self.pid = None, None, None
-        self.connections, self.ports, self.hello = {}, {}, {}
+        self.connections, self.ports, self.hello = {}, {}, None
         self.cpu_pct, self.rss = 0.0, 0
         log.info("%s: host %s", self.name, exit_text(rc))
 
@@ -328,7 +345,7 @@ class Supervisor:
         if self._channel is not None and not self._channel.closed:
             with contextlib.suppress(CommandError):
                 timeout = self.config.exit_timeout
-                await self._channel.command("exit", wait=timeout, timeout=timeout)
+                await self._channel.command(Exit(timeout), wait=timeout)
         if await wait_exit(proc, deadline - loop.time()):
             return
         log.warning("%s: no exit after %.1fs; SIGTERM", self.name, self.config.exit_timeout)
@@ -349,7 +366,7 @@ class Supervisor:
                 proc.kill()
 
     def _hello_overdue(self, proc: asyncio.subprocess.Process) -> None:
-        if proc is self._proc and not self.hello:
+        if proc is self._proc and self.hello is None:
             self._kill(proc, f"no hello within {self.config.hello_timeout}s")
 
     def _on_channel_closed(self, reason: str | None) -> None:
@@ -364,7 +381,20 @@ class Supervisor:
             )
 
     # ----------------------------------------------------------------- reports
-    def _on_hello(self, msg: Report) -> None:
+    def _on_report(self, report: Report) -> None:
+        match report:
+            case Hello():
+                self._on_hello(report)
+            case State():
+                self._on_state(report)
+            case Heartbeat():
+                self._on_heartbeat(report)
+            case messages.Fault():
+                self._on_fault(report)
+            case _:  # a reply is the channel's
+                pass
+
+    def _on_hello(self, msg: Hello) -> None:
         self.hello = msg
         self._heard = asyncio.get_running_loop().time()
         self.on_change(self)
@@ -413,27 +443,25 @@ class Supervisor:
                 self.config.watchdog_confirm, self._silence_check, proc
             )
 
-    def _on_state(self, msg: Report) -> None:
-        state = LifecycleState(msg["state"])  # the control codec checked it is one
+    def _on_state(self, msg: State) -> None:
+        state = LifecycleState(msg.state)  # the control codec checked it is one
         self._heard = asyncio.get_running_loop().time()
         if state is LifecycleState.INACTIVE and self.start_latency is None:
             self.start_latency = self._heard - self._spawned
             if self._proc is not None:  # initialized: from now on the heartbeat deadline
                 self._arm_watchdog(self._proc)
-        if msg.get("error"):
-            self.last_error = str(msg["error"])
+        if msg.error:
+            self.last_error = msg.error
         problem = problems.problem_of_state(self.state, msg, self._stopping)
         if self.state != ProcessState.STOPPING:
             self._set(state)
         self._problem(problem)
 
-    def _on_heartbeat(self, msg: Report) -> None:
+    def _on_heartbeat(self, msg: Heartbeat) -> None:
         self._heard = asyncio.get_running_loop().time()
-        ports = msg.get("ports")
-        if isinstance(ports, dict):
-            self.ports = ports
+        self.ports = msg.ports
 
-    def _on_fault(self, msg: Report) -> None:
+    def _on_fault(self, msg: messages.Fault) -> None:
         fault = problems.fault_from_report(msg, time.time())
         self.faults.append(fault)
         self.last_error = f"fault {fault.kind}: {fault.detail}"
@@ -451,7 +479,7 @@ class Supervisor:
         """Measure the host's CPU % (since the last call) and RSS bytes now, and the bytes per
         second its OutPorts sent since the last call (`out_bps`, from the heartbeat's counters)."""
         now = time.monotonic()
-        sent = sum(int(c.get("bytes_out", 0)) for c in self.ports.values() if isinstance(c, dict))
+        sent = sum(c.get("bytes_out", 0) for c in self.ports.values())
         last = self._last_sent
         if last is not None and sent >= last[1] and now > last[0]:
             self.out_bps = (sent - last[1]) / (now - last[0])
@@ -471,12 +499,12 @@ class Supervisor:
 
     def tcp_address(self) -> str | None:
         """Where senders on other robots reach this host (its TCP data address), if running."""
-        tcp = (self.hello.get("data") or {}).get("tcp")
+        tcp = None if self.hello is None else self.hello.data.get("tcp")
         return f"tcp://{tcp}" if tcp else None
 
     def data_address(self) -> str | None:
         """Where senders on this robot reach this host: its Unix socket, else its TCP address."""
-        data = self.hello.get("data") or {}
+        data = {} if self.hello is None else self.hello.data
         if data.get("unix"):
             return f"unix://{data['unix']}"
         if data.get("tcp"):

@@ -2,14 +2,16 @@
 
 How it works: the agent's end of a Unix socket pair is inherited as `SDRPEER_CONTROL_FD`. Bytes
 read from it go through `ControlDecoder`, a pure core: the shared framing
-(`sdrpeer.control.stream`, the same code the agent uses) cuts the msgpack stream into values and
-enforces the limits (a value over 1 MiB, or one that is not a map with a str `"t"`, is a
-`ProtocolError`); maps carrying an integer `"id"` become `Command`s. `part` maps (a big
-value cut up, `sdrpeer.control.parts`) are collected, and the command they belong to (it says
-`"size"`) gets their bytes as `Command.blob`, or `blob_error`. The report builders (`hello`,
-`state`, `reply`, `heartbeat`, `fault`) are pure functions of their inputs, `now` included.
-`ControlChannel` is the asyncio shell: it feeds the decoder, hands commands to a callback,
-writes reports at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once when
+(`sdrpeer.control.stream`, the same code the agent uses) cuts the msgpack stream into maps and
+enforces the limits (a map over 1 MiB, or a value that is not a map with a str `"t"`, is a
+`ProtocolError`); the codec (`sdrpeer.control.codec`) makes a command dataclass of each map that
+carries an integer `"id"`, delivered as a `Request`. A command the codec cannot read (unknown
+`"t"`, a field missing or of the wrong type) becomes a `Refusal`: the host answers it `ok=false`
+with the codec's words and keeps the channel. `Part`s (a big value cut up,
+`sdrpeer.control.parts`) are collected, and the `restore` they belong to gets their bytes as
+`Request.blob` (or is refused when they do not add up). `ControlChannel` is the asyncio shell:
+it feeds the decoder, hands requests and refusals to a callback, writes reports (message
+dataclasses) at once, sends a heartbeat every 0.5 s, and calls `on_closed` exactly once when
 the channel ends: the agent closed it (the agent died), a protocol error closed it, or the
 parent pid changed. A host must never outlive its agent, so `arm_parent_death_signal` also asks
 Linux to send SIGTERM when the parent goes away (unless the agent armed a signal of its own, e.g.
@@ -29,8 +31,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sdrpeer.control.parts import MAX_BLOB, PartAssembler, check_part
-from sdrpeer.control.stream import MAX_MESSAGE, PROTOCOL, Message, MessageStream, encode
+from sdrpeer.control.codec import (
+    decode_command,
+    decode_part,
+    encode,
+    encode_all,
+    id_of,
+    type_of,
+)
+from sdrpeer.control.messages import Command, Heartbeat, Part, Report, Restore
+from sdrpeer.control.parts import MAX_BLOB, PartAssembler
+from sdrpeer.control.stream import MAX_MESSAGE, MessageStream
 from sdrpeer.errors import PartError, ProtocolError
 
 log = logging.getLogger("sdrpeer.host.control")
@@ -38,18 +49,12 @@ log = logging.getLogger("sdrpeer.host.control")
 __all__ = [
     "HEARTBEAT_INTERVAL",
     "MAX_MESSAGE",
-    "Command",
     "ControlChannel",
     "ControlDecoder",
-    "Message",
     "ProtocolError",
+    "Refusal",
+    "Request",
     "arm_parent_death_signal",
-    "encode",
-    "fault",
-    "heartbeat",
-    "hello",
-    "reply",
-    "state",
 ]
 
 HEARTBEAT_INTERVAL = 0.5
@@ -57,23 +62,31 @@ HEARTBEAT_INTERVAL = 0.5
 
 
 @dataclass(frozen=True, slots=True)
-class Command:
-    """One agent -> host command."""
+class Request:
+    """One agent -> host command, read."""
 
-    t: str
-    """Its type (`activate`, `connect`, ...)."""
     id: int
     """The id the reply carries back."""
-    msg: Message
-    """The whole map, for the command's own fields."""
+    command: Command
+    """The command."""
     blob: bytes | None = None
-    """The bytes its `part` messages carried, when the command says `"size"`."""
-    blob_error: str | None = None
-    """Why those parts did not add up (then `blob` is None)."""
+    """The bytes its `part`s carried (a `restore`'s state), else None."""
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """A command the host cannot read: it answers `ok=false` with `error`."""
+
+    id: int
+    """The id the reply carries back."""
+    t: str
+    """Its `"t"`."""
+    error: str
+    """Why (the codec's or the parts' words)."""
 
 
 class ControlDecoder:
-    """Cuts the byte stream from the agent into commands (pure: no I/O, no clock)."""
+    """Cuts the byte stream from the agent into requests and refusals (pure: no I/O, no clock)."""
 
     def __init__(self, max_message: int = MAX_MESSAGE, max_blob: int = MAX_BLOB) -> None:
         self._stream = MessageStream(max_message)
@@ -83,78 +96,34 @@ class ControlDecoder:
         self.ignored = 0
         """Maps that were well-formed but not commands (no integer id): logged and skipped."""
 
-    def feed(self, data: bytes) -> list[Command]:
+    def feed(self, data: bytes) -> list[Request | Refusal]:
         """Consume `data`; return the complete commands in it; raise ProtocolError."""
-        out: list[Command] = []
-        for msg in self._stream.feed(data):
-            ident = msg.get("id")
-            if msg["t"] == "part" and ident is None:
-                try:
-                    self._parts.add(*check_part(msg), self.max_blob)
-                except PartError as exc:
-                    raise ProtocolError(str(exc)) from None
-                continue
-            if type(ident) is not int:
+        out: list[Request | Refusal] = []
+        for raw in self._stream.feed(data):
+            ident = id_of(raw)
+            if ident is None and type_of(raw) == Part.T:
+                part = decode_part(raw)
+                self._parts.add(part.of, part.data, self.max_blob)
+            elif ident is None:
                 self.ignored += 1
-                log.warning("control: %r without an integer id ignored", msg["t"])
-                continue
-            out.append(self._command(msg, ident))
+                log.warning("control: %r without an integer id ignored", type_of(raw))
+            else:
+                out.append(self._request(raw, ident))
         return out
 
-    def _command(self, msg: Message, ident: int) -> Command:
-        if "size" not in msg:
-            return Command(t=msg["t"], id=ident, msg=msg)
+    def _request(self, raw: dict[str, Any], ident: int) -> Request | Refusal:
         try:
-            blob = self._parts.take(ident, msg["size"])
+            command = decode_command(raw)
+        except ProtocolError as exc:
+            self._parts.drop(ident)
+            return Refusal(ident, type_of(raw), str(exc))
+        if not isinstance(command, Restore):
+            return Request(ident, command)
+        try:
+            blob = self._parts.take(ident, command.size)
         except PartError as exc:
-            return Command(t=msg["t"], id=ident, msg=msg, blob_error=str(exc))
-        return Command(t=msg["t"], id=ident, msg=msg, blob=blob)
-
-
-def hello(
-    *,
-    pid: int,
-    component: str,
-    ports: dict[str, list[str]],
-    params: dict[str, Any],
-    data: dict[str, str],
-) -> Message:
-    """The first report: who we are and where our data server listens."""
-    return {
-        "t": "hello",
-        "protocol": PROTOCOL,
-        "pid": pid,
-        "component": component,
-        "ports": ports,
-        "params": params,
-        "data": data,
-    }
-
-
-def state(name: str, now: float, error: str | None = None, fault: str | None = None) -> Message:
-    """A lifecycle change (`fault`: the kind of the fault that caused this ERROR, if one did)."""
-    msg: Message = {"t": "state", "state": name, "ts": now, "error": error}
-    if fault is not None:
-        msg["fault"] = fault
-    return msg
-
-
-def reply(ident: int, ok: bool, error: str | None = None, size: int | None = None) -> Message:
-    """The answer to command `ident` (`size`: bytes of the `part`s sent right before it)."""
-    msg: Message = {"t": "reply", "id": ident, "ok": ok, "error": error}
-    if size is not None:
-        msg["size"] = size
-    return msg
-
-
-def heartbeat(now: float, ports: dict[str, dict[str, int]]) -> Message:
-    """The periodic liveness report with per-port counters."""
-    return {"t": "heartbeat", "ts": now, "ports": ports}
-
-
-def fault(kind: str, detail: str, now: float) -> Message:
-    """A fault the component reported."""
-    return {"t": "fault", "kind": kind, "detail": detail, "ts": now}
+            return Refusal(ident, command.T, f"{command.T}: {exc}")
+        return Request(ident, command, blob)
 
 
 def arm_parent_death_signal(sig: int = signal.SIGTERM) -> bool:
@@ -178,7 +147,7 @@ class ControlChannel(asyncio.Protocol):
 
     def __init__(
         self,
-        on_command: Callable[[Command], None],
+        on_command: Callable[[Request | Refusal], None],
         on_closed: Callable[[str], None],
         counters: Callable[[], dict[str, dict[str, int]]],
         *,
@@ -215,17 +184,14 @@ class ControlChannel(asyncio.Protocol):
         """True once the channel has ended."""
         return self._closed_reason is not None
 
-    def send(self, msg: Message, *before: Message) -> None:
+    def send(self, report: Report, *before: Part) -> None:
         """Write one report now, `before` first in one write (dropped once the channel ended)."""
         if self._transport is not None and self._closed_reason is None:
-            data = encode(msg)
-            if before:
-                data = b"".join([*map(encode, before), data])
-            self._transport.write(data)
+            self._transport.write(encode_all([*before, report]) if before else encode(report))
 
     def send_heartbeat(self) -> None:
         """Write a heartbeat with the current counters."""
-        self.send(heartbeat(self._clock(), self._counters()))
+        self.send(Heartbeat(self._clock(), self._counters()))
 
     def close(self) -> None:
         """End the channel from our side (after the reports already queued are written)."""
@@ -246,14 +212,14 @@ class ControlChannel(asyncio.Protocol):
     def data_received(self, data: bytes) -> None:
         """Decode and dispatch; a protocol error closes the channel."""
         try:
-            commands = self._decoder.feed(data)
+            requests = self._decoder.feed(data)
         except ProtocolError as exc:
             self.protocol_errors += 1
             log.error("control: protocol error: %s; closing the channel", exc)
             self._end(f"protocol error: {exc}")
             return
-        for command in commands:
-            self._on_command(command)
+        for request in requests:
+            self._on_command(request)
 
     def eof_received(self) -> bool:
         """The agent closed its end: we end too."""

@@ -1,17 +1,17 @@
 """The agent's end of a host's control channel (docs/protocol.md, section 1).
 
-How it works: `ControlDecoder` is the pure part: bytes in, validated messages out (msgpack maps
-with a string "t", at most 1 MiB each, framed by `sdrpeer.control.stream` exactly as the host does;
-anything else raises `ProtocolError`). `ControlChannel` is
-its asyncio shell over the agent's end of a `socket.socketpair()`: `command(t, **fields)` sends a
-map with a fresh integer id and awaits the matching `reply` (timeout -> `CommandError` "timeout",
-ok=false -> "refused", channel gone -> "closed"); reports (`hello`, `state`, `heartbeat`,
-`fault`) go to the handler registered for their type. A value too big for one message travels as
-`part` messages (`sdrpeer.control.parts`): `command(..., blob=b)` writes b's parts and the command
-(with `"size"`) in one write; `command(..., accept=n)` collects up to n bytes of parts sent before
-the reply and returns them as `reply["blob"]` (parts that do not add up refuse the command). A
-protocol error closes the channel, is counted in `counters["protocol_errors"]`, and `on_close`
-hears why; the supervisor then treats the host as failed.
+How it works: `ControlDecoder` is the pure part: bytes in, report dataclasses out (msgpack maps
+with a string "t", at most 1 MiB each, framed by `sdrpeer.control.stream` exactly as the host does,
+read by the codec, which checks every field; anything else raises `ProtocolError`; a report of an
+unknown type is ignored and counted). `ControlChannel` is its asyncio shell over the agent's end of
+a `socket.socketpair()`: `command(cmd)` sends a command dataclass with a fresh integer id and
+awaits the matching `Reply` (timeout -> `CommandError` "timeout", ok=false -> "refused", channel
+gone -> "closed"); the other reports (`Hello`, `State`, `Heartbeat`, `Fault`) go to `on_report`.
+A value too big for one message travels as `Part`s (`sdrpeer.control.parts`): `command(Restore(n),
+blob=b)` writes b's parts and the command in one write; `fetch(cmd, limit)` collects up to `limit`
+bytes of parts sent before the reply and returns them (parts that do not add up refuse the
+command). A protocol error closes the channel, is counted in `counters["protocol_errors"]`, and
+`on_close` hears why; the supervisor then treats the host as failed.
 """
 
 from __future__ import annotations
@@ -20,70 +20,48 @@ import asyncio
 import contextlib
 import logging
 import socket
-from collections.abc import Callable, Collection, Mapping
-from typing import Any
+from collections.abc import Callable, Collection
 
-from sdrpeer.control.parts import PartAssembler, check_part, parts
-from sdrpeer.control.stream import MAX_MESSAGE, PROTOCOL, MessageStream, encode
+from sdrpeer.control.codec import decode_report, encode, encode_all
+from sdrpeer.control.messages import Command, Part, Reply, Report, Restore
+from sdrpeer.control.parts import PartAssembler, parts
+from sdrpeer.control.stream import MAX_MESSAGE, MessageStream
 from sdrpeer.errors import CommandError, PartError, ProtocolError
-from sdrpeer.vocabulary import LifecycleState
 
-REPORTS = ("hello", "state", "heartbeat", "fault", "part")
-LIFECYCLE = tuple(LifecycleState)
 _READ = 64 * 1024
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "LIFECYCLE",
     "MAX_MESSAGE",
-    "REPORTS",
     "CommandError",
     "ControlChannel",
     "ControlDecoder",
     "ProtocolError",
-    "Report",
     "ReportHandler",
-    "check_report",
-    "encode",
 ]
 
-Report = dict[str, Any]
 ReportHandler = Callable[[Report], None]
-
-
-def check_report(msg: Report) -> None:
-    """Validate the fields of a report the agent acts on; raise ProtocolError if wrong."""
-    t = msg["t"]
-    if t == "hello":
-        if msg.get("protocol") != PROTOCOL:
-            raise ProtocolError(f"hello: protocol {msg.get('protocol')!r}, we speak {PROTOCOL}")
-        if not isinstance(msg.get("pid"), int) or not isinstance(msg.get("data", {}), dict):
-            raise ProtocolError("hello: pid must be an integer and data a map")
-    elif t == "state" and msg.get("state") not in LIFECYCLE:
-        raise ProtocolError(f"state: unknown state {msg.get('state')!r}")
-    elif t == "reply" and (
-        not isinstance(msg.get("id"), int) or not isinstance(msg.get("ok"), bool)
-    ):
-        raise ProtocolError("reply: id must be an integer and ok a boolean")
-    elif t == "part":
-        try:
-            check_part(msg)
-        except PartError as e:
-            raise ProtocolError(str(e)) from None
+"""Where the reports that answer no command go (hello, state, heartbeat, fault)."""
 
 
 class ControlDecoder:
-    """Turns the byte stream from a host into validated reports (pure)."""
+    """Turns the byte stream from a host into report dataclasses (pure)."""
 
     def __init__(self, max_message: int = MAX_MESSAGE) -> None:
         self._stream = MessageStream(max_message)
+        self.ignored = 0
+        """Maps of an unknown type: ignored (docs/protocol.md)."""
 
-    def feed(self, data: bytes) -> list[Report]:
+    def feed(self, data: bytes) -> list[Report | Part]:
         """Every complete report in the stream so far; ProtocolError on a bad one."""
-        reports = self._stream.feed(data)
-        for msg in reports:
-            check_report(msg)
-        return reports
+        out: list[Report | Part] = []
+        for raw in self._stream.feed(data):
+            msg = decode_report(raw)
+            if msg is None:
+                self.ignored += 1
+            else:
+                out.append(msg)
+        return out
 
 
 class ControlChannel:
@@ -92,7 +70,7 @@ class ControlChannel:
     def __init__(
         self,
         sock: socket.socket,
-        handlers: Mapping[str, ReportHandler],
+        on_report: ReportHandler,
         on_close: Callable[[str | None], None],
         *,
         name: str = "",
@@ -102,10 +80,10 @@ class ControlChannel:
         self.command_timeout = command_timeout
         self.counters = {"messages_in": 0, "messages_out": 0, "protocol_errors": 0, "late": 0}
         self._sock = sock
-        self._handlers = dict(handlers)
+        self._on_report = on_report
         self._on_close = on_close
         self._decoder = ControlDecoder()
-        self._pending: dict[int, asyncio.Future[Report]] = {}
+        self._pending: dict[int, asyncio.Future[tuple[Reply, bytes | None]]] = {}
         self._sent: dict[int, tuple[str, float]] = {}  # command id -> (its type, loop time sent)
         self._accept: dict[int, int] = {}  # command id -> bytes of parts its reply may bring
         self._parts = PartAssembler()
@@ -126,40 +104,46 @@ class ControlChannel:
         self._reader_task = asyncio.create_task(self._read(reader))
 
     async def command(
-        self,
-        t: str,
-        *,
-        wait: float | None = None,
-        blob: bytes | None = None,
-        accept: int = 0,
-        **fields: Any,
-    ) -> Report:
+        self, cmd: Command, *, wait: float | None = None, blob: bytes | None = None
+    ) -> Reply:
         """Send one command, await its reply for `wait` seconds; CommandError unless ok.
 
-        `blob` goes along in parts; `accept` > 0 takes up to that many bytes of parts back, as
-        `reply["blob"]`.
+        `blob` goes along in parts, right before `cmd`, a `Restore` saying its size.
         """
+        if blob is not None and not (isinstance(cmd, Restore) and cmd.size == len(blob)):
+            raise ValueError(f"{cmd.T}: parts go only with a restore that says their size")
+        reply, _ = await self._call(cmd, wait, blob, 0)
+        return reply
+
+    async def fetch(self, cmd: Command, limit: int, *, wait: float | None = None) -> bytes:
+        """Send one command whose reply brings a value in parts (snapshot); up to `limit` bytes
+        of them, else CommandError "refused"."""
+        _, blob = await self._call(cmd, wait, None, limit)
+        return blob if blob is not None else b""
+
+    async def _call(
+        self, cmd: Command, wait: float | None, blob: bytes | None, accept: int
+    ) -> tuple[Reply, bytes | None]:
+        t = cmd.T
         if self.closed or self._writer is None:
             raise CommandError(t, "closed")
         cid = self._next_id
         self._next_id += 1
-        future: asyncio.Future[Report] = asyncio.get_running_loop().create_future()
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[tuple[Reply, bytes | None]] = loop.create_future()
         self._pending[cid] = future
-        self._sent[cid] = (t, asyncio.get_running_loop().time())
+        self._sent[cid] = (t, loop.time())
         if accept > 0:
             self._accept[cid] = accept
-        msg = {"t": t, "id": cid, **fields}
-        if blob is None:
-            data = encode(msg)
-        else:
-            msg["size"] = len(blob)
-            data = b"".join([*map(encode, parts(cid, blob)), encode(msg)])
+        data = encode(cmd, cid)
+        if blob is not None:
+            data = encode_all(parts(cid, blob)) + data
         try:
             self._writer.write(data)
             self.counters["messages_out"] += 1
             async with asyncio.timeout(self.command_timeout if wait is None else wait):
                 await self._writer.drain()
-                reply = await future
+                reply, got = await future
         except TimeoutError:
             raise CommandError(t, "timeout") from None
         except CommandError as e:
@@ -170,9 +154,9 @@ class ControlChannel:
             self._pending.pop(cid, None)
             self._sent.pop(cid, None)
             self._accept.pop(cid, None)
-        if not reply.get("ok"):
-            raise CommandError(t, "refused", str(reply.get("error") or ""))
-        return reply
+        if not reply.ok:
+            raise CommandError(t, "refused", reply.error or "")
+        return reply, got
 
     async def _read(self, reader: asyncio.StreamReader) -> None:
         reason: str | None = None
@@ -188,36 +172,31 @@ class ControlChannel:
             reason = f"read failed: {e}"
         self._shutdown(reason)
 
-    def _dispatch(self, msg: Report) -> None:
+    def _dispatch(self, msg: Report | Part) -> None:
         self.counters["messages_in"] += 1
-        t = msg["t"]
-        if t == "part":
-            of, data = check_part(msg)
-            if of in self._accept:
-                self._parts.add(of, data, self._accept[of])
+        if isinstance(msg, Part):
+            if msg.of in self._accept:
+                self._parts.add(msg.of, msg.data, self._accept[msg.of])
             else:
                 self.counters["late"] += 1
-            return
-        if t == "reply":
-            future = self._pending.get(msg["id"])
+        elif isinstance(msg, Reply):
+            future = self._pending.get(msg.id)
             if future is None or future.done():
                 self.counters["late"] += 1
             else:
                 future.set_result(self._with_blob(msg))
-            return
-        handler = self._handlers.get(t)
-        if handler is not None:
-            handler(msg)
+        else:
+            self._on_report(msg)
 
-    def _with_blob(self, msg: Report) -> Report:
-        """A reply to a command that accepts parts gets their bytes as "blob" (or fails)."""
-        cid = msg["id"]
-        if cid not in self._accept or not msg.get("ok"):
-            return msg
+    def _with_blob(self, reply: Reply) -> tuple[Reply, bytes | None]:
+        """A reply to a command that accepts parts comes with their bytes (or fails)."""
+        cid = reply.id
+        if cid not in self._accept or not reply.ok:
+            return reply, None
         try:
-            return {**msg, "blob": self._parts.take(cid, msg.get("size"))}
+            return reply, self._parts.take(cid, reply.size)
         except PartError as e:
-            return {**msg, "ok": False, "error": f"the state sent back: {e}"}
+            return Reply(cid, False, f"the state sent back: {e}"), None
 
     def _shutdown(self, reason: str | None) -> None:
         if self.closed:
