@@ -1,26 +1,26 @@
-"""The deployment side of one agent: plan sync, applying the plan, and the allocator role.
+"""The deployment side of one agent: the asyncio shell around the deployment core.
 
-How it works: `step()` runs whenever gossip changes something, at the election's, health's and
-local recovery's deadlines, and every `tick` seconds while a plan is held or this robot is the
-allocator (their duties poll: state handoff, re-allocation retries); with nothing deployed an
-idle fleet steps at most every `idle_tick` seconds:
-1. the election shell is fed this robot's view and says who the allocator is, with its epoch;
-   the plan store's fence rises to every epoch seen. A robot that does not hear a majority of
-   the fleet (`deploy.disconnect`) is not eligible: the side of a cut that is cut off elects no
-   allocator and issues no plan;
-2. plan sync: if an alive robot gossips a plan newer than ours (and not fenced off), fetch it
-   from that robot's API (one fetch in flight); plans pushed to `POST /v1/plan` go the same way;
+How it works: `step()` runs whenever gossip changes something, at the deadlines of the cores it
+drives, and every `tick` seconds while a plan is held or this robot is the allocator (state
+handoff polls); with nothing deployed an idle fleet steps at most every `idle_tick` seconds. Each
+step reads `loop.time()` once and passes it inward:
+1. the health shell judges every robot's robot-wide conditions; the election shell is fed this
+   robot's view and says who the allocator is, with its epoch. A robot that does not hear a
+   majority of the fleet (`deploy.disconnect`, `touch_shell`) is not eligible: the side of a cut
+   that is cut off elects no allocator and issues no plan;
+2. the deployment core (`sdrpeer.deploy.core`, sans-IO) gets the view and decides: fencing, which
+   robot to fetch a newer plan from, and, on the allocator, adopting and re-issuing the newest
+   plan, re-allocating when robots die or degrade, moving `keep_original` components back. Its
+   effects are carried out here: plan fetches and pushes over HTTP (`deploy.peers`), a plan
+   taken is saved (`PlanStore.save`), applied and published in the record, events logged;
 3. apply: the plan's placements on this robot become the instance manager's desired set (only
    the names the plan owns; instances added by hand through the API are left alone), except the
    actives a robot cut off holds INACTIVE by their components' disconnect policy (`CutOff`), and
    the actives a robot holding a newer plan already runs (`derive.superseded`: the old side of a
-   heal stands down on the first gossip of the new side, before it has fetched the newer plan);
-4. if this robot is the allocator: once it has caught up with the newest plan it can hear of
-   (`adopt_after` seconds after winning, or at once when no robot gossips a newer one), it
-   re-issues that plan under its own epoch — losing the allocator loses nothing — and from then
-   on re-allocates (smallest change) when a placement's robot is no longer alive.
-`deploy()` / `undeploy()` run on the allocator (other agents forward them to it); a new plan is
-stored, gossiped (its key is in our record) and pushed to every alive robot.
+   heal stands down on the first gossip of the new side, before it has fetched the newer plan),
+   and the actives waiting at most `handover_wait` for their component's old copy elsewhere.
+`deploy()` / `undeploy()`, `move_component()` and `recover_component()` are the core's requests
+(on the allocator; other agents forward them to it), run at once with the current view.
 """
 
 from __future__ import annotations
@@ -35,14 +35,16 @@ from typing import Any
 
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
-from sdrpeer.deploy.allocator_role import AllocatorRole
 from sdrpeer.deploy.config import DeployConfig
+from sdrpeer.deploy.core import DeployCore, DeployView
 from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot, superseded
+from sdrpeer.deploy.effects import Adopted, Effect, Fetch, Log, Push
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
 from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible
+from sdrpeer.deploy.plan_change import Deploy, Move, Recover
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
 from sdrpeer.deploy.touch_shell import TouchShell
@@ -92,7 +94,8 @@ class Coordinator:
         """Component faults on this robot (restart here; plan changes through the allocator)."""
         self.health = HealthShell(recovery)
         """Robot-wide recovery conditions (low battery, bad link) of every robot."""
-        self.store = PlanStore(data_dir / "plan.json")
+        self.core = DeployCore(name, PlanStore(data_dir / "plan.json"), config)
+        """Plan sync and the allocator's duties (sans-IO); this shell carries out its effects."""
         self.handoff = HandoffShell(
             name, manager, lambda: self.store.plan, self._api_of, token=token, events=events
         )
@@ -100,9 +103,6 @@ class Coordinator:
         manager.before_stop = self.handoff.retire
         self.election = ElectionShell(name, election, self.store.highest_epoch)
         self._owned: set[str] = set()
-        self._fetching: tuple[int, str, int] | None = None
-        self._fetch_failed: dict[str, float] = {}
-        """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
         self._handover_since: dict[str, float] = {}
         """Active placement here -> since when it waits for its component's old copy elsewhere."""
         self._refused: dict[str, str] = {}
@@ -123,7 +123,11 @@ class Coordinator:
             wake=self.wake,
         )
         """Whether this robot is in touch with the fleet (quorum, cut off, rejoining)."""
-        self.role = AllocatorRole(self, config.adopt_after, config.retry_every)
+
+    @property
+    def store(self) -> PlanStore:
+        """The plan this robot holds and its fence."""
+        return self.core.store
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
@@ -159,7 +163,7 @@ class Coordinator:
                 self.election.next_timer(),
                 self.health.next_timer(),
                 self.local.next_timer(),
-                self.role.next_timer(),
+                self.core.next_timer(),
                 self.touch.next_timer(self.store.plan),
             )
             busy = self.store.plan is not None or self.election.is_allocator()
@@ -180,7 +184,7 @@ class Coordinator:
 
     # ----------------------------------------------------------------- one step
     def step(self) -> None:
-        """Election, plan sync, apply, and the allocator's duties (see the module docstring)."""
+        """Health, election, the deployment core, apply (see the module docstring)."""
         now = asyncio.get_running_loop().time()
         state = self.cluster()
         plan = self.store.plan
@@ -195,23 +199,46 @@ class Coordinator:
         before = self.election.info()
         self.election.update(now, state.alive, self._thresholds(), degraded)
         info = self.election.info()
-        for rec in state.alive.values():
-            e = rec.election
-            if e is not None and e.claiming and e.leader is not None:
-                self.store.see_claim(e.epoch, e.leader)
         if info != before:
             self.events.add(
                 time.time(), "election", self.name, epoch=info.epoch, leader=info.leader
             )
             self.on_change()
-        self._sync(state)
+        self.core.step(now, self._view(now, state))
+        self._carry_out()
         self.touch.after_sync(now, state, quorum, self.caught_up(state), info.leader)
         self._apply(state)
         self.handoff.tick()
-        if self.election.is_allocator():
-            self.role.on_duty(now, state)
-        else:
-            self.role.off_duty()
+
+    def _view(self, now: float, state: ClusterState | None = None) -> DeployView:
+        """What the deployment core is told this step."""
+        info = self.election.info()
+        return DeployView(
+            self.cluster() if state is None else state,
+            allocator=self.election.is_allocator(),
+            epoch=info.epoch,
+            leader=info.leader,
+            degraded=frozenset(self.health.degraded(now)),
+            excluded=frozenset(self.health.excluded(now)),
+        )
+
+    def _carry_out(self) -> None:
+        """Do what the core asked for, in order."""
+        for effect in self.core.effects():
+            self._do(effect)
+
+    def _do(self, effect: Effect) -> None:
+        if isinstance(effect, Log):
+            self.events.add(time.time(), effect.kind, self.name, **effect.detail)
+        elif isinstance(effect, Adopted):
+            self.store.save()
+            self._apply(self.cluster())  # before publishing: the record never shows the new
+            self.on_change()  # plan's key next to instance states from the old one
+            self.wake()
+        elif isinstance(effect, Fetch):
+            self._spawn(self._fetch(effect.robot, effect.api))
+        elif isinstance(effect, Push):
+            self._spawn(self._push(effect))
 
     def _log_health(self) -> None:
         for event in self.health.drain():
@@ -234,77 +261,34 @@ class Coordinator:
         plan = self.store.plan
         return None if plan is None or plan.system is None else plan.system.allocation.thresholds
 
-    def _newest_offer(
-        self, state: ClusterState, now: float | None = None
-    ) -> tuple[str, tuple[int, str, int]] | None:
-        """The robot gossiping the newest plan we would take (with `now`: leaving out robots a
-        fetch just failed from, for `config.fetch_retry` seconds)."""
-        best: tuple[str, tuple[int, str, int]] | None = None
-        for robot, rec in state.alive.items():
-            p = rec.plan
-            if robot == self.name or p is None or rec.api is None:
-                continue
-            if now is not None and self._fetch_failed.get(robot, 0.0) > now:
-                continue
-            if self.store.accepts(p.key) and (best is None or p.key > best[1]):
-                best = (robot, p.key)
-        return best
-
     def caught_up(self, state: ClusterState) -> bool:
         """No alive robot gossips a plan newer than ours, and no fetch is in flight."""
-        return self._newest_offer(state) is None and self._fetching is None
-
-    def _sync(self, state: ClusterState) -> None:
-        offer = self._newest_offer(state, asyncio.get_running_loop().time())
-        if offer is None or self._fetching is not None:
-            return
-        robot, key = offer
-        api = state.alive[robot].api
-        assert api is not None
-        self._fetching = key
-        self._spawn(self._fetch(robot, api))
+        return self.core.caught_up(state)
 
     async def _fetch(self, robot: str, api: str) -> None:
+        plan: Plan | None = None
         try:
             plan = await peers.fetch_plan(api, self.token)
-            self.accept(plan, source=robot)
         except ApiError as e:
             log.info("cannot fetch the plan from %s: %s", robot, e)
-            self._fetch_failed[robot] = asyncio.get_running_loop().time() + self.config.fetch_retry
-        finally:
-            self._fetching = None
+        finally:  # whatever happened, the core hears the end of its fetch
+            if plan is None:
+                self.core.fetch_failed(asyncio.get_running_loop().time(), robot)
+            else:
+                self.core.fetched(robot, plan)
+            self._carry_out()
             self.wake()
+
+    async def _push(self, push: Push) -> None:
+        try:
+            await peers.push_plan(push.api, self.token, push.plan)
+        except ApiError as e:
+            log.info("cannot push the plan to %s (it will fetch it): %s", push.robot, e)
 
     def accept(self, plan: Plan, source: str) -> bool:
         """Offer a plan (fetched, pushed, or our own); True if it is now the one we hold."""
-        held = self.store.plan
-        if held is not None and held.key == plan.key:
-            return True  # the same plan again (a push and a fetch crossed): nothing to do
-        ok = self.store.offer(plan)
-        if ok:
-            self.events.add(
-                time.time(),
-                "plan.accepted",
-                self.name,
-                epoch=plan.epoch,
-                version=plan.version,
-                allocator=plan.allocator,
-                source=source,
-            )
-            self._apply(self.cluster())  # before publishing: the record never shows the new
-            self.on_change()  # plan's key next to instance states from the old one
-            self.wake()
-        else:
-            self.events.add(
-                time.time(),
-                "plan.refused",
-                self.name,
-                epoch=plan.epoch,
-                version=plan.version,
-                allocator=plan.allocator,
-                fence=self.store.highest_epoch,
-                source=source,
-            )
+        ok = self.core.offer(plan, source)
+        self._carry_out()
         return ok
 
     def _apply(self, state: ClusterState) -> None:
@@ -327,11 +311,7 @@ class Coordinator:
             for n in waits
             if now - self._handover_since.setdefault(n, now) < self.config.handover_wait
         }
-        newer = {
-            robot
-            for robot, rec in state.alive.items()
-            if robot != self.name and rec.plan is not None and self.store.accepts(rec.plan.key)
-        }
+        newer = self.core.newer_holders(state)
         yielded = superseded(plan, self.name, remote, newer)
         for name in sorted(yielded - self._yielded):
             self.events.add(
@@ -387,9 +367,7 @@ class Coordinator:
         }
         if self.election.is_allocator():
             try:
-                result = await self.role.recover_component(
-                    self.name, d.component, d.instance, d.action
-                )
+                result = await self.recover_component(self.name, d.component, d.instance, d.action)
             except LookupError:  # a plan changed under the decision: nothing to recover
                 return False
             return not isinstance(result, Infeasible)
@@ -402,14 +380,27 @@ class Coordinator:
 
     async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
         """Allocate `system` (None: undeploy) and publish the plan (allocator only)."""
-        return await self.role.deploy(system, origin)
+        now = asyncio.get_running_loop().time()
+        try:
+            return self.core.request(now, self._view(now), Deploy(system, origin))
+        finally:
+            self._carry_out()
 
     async def move_component(self, component: str, to: str | None) -> Plan | Infeasible:
         """A planned move of one component's active (allocator only; see deploy.move)."""
-        return await self.role.move_component(component, to)
+        now = asyncio.get_running_loop().time()
+        try:
+            return self.core.request(now, self._view(now), Move(component, to))
+        finally:
+            self._carry_out()
 
     async def recover_component(
         self, robot: str, component: str, instance: str, action: str
     ) -> Plan | Infeasible:
         """A robot's recovery step that changes who is active (allocator only)."""
-        return await self.role.recover_component(robot, component, instance, action)
+        now = asyncio.get_running_loop().time()
+        try:
+            step = Recover(robot, component, instance, action)
+            return self.core.request(now, self._view(now), step)
+        finally:
+            self._carry_out()

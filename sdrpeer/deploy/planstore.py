@@ -1,12 +1,12 @@
 """The plan one robot holds, fenced by the allocator's (epoch, name), kept across restarts.
 
-How it works: `offer(plan)` accepts a plan only when its key `(epoch, allocator, version)` is
-larger than the held plan's and the election fence (`sdrpeer.election.fence.Fence`, raised by
-`see_claim` to every allocator claim this robot hears of) admits its `(epoch, allocator)`: a plan
-from a stale allocator is refused and counted, so it cannot undo a newer one. An accepted plan is
-written to `DATA_DIR/plan.json` (atomically) and read back when the agent starts, so a restarted
-robot still knows the system and can give it to a new allocator. `info()` is what the robot
-gossips about it.
+How it works: `offer(plan)` (pure: the deployment core calls it) accepts a plan only when its
+key `(epoch, allocator, version)` is larger than the held plan's and the election fence
+(`sdrpeer.election.fence.Fence`, raised by `see_claim` to every allocator claim this robot hears
+of) admits its `(epoch, allocator)`: a plan from a stale allocator is refused and counted, so it
+cannot undo a newer one. The shell writes an accepted plan to `DATA_DIR/plan.json` with `save()`
+(atomically); it is read back when the agent starts, so a restarted robot still knows the system
+and can give it to a new allocator. `info()` is what the robot gossips about it.
 """
 
 from __future__ import annotations
@@ -79,7 +79,6 @@ class PlanStore:
         self.fence.admit(plan.epoch, plan.allocator)
         self.plan = plan
         self._digest = plan_digest(plan)
-        self._save(plan)
         return True
 
     def info(self) -> PlanInfo | None:
@@ -89,8 +88,10 @@ class PlanStore:
         p = self.plan
         return PlanInfo(p.epoch, p.version, self._digest, p.allocator)
 
-    def _save(self, plan: Plan) -> None:
-        if self.path is None:
+    def save(self) -> None:
+        """Write the plan held to `path` (atomically; nothing without a path or a plan)."""
+        plan = self.plan
+        if self.path is None or plan is None:
             return
         tmp = self.path.with_suffix(".tmp")
         try:
