@@ -46,14 +46,12 @@ from sdrpeer.deploy.plan_change import (
     with_origins,
 )
 from sdrpeer.deploy.planstore import PlanStore
-from sdrpeer.deploy.view import ClusterState
+from sdrpeer.deploy.view import ClusterState, PlanKey
 from sdrpeer.errors import NotAllocator
 from sdrpeer.plan import Plan
 
 log = logging.getLogger(__name__)
 
-PlanKey = tuple[int, str, int]
-"""(epoch, allocator, version): the order of plans."""
 
 Request = Deploy | Move | Recover
 """What an operator or a robot may ask the allocator for."""
@@ -120,10 +118,8 @@ class DeployCore:
     def step(self, now: float, view: DeployView) -> None:
         """Fence, plan sync, and the allocator's duties (see the module docstring)."""
         state = view.state
-        for rec in state.alive.values():
-            e = rec.election
-            if e is not None and e.claiming and e.leader is not None:
-                self.store.see_claim(e.epoch, e.leader)
+        for epoch, leader in state.claims():
+            self.store.see_claim(epoch, leader)
         for robot in [r for r, t in self._fetch_failed.items() if t <= now]:
             del self._fetch_failed[robot]
         self._sync(now, state)
@@ -190,22 +186,17 @@ class DeployCore:
         fetch just failed from)."""
         held = self.store.plan
         floor = None if held is None else held.key
-        best: tuple[str, PlanKey] | None = None
         failed = self._fetch_failed
-        for robot, rec in state.alive.items():
-            p = rec.plan
-            if p is None or rec.api is None or robot == self.name:
-                continue
-            key = p.key
+        for key, robot in state.plan_offers():
             if floor is not None and key <= floor:
-                continue  # the common case, checked first: every robot holds our plan
-            if best is not None and key <= best[1]:
+                return None  # newest first: the rest is older still
+            if robot == self.name:
                 continue
-            if now is not None and failed and failed.get(robot, -math.inf) > now:
+            if now is not None and failed.get(robot, -math.inf) > now:
                 continue
             if self.store.accepts(key):
-                best = (robot, key)
-        return best
+                return (robot, key)
+        return None
 
     def _sync(self, now: float, state: ClusterState) -> None:
         if self._fetching is not None:

@@ -57,7 +57,6 @@ class PlanStore:
             log.warning("%s: ignoring the saved plan: %s", path, e)
             return
         self.plan = plan
-        self._digest = plan_digest(plan)
         self.fence.raise_to(plan.epoch, plan.allocator)
 
     def see_claim(self, epoch: int, allocator: str) -> None:
@@ -78,7 +77,7 @@ class PlanStore:
             return False
         self.fence.admit(plan.epoch, plan.allocator)
         self.plan = plan
-        self._digest = plan_digest(plan)
+        self._digest = ""
         return True
 
     def info(self) -> PlanInfo | None:
@@ -86,6 +85,8 @@ class PlanStore:
         if self.plan is None:
             return None
         p = self.plan
+        if not self._digest:  # computed once per plan held, when first gossiped
+            self._digest = plan_digest(p)
         return PlanInfo(p.epoch, p.version, self._digest, p.allocator)
 
     def save(self) -> None:
