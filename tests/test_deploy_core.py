@@ -131,6 +131,21 @@ def test_a_new_allocator_waits_at_most_adopt_after_for_a_newer_plan() -> None:
     assert plan.placements == HELD.placements
 
 
+def test_a_deploy_while_waiting_to_adopt_ends_the_wait() -> None:
+    newer = Plan(1, 4, SYSTEM, HELD.placements, "r0")
+    core = core_holding(HELD)
+    state = fleet("r1", "r2", "r3", plans={"r3": newer})
+    core.step(10.0, leading(state, 2))
+    assert core.effects() == [Fetch("r3", "http://r3")]  # it never answers
+    plan = core.request(10.2, leading(state, 2), Deploy(SYSTEM, "r1"))
+    assert isinstance(plan, Plan)
+    assert plan.key == (2, "r1", 1)
+    core.effects()
+    assert core.next_timer() == float("inf")  # no deadline left behind in the past
+    core.step(10.0 + CONFIG.adopt_after, leading(state, 2))
+    assert core.effects() == []  # our deploy is the plan of this epoch: nothing to adopt
+
+
 def test_versions_grow_under_our_epoch_and_restart_at_one_under_a_new_one() -> None:
     core = core_holding()
     state = fleet("r1", "r2", "r3")

@@ -94,7 +94,6 @@ class DeployCore:
         self._last_attempt: (
             tuple[PlanKey, frozenset[str], frozenset[str], frozenset[str]] | None
         ) = None
-        self._last_attempt_at = -math.inf
         self._retry_at = math.inf
         """When the last attempt may be repeated (inf: nothing to retry)."""
         self._lost_since: dict[str, float] = {}
@@ -176,6 +175,7 @@ class DeployCore:
         assert result is not None  # only a Reissue may come to nothing
         if isinstance(reason, Deploy) and isinstance(result, Plan):
             self._adopted_epoch = view.epoch  # a deploy under our epoch: nothing left to adopt
+            self._adopt_by = math.inf
         return result
 
     # ----------------------------------------------------------------- plan sync
@@ -212,7 +212,7 @@ class DeployCore:
 
     # ----------------------------------------------------------------- the allocator
     def _off_duty(self) -> None:
-        self._elected_at = None
+        self._elected_at, self._last_attempt = None, None
         self._adopt_by = self._retry_at = self._held_due = math.inf
         self._lost_since.clear()
 
@@ -223,8 +223,10 @@ class DeployCore:
         state, epoch = view.state, view.epoch
         plan = self.store.plan
         if self._adopted_epoch != epoch:
-            if not self.caught_up(state) and now - self._elected_at < self.config.adopt_after:
-                self._adopt_by = self._elected_at + self.config.adopt_after
+            adopt_by = self._elected_at + self.config.adopt_after  # the timer's own value
+            if not self.caught_up(state) and now < adopt_by:
+                self._adopt_by = adopt_by  # the only deadline while it waits
+                self._held_due, self._last_attempt, self._retry_at = math.inf, None, math.inf
                 return
             self._adopt_by = math.inf
             self._adopted_epoch = epoch
@@ -233,6 +235,7 @@ class DeployCore:
                 return
         if plan is None or plan.system is None:
             self._held_due = self._retry_at = math.inf
+            self._last_attempt = None
             return
         held = self._held(now, plan, view)
         if self._reconcile(now, view, plan):
@@ -242,14 +245,13 @@ class DeployCore:
         sick = placed_on & view.degraded
         short = plan.standbys_short()
         if not (lost or sick or short):
-            self._retry_at = math.inf
+            self._last_attempt, self._retry_at = None, math.inf
             return
         attempt = (plan.key, frozenset(state.alive), view.degraded, held)
-        retry_every = self.config.retry_every
-        if attempt == self._last_attempt and now - self._last_attempt_at < retry_every:
+        if attempt == self._last_attempt and now < self._retry_at:
             return  # the same plan and robots failed to place already: wait or for a change
-        self._last_attempt, self._last_attempt_at = attempt, now
-        self._retry_at = now + retry_every
+        self._last_attempt = attempt
+        self._retry_at = now + self.config.retry_every
         why = [f"robots gone: {', '.join(sorted(lost))}"] if lost else []
         if sick:
             why.append(f"robots degraded: {', '.join(sorted(sick))}")
