@@ -1,16 +1,19 @@
 """The deployment core with literal times: plan sync, adopting and re-issuing after an election,
-re-allocation when robots die, `retry_every`, recovery requests, moves, and fencing. No asyncio,
-no sockets: every test feeds `step(now, view)` and reads the effects."""
+re-allocation when robots die, `retry_every`, recovery requests, moves, fencing, and applying
+the plan to the robot (handover, superseded copies, launch policy, cut off). No asyncio, no
+sockets: every test feeds `step(now, view)` or `apply(now, state, here)` and reads the effects."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import pytest
 
 from sdrpeer.deploy.config import DeployConfig
-from sdrpeer.deploy.core import DeployCore, DeployView
-from sdrpeer.deploy.effects import Adopted, Effect, Fetch, Log, Push
+from sdrpeer.deploy.core import DeployCore, DeployView, Here
+from sdrpeer.deploy.disconnect import CutOff
+from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
 from sdrpeer.deploy.move import MoveError
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.plan_change import Deploy, Move, Recover
@@ -18,7 +21,14 @@ from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import NotAllocator
 from sdrpeer.plan import Placement, Plan
-from sdrpeer.record import ElectionInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
+from sdrpeer.record import (
+    ElectionInfo,
+    InstanceInfo,
+    LinkSummary,
+    Metrics,
+    PlanInfo,
+    RobotRecord,
+)
 from sdrpeer.system.model import DisconnectSpec, SystemDef
 from tests.test_alloc_core import TABLE_V, comp
 
@@ -357,3 +367,85 @@ def test_a_deposed_allocator_issues_nothing() -> None:
         core.request(5.1, view, Move("A", "r3"))
     assert raised.value.leader == "r4"
     assert core.effects() == []
+
+
+# -- applying the plan to this robot ---------------------------------------------------------
+
+
+class NoExec:
+    """A launch policy that refuses the exec launcher."""
+
+    def refusal(self, launcher: str, target: str | Sequence[str]) -> str | None:
+        return "exec is off" if launcher == "exec" else None
+
+
+def desired(core: DeployCore) -> dict[str, str]:
+    """instance -> desired state, from the Desired effect the last apply queued."""
+    (effect,) = [e for e in core.effects() if isinstance(e, Desired)]
+    return {s.name: s.desired for s in effect.specs}
+
+
+def running(name: str, component: str, plan: Plan | None = None) -> RobotRecord:
+    """A robot that runs `component` ACTIVE as its active instance `name`."""
+    inst = InstanceInfo(name, component, "active", "active", 1.0, 10**7, "tcp://10.0.0.9:7")
+    return replace(record("r2", plan), instances=(inst,))
+
+
+def test_a_moved_active_waits_for_the_old_copy_at_most_handover_wait() -> None:
+    core = core_holding(HELD, me="r2")  # HELD places B on r2; r3 still runs B ACTIVE
+    state = fleet("r1", "r2", "r3")
+    state.alive["r3"] = replace(running("B-old", "B"), api="http://r3")
+    core.apply(10.0, state, Here())
+    assert desired(core) == {"B": "inactive"}
+    core.apply(10.0 + CONFIG.handover_wait - 0.01, state, Here())
+    assert desired(core) == {"B": "inactive"}
+    core.apply(10.0 + CONFIG.handover_wait, state, Here())
+    assert desired(core) == {"B": "active"}  # the old robot never heard of the plan
+
+
+def test_the_old_side_stands_down_for_a_newer_plans_copy_and_says_so_once() -> None:
+    core = core_holding(HELD, me="r1")  # A on r1
+    newer = Plan(2, 1, SYSTEM, (Placement("A", "A", "r2"),), "r2")
+    state = fleet("r1", "r2")
+    state.alive["r2"] = running("A", "A", newer)
+    core.apply(10.0, state, Here())
+    effects = core.effects()
+    assert logs(effects, "plan.superseded") == [{"instance": "A", "newer": ["r2"]}]
+    (want,) = [e for e in effects if isinstance(e, Desired)]
+    assert {s.name: s.desired for s in want.specs} == {"A": "inactive"}
+    core.apply(10.1, state, Here())
+    assert logs(core.effects(), "plan.superseded") == []
+
+
+def test_what_the_launch_policy_refuses_is_left_out_and_said_once() -> None:
+    sh = replace(comp("Sh", 100 * MB), launcher="exec", target=("/bin/sh",))
+    system = SystemDef("s", (sh, comp("A", 100 * MB)), allocation=TABLE_V)
+    plan = Plan(1, 1, system, (Placement("Sh", "Sh", "r1"), Placement("A", "A", "r1")), "r2")
+    core = core_holding(plan)
+    core.apply(1.0, fleet("r1"), Here(policy=NoExec()))
+    effects = core.effects()
+    assert logs(effects, "launch.refused") == [{"instance": "Sh", "reason": "exec is off"}]
+    assert [s.name for e in effects if isinstance(e, Desired) for s in e.specs] == ["A"]
+    core.apply(1.1, fleet("r1"), Here(policy=NoExec()))
+    assert logs(core.effects(), "launch.refused") == []
+
+
+def test_nothing_is_applied_before_joining_and_dropped_placements_are_removed() -> None:
+    core = core_holding(HELD, me="r1")
+    core.apply(1.0, fleet("r1", "r2"), Here(joined=False))
+    assert core.effects() == []
+    core.apply(1.1, fleet("r1", "r2"), Here())
+    assert desired(core) == {"A": "active"}
+    assert core.offer(Plan(1, 4, SYSTEM, (Placement("A", "A", "r2"),), "r0"), source="r0")
+    core.effects()
+    core.apply(1.2, fleet("r1", "r2"), Here())
+    (effect,) = [e for e in core.effects() if isinstance(e, Desired)]
+    assert (effect.specs, effect.removed) == ((), ("A",))
+
+
+def test_a_robot_cut_off_holds_its_actives_down() -> None:
+    core = core_holding(HELD, me="r1")
+    cutoff = CutOff()
+    cutoff.update(5.0, quorum=False, caught_up=True)
+    core.apply(5.0, fleet("r1"), Here(cutoff=cutoff))
+    assert desired(core) == {"A": "inactive"}  # stop_after 0 s: at once

@@ -1,26 +1,26 @@
 """The deployment side of one agent: the asyncio shell around the deployment core.
 
 How it works: `step()` runs whenever gossip changes something, at the deadlines of the cores it
-drives, and every `tick` seconds while a plan is held or this robot is the allocator (state
-handoff polls); with nothing deployed an idle fleet steps at most every `idle_tick` seconds. Each
-step reads `loop.time()` once and passes it inward:
+drives (`next_timer()` of the deployment core, the election, health, local recovery and touch
+shells), and every `tick` seconds while a plan is held or this robot is the allocator (state
+handoff polls); with nothing deployed an idle fleet steps at most every `idle_tick` seconds.
+Each step reads `loop.time()` once and passes it inward:
 1. the health shell judges every robot's robot-wide conditions; the election shell is fed this
    robot's view and says who the allocator is, with its epoch. A robot that does not hear a
    majority of the fleet (`deploy.disconnect`, `touch_shell`) is not eligible: the side of a cut
    that is cut off elects no allocator and issues no plan;
 2. the deployment core (`sdrpeer.deploy.core`, sans-IO) gets the view and decides: fencing, which
-   robot to fetch a newer plan from, and, on the allocator, adopting and re-issuing the newest
-   plan, re-allocating when robots die or degrade, moving `keep_original` components back. Its
-   effects are carried out here: plan fetches and pushes over HTTP (`deploy.peers`), a plan
-   taken is saved (`PlanStore.save`), applied and published in the record, events logged;
-3. apply: the plan's placements on this robot become the instance manager's desired set (only
-   the names the plan owns; instances added by hand through the API are left alone), except the
-   actives a robot cut off holds INACTIVE by their components' disconnect policy (`CutOff`), and
-   the actives a robot holding a newer plan already runs (`derive.superseded`: the old side of a
-   heal stands down on the first gossip of the new side, before it has fetched the newer plan),
-   and the actives waiting at most `handover_wait` for their component's old copy elsewhere.
-`deploy()` / `undeploy()`, `move_component()` and `recover_component()` are the core's requests
-(on the allocator; other agents forward them to it), run at once with the current view.
+   robot to fetch a newer plan from and, on the allocator, adopting and re-issuing the newest
+   plan, re-allocating when robots die or degrade, moving `keep_original` components back;
+3. the touch shell learns whether the robot is caught up; then the core applies the plan to
+   this robot (`DeployCore.apply`, given the instances ACTIVE here, the cut-off state and the
+   launch policy).
+The core's effects are carried out here, in order: plan fetches and pushes over HTTP
+(`deploy.peers`, one task each), a plan taken is saved (`PlanStore.save`), applied and
+published in the record (`on_change`), the desired instances go to the instance manager, events
+to the event log. `deploy()` / `undeploy()`, `move_component()` and `recover_component()` are
+the core's requests (on the allocator; other agents forward them to it), run at once with the
+current view.
 """
 
 from __future__ import annotations
@@ -36,9 +36,8 @@ from typing import Any
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.config import DeployConfig
-from sdrpeer.deploy.core import DeployCore, DeployView
-from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot, superseded
-from sdrpeer.deploy.effects import Adopted, Effect, Fetch, Log, Push
+from sdrpeer.deploy.core import DeployCore, DeployView, Here
+from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
@@ -56,7 +55,6 @@ from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.system.model import SystemDef, Thresholds
 
 log = logging.getLogger(__name__)
@@ -102,13 +100,6 @@ class Coordinator:
         """Component states to hot standbys (sync) and to a moved component's new instance."""
         manager.before_stop = self.handoff.retire
         self.election = ElectionShell(name, election, self.store.highest_epoch)
-        self._owned: set[str] = set()
-        self._handover_since: dict[str, float] = {}
-        """Active placement here -> since when it waits for its component's old copy elsewhere."""
-        self._refused: dict[str, str] = {}
-        """Placements here the launch policy refuses, with why (logged once)."""
-        self._yielded: set[str] = set()
-        """Active placements here stood down for a newer plan's copy elsewhere (`superseded`)."""
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
@@ -207,7 +198,7 @@ class Coordinator:
         self.core.step(now, self._view(now, state))
         self._carry_out()
         self.touch.after_sync(now, state, quorum, self.caught_up(state), info.leader)
-        self._apply(state)
+        self._apply(now, state)
         self.handoff.tick()
 
     def _view(self, now: float, state: ClusterState | None = None) -> DeployView:
@@ -232,9 +223,18 @@ class Coordinator:
             self.events.add(time.time(), effect.kind, self.name, **effect.detail)
         elif isinstance(effect, Adopted):
             self.store.save()
-            self._apply(self.cluster())  # before publishing: the record never shows the new
-            self.on_change()  # plan's key next to instance states from the old one
+            # applied before it is published: the record never shows the new plan's key next
+            # to instance states from the old one
+            self._apply(asyncio.get_running_loop().time(), self.cluster())
+            self.on_change()
             self.wake()
+        elif isinstance(effect, Desired):
+            current = self.manager.desired()
+            for gone in effect.removed:
+                self.manager.remove(gone)
+            changed = [s for s in effect.specs if current.get(s.name) != s]
+            if changed:
+                self.manager.set_desired(changed)
         elif isinstance(effect, Fetch):
             self._spawn(self._fetch(effect.robot, effect.api))
         elif isinstance(effect, Push):
@@ -291,61 +291,12 @@ class Coordinator:
         self._carry_out()
         return ok
 
-    def _apply(self, state: ClusterState) -> None:
-        plan = self.store.plan
-        if plan is None or not self.touch.joined:
-            return
-        remote: dict[str, Remote] = {}
-        for robot, rec in state.alive.items():
-            if robot == self.name:
-                continue
-            for inst in rec.instances:
-                remote[inst.name] = Remote(robot, inst.state, inst.data, inst.component, inst.role)
-        active_here = {s["name"] for s in self.manager.status() if s.get("state") == "ACTIVE"}
-        now = asyncio.get_running_loop().time()
-        waits = handover_waits(plan, self.name, remote, active_here)
-        for gone in self._handover_since.keys() - waits:
-            del self._handover_since[gone]
-        hold = {
-            n
-            for n in waits
-            if now - self._handover_since.setdefault(n, now) < self.config.handover_wait
-        }
-        newer = self.core.newer_holders(state)
-        yielded = superseded(plan, self.name, remote, newer)
-        for name in sorted(yielded - self._yielded):
-            self.events.add(
-                time.time(), "plan.superseded", self.name, instance=name, newer=sorted(newer)
-            )
-        self._yielded = yielded
-        hold |= yielded
-        specs = specs_for_robot(plan, self.name, remote, active_here, hold)
-        specs = self._allowed(self.touch.hold_down(now, plan, specs))
-        names = {s.name for s in specs}
-        current = self.manager.desired()
-        for gone in sorted(self._owned - names):
-            self.manager.remove(gone)
-        changed = [s for s in specs if current.get(s.name) != s]
-        if changed:
-            self.manager.set_desired(changed)
-        self._owned = names
-
-    def _allowed(self, specs: list[InstanceSpec]) -> list[InstanceSpec]:
-        """`specs` less those this robot's launch policy refuses (a plan from an allocator that
-        did not know the policy yet): an event `launch.refused` says which and why, once."""
-        out = []
-        refused: dict[str, str] = {}
-        for spec in specs:
-            why = self.manager.policy.refusal(spec.launcher, spec.target)
-            if why is None:
-                out.append(spec)
-            else:
-                refused[spec.name] = why
-        for name, why in sorted(refused.items()):
-            if self._refused.get(name) != why:
-                self.events.add(time.time(), "launch.refused", self.name, instance=name, reason=why)
-        self._refused = refused
-        return out
+    def _apply(self, now: float, state: ClusterState) -> None:
+        """Hand the core this robot's own side; it answers with the desired instances."""
+        active = frozenset(s["name"] for s in self.manager.status() if s.get("state") == "ACTIVE")
+        here = Here(active, self.touch.joined, self.touch.cutoff, self.manager.policy)
+        self.core.apply(now, state, here)
+        self._carry_out()
 
     def status(self, now_wall: float) -> dict[str, Any]:
         """GET /v1/status: the plan's components with their robots and states."""

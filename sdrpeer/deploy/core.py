@@ -21,6 +21,15 @@ done is queued as an effect (`sdrpeer.deploy.effects`) that the shell drains wit
    off a lost robot with `reconcile: keep_original` is moved back once that robot is well.
 4. Requests (`request`: `Deploy`, `Move`, `Recover`) run on the allocator only (`NotAllocator`
    elsewhere).
+5. Apply (`apply(now, state, here)`, once the shell has heard whether the robot is in touch):
+   the plan's placements on this robot become the instance manager's desired set (`Desired`:
+   only the names the plan owns), built by `derive.specs_for_robot`, except the actives a robot
+   cut off holds INACTIVE by their components' disconnect policy (`CutOff`), the actives a robot
+   holding a newer plan already runs (`derive.superseded`: the old side of a heal stands down on
+   the first gossip of the new side, `plan.superseded`), the actives waiting at most
+   `handover_wait` for their component's old copy elsewhere to stand down, and what this
+   robot's launch policy refuses (`launch.refused`, said once). Nothing is applied before the
+   robot has been in touch with the fleet since it started.
 Every plan, whatever asked for it, comes from the one allocation path (`plan_change.change`),
 and is offered to our own store, then `Push`ed to every alive robot.
 """
@@ -29,11 +38,14 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 from sdrpeer.deploy.config import DeployConfig
-from sdrpeer.deploy.disconnect import held_components
-from sdrpeer.deploy.effects import Adopted, Effect, Fetch, Log, Push
+from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot, superseded
+from sdrpeer.deploy.disconnect import CutOff, held_components
+from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.plan_change import (
     Context,
@@ -49,6 +61,7 @@ from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.view import ClusterState, PlanKey
 from sdrpeer.errors import NotAllocator
 from sdrpeer.plan import Plan
+from sdrpeer.runtime.spec import InstanceSpec
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +86,28 @@ class DeployView:
     """Robots a robot-wide recovery condition holds on: their components must move."""
     excluded: frozenset[str] = frozenset()
     """Robots that must not receive components (degraded, or within their minimum dwell)."""
+
+
+class Refusals(Protocol):
+    """What this robot lets its hosts run (`sdrpeer.launch_policy.LaunchPolicy`)."""
+
+    def refusal(self, launcher: str, target: str | Sequence[str]) -> str | None:
+        """None if a host of `launcher` running `target` may start here, else why not."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class Here:
+    """This robot's own side at one step, for applying the plan."""
+
+    active: frozenset[str] = frozenset()
+    """The instances running ACTIVE here (the instance manager's)."""
+    joined: bool = True
+    """In touch with the fleet (and caught up) at least once since the agent started."""
+    cutoff: CutOff = field(default_factory=CutOff)
+    """Whether this robot is cut off from the fleet, or back and not caught up yet."""
+    policy: Refusals | None = None
+    """Its launch policy (None: everything may run)."""
 
 
 class DeployCore:
@@ -102,6 +137,14 @@ class DeployCore:
         self._moving_back: tuple[str, PlanKey] | None = None
         """The keep_original move last made, with the key of the plan it was asked under
         (asked once per plan: a move that cannot be made waits for the next plan)."""
+        self._owned: frozenset[str] = frozenset()
+        """The instance names the plan had this robot run at the last apply."""
+        self._handover_since: dict[str, float] = {}
+        """Active placement here -> since when it waits for its component's old copy elsewhere."""
+        self._yielded: set[str] = set()
+        """Active placements here stood down for a newer plan's copy elsewhere (`superseded`)."""
+        self._refused: dict[str, str] = {}
+        """Placements here the launch policy refuses, with why (logged once)."""
 
     # ----------------------------------------------------------------- the shell's surface
     def effects(self) -> list[Effect]:
@@ -177,6 +220,67 @@ class DeployCore:
             self._adopted_epoch = view.epoch  # a deploy under our epoch: nothing left to adopt
             self._adopt_by = math.inf
         return result
+
+    # ----------------------------------------------------------------- apply
+    def apply(self, now: float, state: ClusterState, here: Here) -> None:
+        """This robot's share of the plan as a `Desired` effect (see the module docstring)."""
+        plan = self.store.plan
+        if plan is None or not here.joined:
+            return
+        remote: dict[str, Remote] = {}
+        for robot, rec in state.alive.items():
+            if robot == self.name:
+                continue
+            for inst in rec.instances:
+                remote[inst.name] = Remote(robot, inst.state, inst.data, inst.component, inst.role)
+        waits = handover_waits(plan, self.name, remote, here.active)
+        for gone in self._handover_since.keys() - waits:
+            del self._handover_since[gone]
+        wait = self.config.handover_wait
+        hold = {n for n in waits if now - self._handover_since.setdefault(n, now) < wait}
+        newer = self.newer_holders(state)
+        yielded = superseded(plan, self.name, remote, newer)
+        for name in sorted(yielded - self._yielded):
+            self._effects.append(Log("plan.superseded", {"instance": name, "newer": sorted(newer)}))
+        self._yielded = yielded
+        specs = specs_for_robot(plan, self.name, remote, here.active, hold | yielded)
+        specs = self._allowed(self._held_down(now, plan, here.cutoff, specs), here.policy)
+        names = frozenset(s.name for s in specs)
+        self._effects.append(Desired(tuple(specs), tuple(sorted(self._owned - names))))
+        self._owned = names
+
+    @staticmethod
+    def _held_down(
+        now: float, plan: Plan, cutoff: CutOff, specs: list[InstanceSpec]
+    ) -> list[InstanceSpec]:
+        """`specs` with the actives a robot cut off (or not caught up yet) stands down INACTIVE."""
+        system = plan.system
+        if not (cutoff.cut or cutoff.rejoining) or system is None:
+            return specs
+        return [
+            replace(s, desired="inactive")
+            if s.role == "active"
+            and cutoff.holds_down(now, system.component(s.component).disconnect)
+            else s
+            for s in specs
+        ]
+
+    def _allowed(self, specs: list[InstanceSpec], policy: Refusals | None) -> list[InstanceSpec]:
+        """`specs` less those this robot's launch policy refuses (a plan from an allocator that
+        did not know the policy yet): `launch.refused` says which and why, once."""
+        out = []
+        refused: dict[str, str] = {}
+        for spec in specs:
+            why = None if policy is None else policy.refusal(spec.launcher, spec.target)
+            if why is None:
+                out.append(spec)
+            else:
+                refused[spec.name] = why
+        for name, why in sorted(refused.items()):
+            if self._refused.get(name) != why:
+                self._effects.append(Log("launch.refused", {"instance": name, "reason": why}))
+        self._refused = refused
+        return out
 
     # ----------------------------------------------------------------- plan sync
     def _newest_offer(

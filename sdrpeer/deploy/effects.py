@@ -3,7 +3,8 @@
 How it works: the core never performs I/O; every call into it may queue effects, which the shell
 drains with `DeployCore.effects()` and carries out in order: fetch a plan from a robot's API and
 report the answer back (`fetched` / `fetch_failed`), push a plan to a robot (fire and forget),
-persist and apply a plan the core now holds, and write an event to the robot's event log (the
+persist and apply a plan the core now holds, set the instance manager's desired instances, and
+write an event to the robot's event log (the
 shell stamps it with the wall clock and the robot's name).
 """
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sdrpeer.plan import Plan
+from sdrpeer.runtime.spec import InstanceSpec
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +45,15 @@ class Adopted:
 
 
 @dataclass(frozen=True, slots=True)
+class Desired:
+    """This robot's share of the plan: the instance manager's desired specs for the names the
+    plan owns (only those that changed need setting), and the names it no longer owns."""
+
+    specs: tuple[InstanceSpec, ...]
+    removed: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class Log:
     """An entry for the robot's event log."""
 
@@ -50,5 +61,5 @@ class Log:
     detail: dict[str, Any] = field(default_factory=dict)
 
 
-Effect = Fetch | Push | Adopted | Log
+Effect = Fetch | Push | Adopted | Desired | Log
 """Everything the core may ask for."""

@@ -9,9 +9,10 @@ its plan over the API (the allocator first, else the robot gossiping the newest 
 alone may still show it the records from before the cut) and counts as caught up only after the
 answer; failed asks are retried every `ASK_RETRY` seconds. `joined` says whether the robot has
 been in touch since it started (until then the coordinator applies no plan: it would launch
-hosts for a plan the fleet has very likely replaced), `hold_down` turns the specs of actives a
-robot cut off must stand down INACTIVE. Events `fleet.cut_off`, `fleet.rejoined` and
-`fleet.in_touch` say when the state changed, with how many robots it heard of how many.
+hosts for a plan the fleet has very likely replaced); the deployment core reads `cutoff` to
+hold down the actives a robot cut off must stand down INACTIVE. Events `fleet.cut_off`,
+`fleet.rejoined` and `fleet.in_touch` say when the state changed, with how many robots it heard
+of how many.
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import asyncio
 import logging
 import time
 from collections.abc import Awaitable, Callable, Coroutine
-from dataclasses import replace
 from typing import Any
 
 from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum
@@ -28,7 +28,6 @@ from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
-from sdrpeer.runtime.spec import InstanceSpec
 
 log = logging.getLogger(__name__)
 
@@ -104,19 +103,6 @@ class TouchShell:
             if p.role == "active"
         ]
         return self.cutoff.next_timer(policies)
-
-    def hold_down(self, now: float, plan: Plan, specs: list[InstanceSpec]) -> list[InstanceSpec]:
-        """`specs` with the actives a robot cut off (or not caught up yet) stands down INACTIVE."""
-        system = plan.system
-        if not (self.cutoff.cut or self.cutoff.rejoining) or system is None:
-            return specs
-        return [
-            replace(s, desired="inactive")
-            if s.role == "active"
-            and self.cutoff.holds_down(now, system.component(s.component).disconnect)
-            else s
-            for s in specs
-        ]
 
     def _log(self, heard: int) -> None:
         c = self.cutoff
