@@ -36,7 +36,7 @@ from typing import Any
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
 from sdrpeer.deploy.config import DeployConfig
-from sdrpeer.deploy.core import DeployCore, DeployView, Here
+from sdrpeer.deploy.core import DeployCore, DeployView, Here, Request
 from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
@@ -329,29 +329,25 @@ class Coordinator:
         status, _ = await peer_client.call(rec.api, "POST", "/v1/recovery", self.token, body=body)
         return status == 200
 
-    async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
-        """Allocate `system` (None: undeploy) and publish the plan (allocator only)."""
+    async def request(self, reason: Request) -> Plan | Infeasible:
+        """Hand a request to the core at once, with the current view (allocator only:
+        NotAllocator elsewhere), and carry out what it asks for."""
         now = asyncio.get_running_loop().time()
         try:
-            return self.core.request(now, self._view(now), Deploy(system, origin))
+            return self.core.request(now, self._view(now), reason)
         finally:
             self._carry_out()
 
+    async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
+        """Allocate `system` (None: undeploy) and publish the plan (allocator only)."""
+        return await self.request(Deploy(system, origin))
+
     async def move_component(self, component: str, to: str | None) -> Plan | Infeasible:
         """A planned move of one component's active (allocator only; see deploy.move)."""
-        now = asyncio.get_running_loop().time()
-        try:
-            return self.core.request(now, self._view(now), Move(component, to))
-        finally:
-            self._carry_out()
+        return await self.request(Move(component, to))
 
     async def recover_component(
         self, robot: str, component: str, instance: str, action: str
     ) -> Plan | Infeasible:
         """A robot's recovery step that changes who is active (allocator only)."""
-        now = asyncio.get_running_loop().time()
-        try:
-            step = Recover(robot, component, instance, action)
-            return self.core.request(now, self._view(now), step)
-        finally:
-            self._carry_out()
+        return await self.request(Recover(robot, component, instance, action))

@@ -1,4 +1,5 @@
-"""The deployment core of one robot: plan sync and the allocator's duties (sans-IO).
+"""The deployment core of one robot: plan sync, the allocator's duties, and applying the plan to
+this robot (sans-IO).
 
 How it works: the shell (`sdrpeer.deploy.coordinator`) calls `step(now, view)` whenever gossip
 changes something and at `next_timer()`; `view` is what the rest of the agent knows this step
@@ -111,7 +112,8 @@ class Here:
 
 
 class DeployCore:
-    """One robot's plan sync and, while it holds the role, the allocator's duties."""
+    """One robot's plan sync, its share of the plan and, while it holds the role, the
+    allocator's duties."""
 
     def __init__(self, name: str, store: PlanStore, config: DeployConfig | None = None) -> None:
         """`store`: the plan this robot holds and its fence (loaded by the shell)."""
