@@ -112,6 +112,7 @@ class Coordinator:
             accept=lambda plan, source: self.accept(plan, source=source),
             spawn=self._spawn,
             wake=self.wake,
+            ask_retry=config.ask_retry,
         )
         """Whether this robot is in touch with the fleet (quorum, cut off, rejoining)."""
 

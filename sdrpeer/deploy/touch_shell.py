@@ -7,12 +7,12 @@ the pure `CutOff` learns whether the robot is cut off, back (rejoining) or in to
 from a cut, or restarted with a plan that places other robots, asks one robot of the fleet for
 its plan over the API (the allocator first, else the robot gossiping the newest plan; gossip
 alone may still show it the records from before the cut) and counts as caught up only after the
-answer; failed asks are retried every `ASK_RETRY` seconds. `joined` says whether the robot has
-been in touch since it started (until then the coordinator applies no plan: it would launch
-hosts for a plan the fleet has very likely replaced); the deployment core reads `cutoff` to
-hold down the actives a robot cut off must stand down INACTIVE. Events `fleet.cut_off`,
-`fleet.rejoined` and `fleet.in_touch` say when the state changed, with how many robots it heard
-of how many.
+answer; failed asks are retried every `DeployConfig.ask_retry` seconds. `joined` says whether
+the robot has been in touch since it started (until then the coordinator applies no plan: it
+would launch hosts for a plan the fleet has very likely replaced); the deployment core reads
+`cutoff` to hold down the actives a robot cut off must stand down INACTIVE. Events
+`fleet.cut_off`, `fleet.rejoined` and `fleet.in_touch` say when the state changed, with how
+many robots it heard of how many.
 """
 
 from __future__ import annotations
@@ -31,9 +31,6 @@ from sdrpeer.plan import Plan
 
 log = logging.getLogger(__name__)
 
-ASK_RETRY = 0.5
-"""Seconds before a robot back from a cut asks again after an ask failed."""
-
 
 class TouchShell:
     """One robot's contact with the fleet."""
@@ -48,10 +45,13 @@ class TouchShell:
         accept: Callable[[Plan, str], bool],
         spawn: Callable[[Coroutine[Any, Any, None]], None],
         wake: Callable[[], None],
+        ask_retry: float = 0.5,
     ) -> None:
         """`kept`: the plan this agent started with; `ask(api)`: the plan of the robot there;
-        `accept(plan, source)`: offer it to the plan store; `spawn`, `wake`: the coordinator's."""
+        `accept(plan, source)`: offer it to the plan store; `spawn`, `wake`: the coordinator's;
+        `ask_retry`: `DeployConfig.ask_retry`."""
         self.name = name
+        self.ask_retry = ask_retry
         self.events = events
         self.ask = ask
         self.accept = accept
@@ -132,7 +132,7 @@ class TouchShell:
             plan = await self.ask(api)
         except ApiError as e:
             log.info("cannot ask %s for its plan after a cut: %s", robot, e)
-            self._ask_after = asyncio.get_running_loop().time() + ASK_RETRY
+            self._ask_after = asyncio.get_running_loop().time() + self.ask_retry
         else:
             if plan is not None:
                 self.accept(plan, robot)
