@@ -116,13 +116,12 @@ def cluster_view(
     """The allocator's view: every alive robot with a record, in first-fit order, except
     `exclude` (robots that must not receive components: degraded, or being left)."""
     names = [n for n in state.order if n in state.alive] or sorted(state.alive)
-    robots = tuple(
-        RobotView(n, r.metrics, r.links, r.instances, r.launch)
-        for n in names
-        if n not in exclude
-        for r in (state.alive[n],)
-    )
-    return ClusterView(robots, origin)
+    robots = []
+    for name in names:
+        if name not in exclude:
+            rec = state.alive[name]
+            robots.append(RobotView(name, rec.metrics, rec.links, rec.instances, rec.launch))
+    return ClusterView(tuple(robots), origin)
 
 
 def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
