@@ -202,11 +202,18 @@ class DeployCore:
 
     def newer_holders(self, state: ClusterState) -> set[str]:
         """The other alive robots that gossip a plan this robot would take."""
-        return {
-            robot
-            for robot, rec in state.alive.items()
-            if robot != self.name and rec.plan is not None and self.store.accepts(rec.plan.key)
-        }
+        held = self.store.plan
+        floor = None if held is None else held.key
+        newer = set()
+        last: tuple[PlanKey | None, bool] = (None, False)  # robots holding one plan: ask once
+        for key, robot in state.plan_offers():
+            if floor is not None and key <= floor:
+                break  # newest first: the rest is older still
+            if key != last[0]:
+                last = (key, self.store.accepts(key))
+            if last[1] and robot != self.name:
+                newer.add(robot)
+        return newer
 
     def request(self, now: float, view: DeployView, reason: Request) -> Plan | Infeasible:
         """Allocate for a request and publish the plan; allocator only (`NotAllocator`).
@@ -229,12 +236,11 @@ class DeployCore:
         plan = self.store.plan
         if plan is None or not here.joined:
             return
-        remote: dict[str, Remote] = {}
-        for robot, rec in state.alive.items():
-            if robot == self.name:
-                continue
-            for inst in rec.instances:
-                remote[inst.name] = Remote(robot, inst.state, inst.data, inst.component, inst.role)
+        remote = {
+            inst.name: Remote(robot, inst.state, inst.data, inst.component, inst.role)
+            for robot, inst in state.hosted()
+            if robot != self.name
+        }
         waits = handover_waits(plan, self.name, remote, here.active)
         for gone in self._handover_since.keys() - waits:
             del self._handover_since[gone]
@@ -296,7 +302,7 @@ class DeployCore:
         for key, robot in state.plan_offers():
             if floor is not None and key <= floor:
                 return None  # newest first: the rest is older still
-            if robot == self.name:
+            if robot == self.name or state.alive[robot].api is None:
                 continue
             if now is not None and failed.get(robot, -math.inf) > now:
                 continue

@@ -2,15 +2,15 @@
 and the members the fleet is counted in.
 
 How it works: the agent builds a `ClusterState` from its gossip view for every step; the
-deployment core asks it two questions, `plan_offers()` and `claims()`, computed from the records
-on each call (a caller that knows its records never change, such as the simulator's snapshots
-shared by a thousand robots, may answer them once)."""
+deployment core asks it three questions, `plan_offers()`, `claims()` and `hosted()`, computed
+from the records on each call (a caller that knows its records never change, such as the
+simulator's snapshots shared by a thousand robots, may answer them once)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from sdrpeer.record import RobotRecord
+from sdrpeer.record import InstanceInfo, RobotRecord
 
 PlanKey = tuple[int, str, int]
 """(epoch, allocator, version): the order of plans (`sdrpeer.plan.Plan.key`)."""
@@ -33,15 +33,18 @@ class ClusterState:
     """Whether the table holds any other robot (in any state) since this agent started."""
 
     def plan_offers(self) -> list[tuple[PlanKey, str]]:
-        """(plan key, robot) of every alive robot that gossips a plan and an API address to
-        fetch it from, newest plan first."""
+        """(plan key, robot) of every alive robot that gossips a plan, newest plan first."""
         offers = [
             ((p.epoch, p.allocator, p.version), robot)
             for robot, rec in self.alive.items()
-            if (p := rec.plan) is not None and rec.api is not None
+            if (p := rec.plan) is not None
         ]
         offers.sort(reverse=True)
         return offers
+
+    def hosted(self) -> list[tuple[str, InstanceInfo]]:
+        """(robot, instance) of every instance an alive robot gossips."""
+        return [(robot, inst) for robot, rec in self.alive.items() for inst in rec.instances]
 
     def claims(self) -> list[tuple[int, str]]:
         """(epoch, robot) of every alive robot's published claim to the allocator role."""

@@ -5,8 +5,8 @@ How it works:
 - the `Cluster` lends its clock, its event heap (`schedule`, `run_until`, `wait_for`) and its
   seeded `Network` (delay, loss, partitions); no membership core runs (a thousand SWIM cores
   would cost the run its speed; `sim/agents.py` measures gossip itself). Gossip is modelled by
-  what it delivers: every robot's record (the plan it holds as a `PlanInfo`, its instances from
-  the plan, the allocator's claim) goes into one *truth*; a change of the truth is taken as a
+  what it delivers: every robot's record (the plan it holds as a `PlanInfo`, the instances it
+  runs, the allocator's claim) goes into one *truth*; a change of the truth is taken as a
   snapshot at most every `batch` seconds, and each robot sees a snapshot `lag` seconds after it
   was taken (robots are spread over `buckets` lags between `lags[0]` and `lags[1]`: an epidemic
   reaches robots at different moments, in order);
@@ -14,14 +14,20 @@ How it works:
   truth `detect_after` seconds later (failure detection); the election is an oracle: the first
   robot by name of the truth holds the role, at an epoch one higher at every change, and claims
   it in its record (which raises every robot's fence as the snapshot reaches it);
-- each robot's core is stepped when a snapshot reaches it, at its `next_timer()`, and after the
-  answer of a fetch; its effects are carried out as the agent's shell does: `Fetch` is a request
-  and an answer over the network (a lost one, a dead robot or a robot without a plan fails after
-  `fetch_timeout`), `Push` is one message offered to the receiver's core, `Adopted` rewrites the
-  robot's record in the truth, `Log` lines are kept (`logs`; `plan.accepted` only counted);
+- each robot's core is stepped (then applies the plan) when a snapshot reaches it, at its
+  `next_timer()`, and after the answer of a fetch; its effects are carried out as the agent's
+  shell does: `Fetch` is a request and an answer over the network (a lost one, a dead robot or
+  a robot without a plan fails after `fetch_timeout`), `Push` is one message offered to the
+  receiver's core, `Adopted` rewrites the robot's record in the truth and applies the plan,
+  `Log` lines are kept (`logs`; `plan.accepted` only counted);
+- each robot's instance manager is modelled by what its core asks for (`Desired`), done at once:
+  a spec that wants to run ACTIVE is ACTIVE, any other INACTIVE; its record carries them, so
+  the handover of a moved component (the new copy waits until the old one's robot shows it
+  stood down) runs over the same lagged gossip;
 - requests (deploy, move, recovery) go to the robot whose view says it holds the role.
 `converged()` says whether every running robot holds the allocator's plan and no placement of it
-sits on a robot that is down.
+sits on a robot that is down; `running_as_planned()` also whether every running robot runs
+exactly its share of it; `actives()` which robots run each component ACTIVE.
 """
 
 from __future__ import annotations
@@ -33,8 +39,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from sdrpeer.deploy.config import DeployConfig
-from sdrpeer.deploy.core import DeployCore, DeployView, Request
-from sdrpeer.deploy.effects import Adopted, Fetch, Log, Push
+from sdrpeer.deploy.core import DeployCore, DeployView, Here, Request
+from sdrpeer.deploy.effects import Adopted, Desired, Fetch, Log, Push
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.view import ClusterState, PlanKey
@@ -69,6 +75,12 @@ class _Frozen(ClusterState):
         if claims is None:
             claims = self.__dict__["_claims"] = super().claims()
         return claims
+
+    def hosted(self) -> list[tuple[str, InstanceInfo]]:
+        hosted: list[tuple[str, InstanceInfo]] | None = self.__dict__.get("_hosted")
+        if hosted is None:
+            hosted = self.__dict__["_hosted"] = super().hosted()
+        return hosted
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +124,8 @@ class DeploySim:
         self.epoch = 0
         self.leader: str | None = None
         self._plans: dict[str, Plan | None] = dict.fromkeys(names)
+        self.instances: list[dict[str, InstanceInfo]] = [{} for _ in names]
+        """Per robot: the instances it runs (what its core last asked for, at once)."""
         self.truth: dict[str, RobotRecord] = {name: self._record(name) for name in names}
         """Every robot not yet detected dead, with its current record."""
         empty = Snapshot(ClusterState({}, names), 0, None)
@@ -191,6 +205,35 @@ class DeploySim:
             if alive
         )
 
+    def running_as_planned(self) -> bool:
+        """Whether `converged()` and every running robot runs exactly its share of that plan:
+        the instances placed on it, each active one ACTIVE and each standby INACTIVE."""
+        leader = self.allocator()
+        if not self.converged() or leader is None:
+            return False
+        plan = self.plan(leader)
+        assert plan is not None
+        for i, up in enumerate(self.up):
+            if not up:
+                continue
+            want = {p.instance: p.role for p in plan.on_robot(self.names[i])}
+            have = self.instances[i]
+            if {n: inst.role for n, inst in have.items()} != want:
+                return False
+            if any((inst.state == "active") != (inst.role == "active") for inst in have.values()):
+                return False
+        return True
+
+    def actives(self) -> dict[str, list[str]]:
+        """component -> the running robots that run it ACTIVE now."""
+        out: dict[str, list[str]] = {}
+        for i, up in enumerate(self.up):
+            if up:
+                for inst in self.instances[i].values():
+                    if inst.state == "active":
+                        out.setdefault(inst.component, []).append(self.names[i])
+        return out
+
     def kinds(self, kind: str) -> list[tuple[float, str, dict[str, Any]]]:
         """The logged events of one kind, as (time, robot, detail)."""
         return [(t, robot, detail) for t, robot, k, detail in self.logs if k == kind]
@@ -200,10 +243,7 @@ class DeploySim:
     def _record(self, name: str) -> RobotRecord:
         plan = self._plans[name]
         info = None if plan is None else PlanInfo(plan.epoch, plan.version, "", plan.allocator)
-        instances = tuple(
-            InstanceInfo(p.instance, p.component, p.role, p.role, 0.0, 0)
-            for p in ([] if plan is None else plan.on_robot(name))
-        )
+        instances = tuple(self.instances[self.cluster.index[name]].values())
         claim = ElectionInfo(self.epoch, name, True) if name == self.leader else None
         return RobotRecord(METRICS, LinkSummary(), f"sim://{name}", 0, instances, claim, info)
 
@@ -249,7 +289,14 @@ class DeploySim:
     def _step(self, i: int) -> None:
         self.cores[i].step(self.cluster.now, self._view(i))
         self._drain(i)
+        self._apply(i)
         self._arm(i)
+
+    def _apply(self, i: int) -> None:
+        active = frozenset(n for n, inst in self.instances[i].items() if inst.state == "active")
+        state = self._seen[self._bucket[i]].state
+        self.cores[i].apply(self.cluster.now, state, Here(active))
+        self._drain(i)
 
     def _arm(self, i: int) -> None:
         at = self.cores[i].next_timer()
@@ -264,7 +311,8 @@ class DeploySim:
 
     def _drain(self, i: int) -> None:
         name, now = self.names[i], self.cluster.now
-        for effect in self.cores[i].effects():
+        for effect in self.cores[i].effects():  # an Adopted plan's own effects are drained by
+            # `_apply` (called for it) before the rest of this list
             if isinstance(effect, Log):
                 if effect.kind == "plan.accepted":
                     self.accepted += 1
@@ -275,13 +323,39 @@ class DeploySim:
                 if before is not None and effect.plan.key <= before.key:
                     self.violations.append((now, name, effect.plan.key, before.key))
                 self._plans[name] = effect.plan
-                if name in self.truth:
-                    self.truth[name] = self._record(name)
-                    self._changed()
+                self._publish(name)
+                self._apply(i)
+            elif isinstance(effect, Desired):
+                self._run(i, effect)
             elif isinstance(effect, Fetch):
                 self._fetch(i, self.cluster.index[effect.robot])
             elif isinstance(effect, Push):
                 self._push(i, self.cluster.index[effect.robot], effect.plan)
+
+    def _run(self, i: int, want: Desired) -> None:
+        """Robot i's instance manager does what its core asks, at once: a spec that wants to be
+        active runs ACTIVE, any other INACTIVE; removed instances stop."""
+        running = {
+            spec.name: InstanceInfo(
+                spec.name,
+                spec.component,
+                "active" if spec.wants_active() else "inactive",
+                spec.role,
+                0.0,
+                0,
+                f"tcp://{self.names[i]}:7000",
+            )
+            for spec in want.specs
+        }
+        if running != self.instances[i]:
+            self.instances[i] = running
+            self._publish(self.names[i])
+
+    def _publish(self, name: str) -> None:
+        """`name`'s record changed: the next snapshot carries it (if the fleet still sees it)."""
+        if name in self.truth:
+            self.truth[name] = self._record(name)
+            self._changed()
 
     def _fetch(self, i: int, j: int) -> None:
         """Robot i asks robot j for its plan (a lost request fails after `fetch_timeout`)."""
