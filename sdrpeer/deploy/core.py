@@ -122,10 +122,13 @@ class DeployCore:
         self.config = config or DeployConfig()
         self._effects: list[Effect] = []
         self._fetching: PlanKey | None = None
+        """The key of the plan a fetch in flight was sent for."""
         self._fetch_failed: dict[str, float] = {}
         """Robot -> time before which a plan is not fetched from it again (a fetch failed)."""
         self._elected_at: float | None = None
+        """When this robot took the role (None: it does not hold it)."""
         self._adopted_epoch = 0
+        """The epoch under which it last adopted (or deployed) a plan."""
         self._adopt_by = math.inf
         """While a new allocator waits to catch up: when it re-issues anyway."""
         self._last_attempt: (
@@ -136,6 +139,7 @@ class DeployCore:
         self._lost_since: dict[str, float] = {}
         """Robot -> when this allocator first saw it gone while the plan placed something there."""
         self._held_due = math.inf
+        """When the first held component may be replaced (`disconnect.held_components`)."""
         self._moving_back: tuple[str, PlanKey] | None = None
         """The keep_original move last made, with the key of the plan it was asked under
         (asked once per plan: a move that cannot be made waits for the next plan)."""
