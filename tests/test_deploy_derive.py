@@ -181,6 +181,7 @@ def test_store_fences_older_allocators_and_persists(tmp_path: Path) -> None:
     info = store.info()
     assert info is not None
     assert (info.epoch, info.version, info.allocator) == (5, 1, "c")
+    store.save()  # the shell saves what the core took
     again = PlanStore(tmp_path / "plan.json")
     assert again.plan == Plan(5, 1, None, (), "c")
     assert again.highest_epoch == 5

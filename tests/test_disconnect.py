@@ -9,8 +9,8 @@ import pytest
 
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.view import ClusterView
-from sdrpeer.deploy.allocator_role import with_origins
 from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum, held_components
+from sdrpeer.deploy.plan_change import with_origins
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError
 from sdrpeer.plan import Placement, Plan, plan_from_json

@@ -40,10 +40,6 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("entry point", {"__main__"}),
 ]
 
-KNOWN_CIRCLES: set[frozenset[str]] = {
-    # The deploy core (issue 16) removes it: the allocator role calls back into the coordinator.
-    frozenset({"sdrpeer.deploy.allocator_role", "sdrpeer.deploy.coordinator"}),
-}
 
 MAX_TOP_LEVEL_MODULES = 10
 
@@ -165,8 +161,7 @@ def test_layers_import_only_downwards() -> None:
 
 
 def test_no_module_imports_itself_in_a_circle() -> None:
-    circles = [c for c in _circles(_imports()) if frozenset(c) not in KNOWN_CIRCLES]
-    assert circles == []
+    assert _circles(_imports()) == []
 
 
 def test_the_top_level_holds_few_modules() -> None:

@@ -34,13 +34,17 @@ class DeployConfig:
     """Seconds before a plan is fetched again from a robot a fetch failed from (a robot
     restarting answers gossip before its API: retrying at once made every agent fetch in a
     tight loop)."""
+    ask_retry: float = 0.5
+    """Seconds before a robot back from a cut asks the fleet for its plan again after an ask
+    failed (`deploy.touch_shell`)."""
 
     def __post_init__(self) -> None:
         for name in ("tick", "idle_tick", "adopt_after", "retry_every", "handover_wait"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"deploy {name} must be > 0 (got {getattr(self, name)})")
-        if self.fetch_retry < 0:
-            raise ValueError(f"deploy fetch_retry must be >= 0 (got {self.fetch_retry})")
+        for name in ("fetch_retry", "ask_retry"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"deploy {name} must be >= 0 (got {getattr(self, name)})")
 
     def with_(self, **changes: Any) -> DeployConfig:
         """A copy with some fields changed."""

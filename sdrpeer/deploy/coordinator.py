@@ -1,26 +1,26 @@
-"""The deployment side of one agent: plan sync, applying the plan, and the allocator role.
+"""The deployment side of one agent: the asyncio shell around the deployment core.
 
-How it works: `step()` runs whenever gossip changes something, at the election's, health's and
-local recovery's deadlines, and every `tick` seconds while a plan is held or this robot is the
-allocator (their duties poll: state handoff, re-allocation retries); with nothing deployed an
-idle fleet steps at most every `idle_tick` seconds:
-1. the election shell is fed this robot's view and says who the allocator is, with its epoch;
-   the plan store's fence rises to every epoch seen. A robot that does not hear a majority of
-   the fleet (`deploy.disconnect`) is not eligible: the side of a cut that is cut off elects no
-   allocator and issues no plan;
-2. plan sync: if an alive robot gossips a plan newer than ours (and not fenced off), fetch it
-   from that robot's API (one fetch in flight); plans pushed to `POST /v1/plan` go the same way;
-3. apply: the plan's placements on this robot become the instance manager's desired set (only
-   the names the plan owns; instances added by hand through the API are left alone), except the
-   actives a robot cut off holds INACTIVE by their components' disconnect policy (`CutOff`), and
-   the actives a robot holding a newer plan already runs (`derive.superseded`: the old side of a
-   heal stands down on the first gossip of the new side, before it has fetched the newer plan);
-4. if this robot is the allocator: once it has caught up with the newest plan it can hear of
-   (`adopt_after` seconds after winning, or at once when no robot gossips a newer one), it
-   re-issues that plan under its own epoch — losing the allocator loses nothing — and from then
-   on re-allocates (smallest change) when a placement's robot is no longer alive.
-`deploy()` / `undeploy()` run on the allocator (other agents forward them to it); a new plan is
-stored, gossiped (its key is in our record) and pushed to every alive robot.
+How it works: `step()` runs whenever gossip changes something, at the deadlines of the cores it
+drives (`next_timer()` of the deployment core, the election, health, local recovery and touch
+shells), and every `tick` seconds while a plan is held or this robot is the allocator (state
+handoff polls); with nothing deployed an idle fleet steps at most every `idle_tick` seconds.
+Each step reads `loop.time()` once and passes it inward:
+1. the health shell judges every robot's robot-wide conditions; the election shell is fed this
+   robot's view and says who the allocator is, with its epoch. A robot that does not hear a
+   majority of the fleet (`deploy.disconnect`, `touch_shell`) is not eligible: the side of a cut
+   that is cut off elects no allocator and issues no plan;
+2. the deployment core (`sdrpeer.deploy.core`, sans-IO) gets the view and decides: fencing, which
+   robot to fetch a newer plan from and, on the allocator, adopting and re-issuing the newest
+   plan, re-allocating when robots die or degrade, moving `keep_original` components back;
+3. the touch shell learns whether the robot is caught up; then the core applies the plan to
+   this robot (`DeployCore.apply`, given the instances ACTIVE here, the cut-off state and the
+   launch policy).
+The core's effects are carried out here, in order: plan fetches and pushes over HTTP
+(`deploy.peers`, one task each), a plan taken is saved (`PlanStore.save`), applied and
+published in the record (`on_change`), the desired instances go to the instance manager, events
+to the event log. `deploy()` / `undeploy()`, `move_component()` and `recover_component()` are
+the core's requests (on the allocator; other agents forward them to it), run at once with the
+current view.
 """
 
 from __future__ import annotations
@@ -35,14 +35,15 @@ from typing import Any
 
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
-from sdrpeer.deploy.allocator_role import AllocatorRole
 from sdrpeer.deploy.config import DeployConfig
-from sdrpeer.deploy.derive import Remote, handover_waits, specs_for_robot, superseded
+from sdrpeer.deploy.core import DeployCore, DeployView, Here, Request
+from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
 from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible
+from sdrpeer.deploy.plan_change import Deploy, Move, Recover
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
 from sdrpeer.deploy.touch_shell import TouchShell
@@ -54,8 +55,8 @@ from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
-from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.system.model import SystemDef, Thresholds
+from sdrpeer.vocabulary import LifecycleState
 
 log = logging.getLogger(__name__)
 
@@ -92,23 +93,14 @@ class Coordinator:
         """Component faults on this robot (restart here; plan changes through the allocator)."""
         self.health = HealthShell(recovery)
         """Robot-wide recovery conditions (low battery, bad link) of every robot."""
-        self.store = PlanStore(data_dir / "plan.json")
+        self.core = DeployCore(name, PlanStore(data_dir / "plan.json"), config)
+        """Plan sync and the allocator's duties (sans-IO); this shell carries out its effects."""
         self.handoff = HandoffShell(
             name, manager, lambda: self.store.plan, self._api_of, token=token, events=events
         )
         """Component states to hot standbys (sync) and to a moved component's new instance."""
         manager.before_stop = self.handoff.retire
         self.election = ElectionShell(name, election, self.store.highest_epoch)
-        self._owned: set[str] = set()
-        self._fetching: tuple[int, str, int] | None = None
-        self._fetch_failed: dict[str, float] = {}
-        """Robot -> loop time before which a plan is not fetched from it again (it failed)."""
-        self._handover_since: dict[str, float] = {}
-        """Active placement here -> since when it waits for its component's old copy elsewhere."""
-        self._refused: dict[str, str] = {}
-        """Placements here the launch policy refuses, with why (logged once)."""
-        self._yielded: set[str] = set()
-        """Active placements here stood down for a newer plan's copy elsewhere (`superseded`)."""
         self._wake = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._bg: set[asyncio.Task[Any]] = set()
@@ -121,9 +113,14 @@ class Coordinator:
             accept=lambda plan, source: self.accept(plan, source=source),
             spawn=self._spawn,
             wake=self.wake,
+            ask_retry=config.ask_retry,
         )
         """Whether this robot is in touch with the fleet (quorum, cut off, rejoining)."""
-        self.role = AllocatorRole(self, config.adopt_after, config.retry_every)
+
+    @property
+    def store(self) -> PlanStore:
+        """The plan this robot holds and its fence."""
+        return self.core.store
 
     # ----------------------------------------------------------------- loop
     def start(self) -> None:
@@ -159,7 +156,7 @@ class Coordinator:
                 self.election.next_timer(),
                 self.health.next_timer(),
                 self.local.next_timer(),
-                self.role.next_timer(),
+                self.core.next_timer(),
                 self.touch.next_timer(self.store.plan),
             )
             busy = self.store.plan is not None or self.election.is_allocator()
@@ -180,7 +177,7 @@ class Coordinator:
 
     # ----------------------------------------------------------------- one step
     def step(self) -> None:
-        """Election, plan sync, apply, and the allocator's duties (see the module docstring)."""
+        """Health, election, the deployment core, apply (see the module docstring)."""
         now = asyncio.get_running_loop().time()
         state = self.cluster()
         plan = self.store.plan
@@ -195,23 +192,55 @@ class Coordinator:
         before = self.election.info()
         self.election.update(now, state.alive, self._thresholds(), degraded)
         info = self.election.info()
-        for rec in state.alive.values():
-            e = rec.election
-            if e is not None and e.claiming and e.leader is not None:
-                self.store.see_claim(e.epoch, e.leader)
         if info != before:
             self.events.add(
                 time.time(), "election", self.name, epoch=info.epoch, leader=info.leader
             )
             self.on_change()
-        self._sync(state)
+        self.core.step(now, self._view(now, state))
+        self._carry_out()
         self.touch.after_sync(now, state, quorum, self.caught_up(state), info.leader)
-        self._apply(state)
+        self._apply(now, state)
         self.handoff.tick()
-        if self.election.is_allocator():
-            self.role.on_duty(now, state)
-        else:
-            self.role.off_duty()
+
+    def _view(self, now: float, state: ClusterState | None = None) -> DeployView:
+        """What the deployment core is told this step."""
+        info = self.election.info()
+        return DeployView(
+            self.cluster() if state is None else state,
+            allocator=self.election.is_allocator(),
+            epoch=info.epoch,
+            leader=info.leader,
+            degraded=frozenset(self.health.degraded(now)),
+            excluded=frozenset(self.health.excluded(now)),
+        )
+
+    def _carry_out(self) -> None:
+        """Do what the core asked for, in order."""
+        for effect in self.core.effects():
+            self._do(effect)
+
+    def _do(self, effect: Effect) -> None:
+        if isinstance(effect, Log):
+            self.events.add(time.time(), effect.kind, self.name, **effect.detail)
+        elif isinstance(effect, Adopted):
+            self.store.save()
+            # applied before it is published: the record never shows the new plan's key next
+            # to instance states from the old one
+            self._apply(asyncio.get_running_loop().time(), self.cluster())
+            self.on_change()
+            self.wake()
+        elif isinstance(effect, Desired):
+            current = self.manager.desired()
+            for gone in effect.removed:
+                self.manager.remove(gone)
+            changed = [s for s in effect.specs if current.get(s.name) != s]
+            if changed:
+                self.manager.set_desired(changed)
+        elif isinstance(effect, Fetch):
+            self._spawn(self._fetch(effect.robot, effect.api))
+        elif isinstance(effect, Push):
+            self._spawn(self._push(effect))
 
     def _log_health(self) -> None:
         for event in self.health.drain():
@@ -234,138 +263,44 @@ class Coordinator:
         plan = self.store.plan
         return None if plan is None or plan.system is None else plan.system.allocation.thresholds
 
-    def _newest_offer(
-        self, state: ClusterState, now: float | None = None
-    ) -> tuple[str, tuple[int, str, int]] | None:
-        """The robot gossiping the newest plan we would take (with `now`: leaving out robots a
-        fetch just failed from, for `config.fetch_retry` seconds)."""
-        best: tuple[str, tuple[int, str, int]] | None = None
-        for robot, rec in state.alive.items():
-            p = rec.plan
-            if robot == self.name or p is None or rec.api is None:
-                continue
-            if now is not None and self._fetch_failed.get(robot, 0.0) > now:
-                continue
-            if self.store.accepts(p.key) and (best is None or p.key > best[1]):
-                best = (robot, p.key)
-        return best
-
     def caught_up(self, state: ClusterState) -> bool:
         """No alive robot gossips a plan newer than ours, and no fetch is in flight."""
-        return self._newest_offer(state) is None and self._fetching is None
-
-    def _sync(self, state: ClusterState) -> None:
-        offer = self._newest_offer(state, asyncio.get_running_loop().time())
-        if offer is None or self._fetching is not None:
-            return
-        robot, key = offer
-        api = state.alive[robot].api
-        assert api is not None
-        self._fetching = key
-        self._spawn(self._fetch(robot, api))
+        return self.core.caught_up(state)
 
     async def _fetch(self, robot: str, api: str) -> None:
+        plan: Plan | None = None
         try:
             plan = await peers.fetch_plan(api, self.token)
-            self.accept(plan, source=robot)
         except ApiError as e:
             log.info("cannot fetch the plan from %s: %s", robot, e)
-            self._fetch_failed[robot] = asyncio.get_running_loop().time() + self.config.fetch_retry
-        finally:
-            self._fetching = None
+        finally:  # whatever happened, the core hears the end of its fetch
+            if plan is None:
+                self.core.fetch_failed(asyncio.get_running_loop().time(), robot)
+            else:
+                self.core.fetched(robot, plan)
+            self._carry_out()
             self.wake()
+
+    async def _push(self, push: Push) -> None:
+        try:
+            await peers.push_plan(push.api, self.token, push.plan)
+        except ApiError as e:
+            log.info("cannot push the plan to %s (it will fetch it): %s", push.robot, e)
 
     def accept(self, plan: Plan, source: str) -> bool:
         """Offer a plan (fetched, pushed, or our own); True if it is now the one we hold."""
-        held = self.store.plan
-        if held is not None and held.key == plan.key:
-            return True  # the same plan again (a push and a fetch crossed): nothing to do
-        ok = self.store.offer(plan)
-        if ok:
-            self.events.add(
-                time.time(),
-                "plan.accepted",
-                self.name,
-                epoch=plan.epoch,
-                version=plan.version,
-                allocator=plan.allocator,
-                source=source,
-            )
-            self._apply(self.cluster())  # before publishing: the record never shows the new
-            self.on_change()  # plan's key next to instance states from the old one
-            self.wake()
-        else:
-            self.events.add(
-                time.time(),
-                "plan.refused",
-                self.name,
-                epoch=plan.epoch,
-                version=plan.version,
-                allocator=plan.allocator,
-                fence=self.store.highest_epoch,
-                source=source,
-            )
+        ok = self.core.offer(plan, source)
+        self._carry_out()
         return ok
 
-    def _apply(self, state: ClusterState) -> None:
-        plan = self.store.plan
-        if plan is None or not self.touch.joined:
-            return
-        remote: dict[str, Remote] = {}
-        for robot, rec in state.alive.items():
-            if robot == self.name:
-                continue
-            for inst in rec.instances:
-                remote[inst.name] = Remote(robot, inst.state, inst.data, inst.component, inst.role)
-        active_here = {s["name"] for s in self.manager.status() if s.get("state") == "ACTIVE"}
-        now = asyncio.get_running_loop().time()
-        waits = handover_waits(plan, self.name, remote, active_here)
-        for gone in self._handover_since.keys() - waits:
-            del self._handover_since[gone]
-        hold = {
-            n
-            for n in waits
-            if now - self._handover_since.setdefault(n, now) < self.config.handover_wait
-        }
-        newer = {
-            robot
-            for robot, rec in state.alive.items()
-            if robot != self.name and rec.plan is not None and self.store.accepts(rec.plan.key)
-        }
-        yielded = superseded(plan, self.name, remote, newer)
-        for name in sorted(yielded - self._yielded):
-            self.events.add(
-                time.time(), "plan.superseded", self.name, instance=name, newer=sorted(newer)
-            )
-        self._yielded = yielded
-        hold |= yielded
-        specs = specs_for_robot(plan, self.name, remote, active_here, hold)
-        specs = self._allowed(self.touch.hold_down(now, plan, specs))
-        names = {s.name for s in specs}
-        current = self.manager.desired()
-        for gone in sorted(self._owned - names):
-            self.manager.remove(gone)
-        changed = [s for s in specs if current.get(s.name) != s]
-        if changed:
-            self.manager.set_desired(changed)
-        self._owned = names
-
-    def _allowed(self, specs: list[InstanceSpec]) -> list[InstanceSpec]:
-        """`specs` less those this robot's launch policy refuses (a plan from an allocator that
-        did not know the policy yet): an event `launch.refused` says which and why, once."""
-        out = []
-        refused: dict[str, str] = {}
-        for spec in specs:
-            why = self.manager.policy.refusal(spec.launcher, spec.target)
-            if why is None:
-                out.append(spec)
-            else:
-                refused[spec.name] = why
-        for name, why in sorted(refused.items()):
-            if self._refused.get(name) != why:
-                self.events.add(time.time(), "launch.refused", self.name, instance=name, reason=why)
-        self._refused = refused
-        return out
+    def _apply(self, now: float, state: ClusterState) -> None:
+        """Hand the core this robot's own side; it answers with the desired instances."""
+        active = frozenset(
+            s["name"] for s in self.manager.status() if s.get("state") == LifecycleState.ACTIVE
+        )
+        here = Here(active, self.touch.joined, self.touch.cutoff, self.manager.policy)
+        self.core.apply(now, state, here)
+        self._carry_out()
 
     def status(self, now_wall: float) -> dict[str, Any]:
         """GET /v1/status: the plan's components with their robots and states."""
@@ -387,9 +322,7 @@ class Coordinator:
         }
         if self.election.is_allocator():
             try:
-                result = await self.role.recover_component(
-                    self.name, d.component, d.instance, d.action
-                )
+                result = await self.recover_component(self.name, d.component, d.instance, d.action)
             except LookupError:  # a plan changed under the decision: nothing to recover
                 return False
             return not isinstance(result, Infeasible)
@@ -400,16 +333,25 @@ class Coordinator:
         status, _ = await peer_client.call(rec.api, "POST", "/v1/recovery", self.token, body=body)
         return status == 200
 
+    async def request(self, reason: Request) -> Plan | Infeasible:
+        """Hand a request to the core at once, with the current view (allocator only:
+        NotAllocator elsewhere), and carry out what it asks for."""
+        now = asyncio.get_running_loop().time()
+        try:
+            return self.core.request(now, self._view(now), reason)
+        finally:
+            self._carry_out()
+
     async def deploy(self, system: SystemDef | None, origin: str) -> Plan | Infeasible:
         """Allocate `system` (None: undeploy) and publish the plan (allocator only)."""
-        return await self.role.deploy(system, origin)
+        return await self.request(Deploy(system, origin))
 
     async def move_component(self, component: str, to: str | None) -> Plan | Infeasible:
         """A planned move of one component's active (allocator only; see deploy.move)."""
-        return await self.role.move_component(component, to)
+        return await self.request(Move(component, to))
 
     async def recover_component(
         self, robot: str, component: str, instance: str, action: str
     ) -> Plan | Infeasible:
         """A robot's recovery step that changes who is active (allocator only)."""
-        return await self.role.recover_component(robot, component, instance, action)
+        return await self.request(Recover(robot, component, instance, action))

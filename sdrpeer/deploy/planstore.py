@@ -1,12 +1,12 @@
 """The plan one robot holds, fenced by the allocator's (epoch, name), kept across restarts.
 
-How it works: `offer(plan)` accepts a plan only when its key `(epoch, allocator, version)` is
-larger than the held plan's and the election fence (`sdrpeer.election.fence.Fence`, raised by
-`see_claim` to every allocator claim this robot hears of) admits its `(epoch, allocator)`: a plan
-from a stale allocator is refused and counted, so it cannot undo a newer one. An accepted plan is
-written to `DATA_DIR/plan.json` (atomically) and read back when the agent starts, so a restarted
-robot still knows the system and can give it to a new allocator. `info()` is what the robot
-gossips about it.
+How it works: `offer(plan)` (pure: the deployment core calls it) accepts a plan only when its
+key `(epoch, allocator, version)` is larger than the held plan's and the election fence
+(`sdrpeer.election.fence.Fence`, raised by `see_claim` to every allocator claim this robot hears
+of) admits its `(epoch, allocator)`: a plan from a stale allocator is refused and counted, so it
+cannot undo a newer one. The shell writes an accepted plan to `DATA_DIR/plan.json` with `save()`
+(atomically); it is read back when the agent starts, so a restarted robot still knows the system
+and can give it to a new allocator. `info()` is what the robot gossips about it.
 """
 
 from __future__ import annotations
@@ -57,7 +57,6 @@ class PlanStore:
             log.warning("%s: ignoring the saved plan: %s", path, e)
             return
         self.plan = plan
-        self._digest = plan_digest(plan)
         self.fence.raise_to(plan.epoch, plan.allocator)
 
     def see_claim(self, epoch: int, allocator: str) -> None:
@@ -78,8 +77,7 @@ class PlanStore:
             return False
         self.fence.admit(plan.epoch, plan.allocator)
         self.plan = plan
-        self._digest = plan_digest(plan)
-        self._save(plan)
+        self._digest = ""
         return True
 
     def info(self) -> PlanInfo | None:
@@ -87,10 +85,14 @@ class PlanStore:
         if self.plan is None:
             return None
         p = self.plan
+        if not self._digest:  # computed once per plan held, when first gossiped
+            self._digest = plan_digest(p)
         return PlanInfo(p.epoch, p.version, self._digest, p.allocator)
 
-    def _save(self, plan: Plan) -> None:
-        if self.path is None:
+    def save(self) -> None:
+        """Write the plan held to `path` (atomically; nothing without a path or a plan)."""
+        plan = self.plan
+        if self.path is None or plan is None:
             return
         tmp = self.path.with_suffix(".tmp")
         try:

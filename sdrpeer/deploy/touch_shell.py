@@ -7,11 +7,12 @@ the pure `CutOff` learns whether the robot is cut off, back (rejoining) or in to
 from a cut, or restarted with a plan that places other robots, asks one robot of the fleet for
 its plan over the API (the allocator first, else the robot gossiping the newest plan; gossip
 alone may still show it the records from before the cut) and counts as caught up only after the
-answer; failed asks are retried every `ASK_RETRY` seconds. `joined` says whether the robot has
-been in touch since it started (until then the coordinator applies no plan: it would launch
-hosts for a plan the fleet has very likely replaced), `hold_down` turns the specs of actives a
-robot cut off must stand down INACTIVE. Events `fleet.cut_off`, `fleet.rejoined` and
-`fleet.in_touch` say when the state changed, with how many robots it heard of how many.
+answer; failed asks are retried every `DeployConfig.ask_retry` seconds. `joined` says whether
+the robot has been in touch since it started (until then the coordinator applies no plan: it
+would launch hosts for a plan the fleet has very likely replaced); the deployment core reads
+`cutoff` to hold down the actives a robot cut off must stand down INACTIVE. Events
+`fleet.cut_off`, `fleet.rejoined` and `fleet.in_touch` say when the state changed, with how
+many robots it heard of how many.
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import asyncio
 import logging
 import time
 from collections.abc import Awaitable, Callable, Coroutine
-from dataclasses import replace
 from typing import Any
 
 from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum
@@ -28,13 +28,9 @@ from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
 from sdrpeer.eventlog import EventLog
 from sdrpeer.plan import Plan
-from sdrpeer.runtime.spec import InstanceSpec
-from sdrpeer.vocabulary import InstanceRole, LifecycleState
+from sdrpeer.vocabulary import InstanceRole
 
 log = logging.getLogger(__name__)
-
-ASK_RETRY = 0.5
-"""Seconds before a robot back from a cut asks again after an ask failed."""
 
 
 class TouchShell:
@@ -50,10 +46,13 @@ class TouchShell:
         accept: Callable[[Plan, str], bool],
         spawn: Callable[[Coroutine[Any, Any, None]], None],
         wake: Callable[[], None],
+        ask_retry: float = 0.5,
     ) -> None:
         """`kept`: the plan this agent started with; `ask(api)`: the plan of the robot there;
-        `accept(plan, source)`: offer it to the plan store; `spawn`, `wake`: the coordinator's."""
+        `accept(plan, source)`: offer it to the plan store; `spawn`, `wake`: the coordinator's;
+        `ask_retry`: `DeployConfig.ask_retry`."""
         self.name = name
+        self.ask_retry = ask_retry
         self.events = events
         self.ask = ask
         self.accept = accept
@@ -106,19 +105,6 @@ class TouchShell:
         ]
         return self.cutoff.next_timer(policies)
 
-    def hold_down(self, now: float, plan: Plan, specs: list[InstanceSpec]) -> list[InstanceSpec]:
-        """`specs` with the actives a robot cut off (or not caught up yet) stands down INACTIVE."""
-        system = plan.system
-        if not (self.cutoff.cut or self.cutoff.rejoining) or system is None:
-            return specs
-        return [
-            replace(s, desired=LifecycleState.INACTIVE)
-            if s.role == InstanceRole.ACTIVE
-            and self.cutoff.holds_down(now, system.component(s.component).disconnect)
-            else s
-            for s in specs
-        ]
-
     def _log(self, heard: int) -> None:
         c = self.cutoff
         kind = "fleet.cut_off" if c.cut else "fleet.rejoined" if c.rejoining else "fleet.in_touch"
@@ -147,7 +133,7 @@ class TouchShell:
             plan = await self.ask(api)
         except ApiError as e:
             log.info("cannot ask %s for its plan after a cut: %s", robot, e)
-            self._ask_after = asyncio.get_running_loop().time() + ASK_RETRY
+            self._ask_after = asyncio.get_running_loop().time() + self.ask_retry
         else:
             if plan is not None:
                 self.accept(plan, robot)

@@ -1,0 +1,252 @@
+"""The allocator's one path from a reason to a new plan (pure: no clock, no I/O).
+
+How it works: every plan the allocator issues comes from `change(reason, ...)`, whatever asked
+for it — a deploy or undeploy (`Deploy`), the re-issue of a held plan under a new allocator's
+epoch or a re-allocation after robots died or degraded (`Reissue`), a robot's recovery step that
+changes who is active (`Recover`), a planned move (`Move`). The skeleton is the same for all:
+the next version (`plan.version + 1` under the same epoch, else 1), the allocation inputs the
+reason asks for (`_ask`), `place`, an `allocation.infeasible` log when nothing fits, and the log
+lines of the new plan. The caller (`sdrpeer.deploy.core`) publishes what comes out.
+
+What differs by reason:
+- `Deploy`: the system as given, the robot that received it tried first, no robot left out;
+- `Reissue`: the held plan, smallest change, `held` components kept where they are; with
+  `recovery` the thresholds are relaxed (`placer.relaxed_for_recovery`) and missing standbys
+  tolerated. When nothing fits, a plan of another epoch or allocator is re-issued unchanged
+  under ours (adopting it loses nothing) and our own is kept; an unchanged allocation issues
+  nothing;
+- `Recover`: `standby_same_robot` swaps in the standby on that robot, the other steps avoid that
+  robot for the component; `LookupError` for a component the system does not have;
+- `Move`: `move.move_inputs` (pinned to a destination, or its robot avoided; `MoveError`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+from dataclasses import dataclass, field, replace
+
+from sdrpeer.alloc.view import ClusterView, RobotView
+from sdrpeer.deploy.effects import Log
+from sdrpeer.deploy.move import move_inputs, swap_to_standby
+from sdrpeer.deploy.placer import Infeasible, place
+from sdrpeer.deploy.view import ClusterState
+from sdrpeer.plan import Plan
+from sdrpeer.system.model import SystemDef
+from sdrpeer.vocabulary import InstanceRole
+
+
+@dataclass(frozen=True, slots=True)
+class Deploy:
+    """Allocate a system (None: undeploy)."""
+
+    system: SystemDef | None
+    origin: str
+    """The robot that received the system (first_fit tries it first)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Reissue:
+    """Re-allocate the held plan under our epoch (smallest change)."""
+
+    why: str
+    """Logged as the allocation's reason."""
+    recovery: bool = False
+    """Components move because of a failure (relaxed thresholds, standbys may be short)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Recover:
+    """A robot's recovery step that changes who is active."""
+
+    robot: str
+    component: str
+    instance: str
+    action: str
+    """standby_same_robot, standby_other_robot or launch_other_robot."""
+
+
+@dataclass(frozen=True, slots=True)
+class Move:
+    """A planned move of a component's active (to `to`, or off its robot)."""
+
+    component: str
+    to: str | None
+
+
+Reason = Deploy | Reissue | Recover | Move
+"""Why the allocator allocates."""
+
+
+@dataclass(frozen=True, slots=True)
+class Context:
+    """What every allocation needs besides the reason."""
+
+    me: str
+    """The allocator (this robot)."""
+    epoch: int
+    """Its epoch."""
+    state: ClusterState
+    excluded: frozenset[str] = frozenset()
+    """Robots that must not receive components (degraded, or within their dwell)."""
+    held: frozenset[str] = frozenset()
+    """Components the disconnect policy keeps where they are (`disconnect.held_components`)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Change:
+    """What one allocation came to."""
+
+    result: Plan | Infeasible | None
+    """The plan to publish, why there is none, or None: nothing to publish."""
+    logs: list[Log] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class _Ask:
+    system: SystemDef | None
+    view: ClusterView
+    previous: Plan | None
+    avoid: dict[str, set[str]] = field(default_factory=dict)
+    recovery: bool = False
+    held: frozenset[str] = frozenset()
+
+
+def cluster_view(
+    state: ClusterState, origin: str | None, exclude: Collection[str] = frozenset()
+) -> ClusterView:
+    """The allocator's view: every alive robot with a record, in first-fit order, except
+    `exclude` (robots that must not receive components: degraded, or being left)."""
+    names = [n for n in state.order if n in state.alive] or sorted(state.alive)
+    robots = []
+    for name in names:
+        if name not in exclude:
+            rec = state.alive[name]
+            robots.append(RobotView(name, rec.metrics, rec.links, rec.instances, rec.launch))
+    return ClusterView(tuple(robots), origin)
+
+
+def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
+    """The plan `reason` asks for, from the held `plan` (see the module docstring)."""
+    epoch, me = ctx.epoch, ctx.me
+    version = plan.version + 1 if plan is not None and plan.epoch == epoch else 1
+    logs: list[Log] = []
+    ask = _ask(reason, plan, ctx)
+    if isinstance(ask, Infeasible):
+        return Change(ask)
+    if ask.system is None:
+        new = Plan(epoch, version, None, (), me)
+    else:
+        result = place(
+            ask.system,
+            ask.view,
+            epoch=epoch,
+            version=version,
+            allocator=me,
+            previous=ask.previous,
+            avoid=ask.avoid,
+            recovery=ask.recovery,
+            held=ask.held,
+        )
+        if isinstance(result, Infeasible):
+            logs.append(Log("allocation.infeasible", {"report": str(result)}))
+            if not isinstance(reason, Reissue):
+                return Change(result, logs)
+            assert plan is not None
+            if plan.epoch == epoch and plan.allocator == me:
+                return Change(None, logs)  # nothing better to issue: keep the plan we hold
+            new = Plan(epoch, version, plan.system, plan.placements, me)
+        elif isinstance(reason, Reissue):
+            assert plan is not None
+            if result.placements == plan.placements and plan.epoch == epoch:
+                return Change(None, logs)  # e.g. still no robot for a missing standby
+            new = result
+        else:
+            new = result
+    if isinstance(reason, Move) and plan is not None:
+        new = replace(new, system=plan.system)  # the pin is for this allocation only
+    return Change(new, logs + _logs(reason, plan, new, epoch))
+
+
+def _ask(reason: Reason, plan: Plan | None, ctx: Context) -> _Ask | Infeasible:
+    state, held = ctx.state, ctx.held
+    if isinstance(reason, Deploy):
+        previous = plan if plan is not None and plan.system is not None else None
+        return _Ask(reason.system, cluster_view(state, reason.origin), previous)
+    if isinstance(reason, Reissue):
+        assert plan is not None
+        if not reason.recovery:
+            return _Ask(plan.system, cluster_view(state, None), plan)
+        return _Ask(
+            plan.system, cluster_view(state, None, ctx.excluded), plan, {}, recovery=True, held=held
+        )
+    if isinstance(reason, Recover):
+        comp = reason.component
+        if plan is None or plan.system is None:
+            return Infeasible(comp, (), 0)
+        if all(c.name != comp for c in plan.system.components):
+            raise LookupError(f"no component {comp!r} in the deployed system")
+        if reason.action == "standby_same_robot":
+            previous, avoid = swap_to_standby(plan, comp, reason.robot), {}
+        else:
+            previous, avoid = plan, {comp: {reason.robot}}
+        view = cluster_view(state, None, ctx.excluded)
+        return _Ask(plan.system, view, previous, avoid, recovery=True, held=held - {comp})
+    inputs = move_inputs(plan, reason.component, reason.to, state.alive)
+    view = cluster_view(state, None, ctx.excluded)
+    return _Ask(inputs.system, view, inputs.previous, inputs.avoid, held=held - {reason.component})
+
+
+def _logs(reason: Reason, old: Plan | None, new: Plan, epoch: int) -> list[Log]:
+    if isinstance(reason, Deploy):
+        system = None if reason.system is None else reason.system.name
+        return [Log("allocation", {"reason": "deploy", "epoch": epoch, "system": system})]
+    assert old is not None
+    moved = moved_components(old, new)
+    if isinstance(reason, Reissue):
+        logs = [Log("allocation", {"reason": reason.why, "epoch": epoch})]
+        if reason.recovery and moved:
+            logs.append(Log("recovery.move", {"reason": reason.why, "moved": moved}))
+        return logs
+    if isinstance(reason, Recover):
+        why = f"{reason.action} for {reason.instance} on {reason.robot}"
+        return [Log("recovery.move", {"reason": why, "moved": moved})]
+    active = old.active_of(reason.component)
+    origin = "" if active is None else active.robot
+    why = f"move {reason.component} from {origin}" + (f" to {reason.to}" if reason.to else "")
+    return [
+        Log("allocation", {"reason": why, "epoch": epoch}),
+        Log("move", {"reason": why, "moved": moved}),
+    ]
+
+
+def with_origins(new: Plan, old: Plan | None, state: ClusterState) -> Plan:
+    """`new` with the origins of `old` it still needs (the component is not back on its robot),
+    and one for each `keep_original` active it moves off a robot that is gone."""
+    if new.system is None or old is None or old.system is None:
+        return replace(new, origins=())
+    names = {c.name for c in new.system.components}
+    same = old.system.digest() == new.system.digest()  # a new system starts afresh
+    origins = dict(old.origins) if same else {}
+    for comp, (src, _) in moved_components(old, new).items():
+        if src not in state.alive and new.system.component(comp).disconnect.reconcile == (
+            "keep_original"
+        ):
+            origins.setdefault(comp, src)
+    kept = {}
+    for comp, robot in origins.items():
+        active = new.active_of(comp)
+        if comp in names and (active is None or active.robot != robot):
+            kept[comp] = robot
+    return replace(new, origins=tuple(sorted(kept.items())))
+
+
+def moved_components(old: Plan, new: Plan) -> dict[str, list[str]]:
+    """component -> [from robot, to robot] for every active instance that changed robot."""
+    out = {}
+    for p in new.placements:
+        if p.role != InstanceRole.ACTIVE:
+            continue
+        before = old.active_of(p.component)
+        if before is not None and before.robot != p.robot:
+            out[p.component] = [before.robot, p.robot]
+    return out
