@@ -1,10 +1,100 @@
-"""A bounded, ordered log of what happened on and around this robot (the API's /v1/events)."""
+"""A bounded, ordered log of what happened on and around this robot (the API's /v1/events),
+and the kinds of its entries (`EventKind`)."""
 
 from __future__ import annotations
 
 from collections import Counter, deque
 from collections.abc import Callable
+from enum import StrEnum
 from typing import Any
+
+
+class EventKind(StrEnum):
+    """Every kind of entry the event log holds, declared once: producers and consumers name
+    these members, never the strings (tests/test_event_kinds.py holds the code to it)."""
+
+    AGENT_START = "agent.start"
+    """This agent started (its addresses, preset)."""
+    SCENARIO = "scenario"
+    """A virtual robot's scenario step changed its facts."""
+    ROBOT_SET = "robot.set"
+    """A virtual robot's facts were changed through the API."""
+    TRAP = "trap"
+    """A threshold crossing (battery, RSSI: broadcast; memory, CPU: this robot's)."""
+    TRAP_MALFORMED = "trap.malformed"
+    """A peer's trap did not decode."""
+    RECORD_MALFORMED = "record.malformed"
+    """A peer's record did not decode."""
+    VITALS_MALFORMED = "vitals.malformed"
+    """A peer's vitals did not decode."""
+    WIRE_REJECTED = "wire.rejected"
+    """Gossip datagrams refused (rate-limited summary by reason)."""
+    KEYS_RELOADED = "keys.reloaded"
+    """The key file was read again and its keys are in use."""
+    KEYS_RELOAD_FAILED = "keys.reload_failed"
+    """The key file could not be read: the old keys stay."""
+    MEMBER_JOIN = "member.join"
+    """A robot was heard of for the first time."""
+    MEMBER_ALIVE = "member.alive"
+    """A robot is alive again."""
+    MEMBER_SUSPECT = "member.suspect"
+    """A robot is suspected of having failed."""
+    MEMBER_DEAD = "member.dead"
+    """A robot was declared dead."""
+    MEMBER_LEFT = "member.left"
+    """A robot left the fleet."""
+    MEMBER_REAPED = "member.reaped"
+    """A dead or departed robot was forgotten."""
+    INSTANCE_STATE = "instance.state"
+    """An instance on this robot changed state."""
+    INSTANCE_FAULT = "instance.fault"
+    """A component fault, an instance in ERROR or a host that died."""
+    ELECTION = "election"
+    """The allocator this robot believes in changed (epoch, leader)."""
+    ELECTION_ELECTED = "election.elected"
+    """This robot claimed the allocator role."""
+    ELECTION_STEPPED_DOWN = "election.stepped_down"
+    """This robot gave the allocator role up."""
+    PLAN_ACCEPTED = "plan.accepted"
+    """This robot took a newer plan."""
+    PLAN_REFUSED = "plan.refused"
+    """A plan from a fenced-off epoch was refused."""
+    PLAN_SUPERSEDED = "plan.superseded"
+    """An active here stood down for a newer plan's copy elsewhere."""
+    LAUNCH_REFUSED = "launch.refused"
+    """A placement here is one this robot's launch policy refuses."""
+    ALLOCATION = "allocation"
+    """The allocator issued a plan (deploy, re-allocation, move)."""
+    ALLOCATION_INFEASIBLE = "allocation.infeasible"
+    """No placement meets the constraints."""
+    RECONCILE = "reconcile"
+    """A component goes back to its original robot (keep_original)."""
+    MOVE = "move"
+    """A planned move."""
+    RECOVERY_MOVE = "recovery.move"
+    """The allocator moved components off a failing robot."""
+    RECOVERY_DECISION = "recovery.decision"
+    """Local recovery chose a step of the ladder."""
+    RECOVERY_EXHAUSTED = "recovery.exhausted"
+    """Local recovery ran out of steps."""
+    RECOVERY_CONDITION = "recovery.condition"
+    """A robot-wide recovery condition holds."""
+    RECOVERY_CLEARED = "recovery.cleared"
+    """A robot-wide recovery condition no longer holds."""
+    FLEET_CUT_OFF = "fleet.cut_off"
+    """This robot hears fewer than a majority of the fleet."""
+    FLEET_REJOINED = "fleet.rejoined"
+    """This robot hears a majority again and is catching up."""
+    FLEET_IN_TOUCH = "fleet.in_touch"
+    """This robot is in touch with the fleet."""
+    STATE_HANDOFF = "state.handoff"
+    """A component's state was sent to another instance."""
+    STATE_RESTORED = "state.restored"
+    """A component's state was restored here."""
+    STATE_DROPPED = "state.dropped"
+    """A state that arrived here was dropped."""
+    STATE_FAILED = "state.failed"
+    """A state handoff failed."""
 
 
 class EventLog:
@@ -62,8 +152,8 @@ class RecoveryTally:
     def count(self, entry: dict[str, Any]) -> None:
         """Count one entry if it is a recovery decision or move."""
         detail = entry["detail"]
-        if entry["kind"] == "recovery.decision":
+        if entry["kind"] == EventKind.RECOVERY_DECISION:
             self.actions[str(detail.get("action"))] += 1
-        elif entry["kind"] == "recovery.move":
+        elif entry["kind"] == EventKind.RECOVERY_MOVE:
             for component in detail.get("moved") or {}:
                 self.moves[str(component)] += 1

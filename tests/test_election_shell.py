@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from sdrpeer.deploy.election_shell import ElectionShell
 from sdrpeer.election.config import lan
+from sdrpeer.election.events import Elected, LeaderChanged, SteppedDown
 from sdrpeer.record.robot import ElectionInfo, LinkSummary, Metrics, RobotRecord
 from sdrpeer.system.model import Thresholds
 
@@ -46,3 +47,24 @@ def test_this_robot_still_judges_itself():
     assert shell.is_allocator()
     shell.update(116.0, alive, NEEDS_BATTERY, degraded={"robot-1"})
     assert not shell.is_allocator()  # its own recovery condition: it abdicates
+
+
+def test_the_cores_events_are_passed_on_as_they_happen():
+    """What the election core reports reaches the shell's caller (the coordinator logs it):
+    a leader seen, this robot's claim, its stepping down; nothing twice."""
+    shell = ElectionShell("robot-1", lan(), known_epoch=3)
+    claim = ElectionInfo(4, "robot-2", True)
+    alive = {"robot-1": record(90.0), "robot-2": record(90.0, claim)}
+    shell.update(100.0, alive, NEEDS_BATTERY)
+    assert shell.drain() == [LeaderChanged(4, "robot-2", None, 100.0)]
+    assert shell.drain() == []
+    alive = {"robot-1": record(90.0)}  # robot-2 is gone: the role is vacant, robot-1 claims it
+    for t in (101.0, 105.0, 110.0):
+        shell.update(t, alive, NEEDS_BATTERY)
+    events = shell.drain()
+    assert [type(e) for e in events] == [LeaderChanged, Elected, LeaderChanged]
+    assert events[0].leader is None
+    assert events[1].epoch == 5
+    assert events[2].leader == "robot-1"
+    shell.update(111.0, alive, NEEDS_BATTERY, degraded={"robot-1"})
+    assert [type(e) for e in shell.drain()] == [SteppedDown, LeaderChanged]

@@ -36,7 +36,7 @@ from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
 from sdrpeer.deploy.routes import ROUTES as DEPLOY_ROUTES
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ConfigError, RecordError
-from sdrpeer.eventlog import EventLog, RecoveryTally
+from sdrpeer.eventlog import EventKind, EventLog, RecoveryTally
 from sdrpeer.gossip.core import Membership
 from sdrpeer.gossip.events import (
     REAPED,
@@ -224,7 +224,11 @@ class Agent:
         # The first record waits for the deployment stack (its election belief and plan): one
         # record per robot at start, not two, and each is spread to the whole fleet.
         self.events.add(
-            time.time(), "agent.start", cfg.name, gossip=f"{addr[0]}:{addr[1]}", api=self.api_url
+            time.time(),
+            EventKind.AGENT_START,
+            cfg.name,
+            gossip=f"{addr[0]}:{addr[1]}",
+            api=self.api_url,
         )
         seeds = [parse_hostport(s) for s in cfg.join]
         if seeds:
@@ -365,7 +369,9 @@ class Agent:
                 t_prev = t
                 if changes:
                     self.robot.set(now, changes)
-                    self.events.add(time.time(), "scenario", self.name, changes=_jsonable(changes))
+                    self.events.add(
+                        time.time(), EventKind.SCENARIO, self.name, changes=_jsonable(changes)
+                    )
             if self.instances is not None:
                 self.instances.sample()
             self._publish()
@@ -390,7 +396,7 @@ class Agent:
         for trap in self.traps.feed(metrics, now):
             if trap.broadcast:  # its crossing also makes a new record (a publishing boundary)
                 self.shell.broadcast_event("trap", encode_trap(trap))
-            self.events.add(time.time(), "trap", self.name, **_trap_json(trap))
+            self.events.add(time.time(), EventKind.TRAP, self.name, **_trap_json(trap))
         self._update_rates(now)
         infos = () if self.instances is None else self.instances.infos()
         self._log_states(infos)
@@ -432,7 +438,7 @@ class Agent:
                 comp = next(i.component for i in infos if i.name == name)
                 self.events.add(
                     time.time(),
-                    "instance.state",
+                    EventKind.INSTANCE_STATE,
                     self.name,
                     instance=name,
                     component=comp,
@@ -440,7 +446,9 @@ class Agent:
                     role=role,
                 )
         for gone in set(self._states) - set(now):
-            self.events.add(time.time(), "instance.state", self.name, instance=gone, state="gone")
+            self.events.add(
+                time.time(), EventKind.INSTANCE_STATE, self.name, instance=gone, state="gone"
+            )
         self._states = now
 
     def _update_rates(self, now: float) -> None:
@@ -468,7 +476,7 @@ class Agent:
             ring = Keyring.from_file(key_file)
         except (ConfigError, OSError, ValueError) as exc:
             log.error("key reload failed, the old keys stay: %s", exc)
-            self.events.add(time.time(), "keys.reload_failed", self.name, error=str(exc))
+            self.events.add(time.time(), EventKind.KEYS_RELOAD_FAILED, self.name, error=str(exc))
             return False
         self.keyring = ring
         if self.shell is not None:
@@ -480,13 +488,18 @@ class Agent:
             self.instances.set_data_keys(data_keys(ring.keys))
         ids = [k.hex() for k in ring.key_ids]
         log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
-        self.events.add(time.time(), "keys.reloaded", self.name, key_ids=ids)
+        self.events.add(time.time(), EventKind.KEYS_RELOADED, self.name, key_ids=ids)
         return True
 
     def _on_fault(self, name: str, kind: str, detail: str) -> None:
         """A component fault, an instance in ERROR, or a host that died: to local recovery."""
         self.events.add(
-            time.time(), "instance.fault", self.name, instance=name, fault=kind, detail=detail
+            time.time(),
+            EventKind.INSTANCE_FAULT,
+            self.name,
+            instance=name,
+            fault=kind,
+            detail=detail,
         )
         if self.coordinator is not None:
             self.coordinator.local.fault(name, kind, detail)
@@ -543,7 +556,7 @@ class Agent:
             try:
                 record = decode_record(event.payload)
             except RecordError as e:
-                self.events.add(wall, "record.malformed", event.name, error=str(e))
+                self.events.add(wall, EventKind.RECORD_MALFORMED, event.name, error=str(e))
                 return
             old = self.records.get(event.name)
             self._received[event.name] = (event.version, record)
@@ -555,7 +568,7 @@ class Agent:
             try:
                 vitals = decode_vitals(event.payload)
             except RecordError as e:
-                self.events.add(wall, "vitals.malformed", event.name, error=str(e))
+                self.events.add(wall, EventKind.VITALS_MALFORMED, event.name, error=str(e))
                 return
             self._vitals[event.name] = (event.version, event.revision, vitals)
             self._overlay(event.name)
@@ -565,9 +578,9 @@ class Agent:
             try:
                 trap = decode_trap(event.payload)
             except RecordError as e:
-                self.events.add(wall, "trap.malformed", event.source, error=str(e))
+                self.events.add(wall, EventKind.TRAP_MALFORMED, event.source, error=str(e))
                 return
-            self.events.add(wall, "trap", event.source, **_trap_json(trap))
+            self.events.add(wall, EventKind.TRAP, event.source, **_trap_json(trap))
 
     def _overlay(self, name: str) -> None:
         """records[name]: the record received, with the newest vitals of it (or of a newer
@@ -586,7 +599,12 @@ class Agent:
 
     def _on_reject(self, reason: str, detail: str, count: int) -> None:
         self.events.add(
-            time.time(), "wire.rejected", self.name, reason=reason, count=count, detail=detail
+            time.time(),
+            EventKind.WIRE_REJECTED,
+            self.name,
+            reason=reason,
+            count=count,
+            detail=detail,
         )
 
     def _on_member(self, event: MemberChanged, wall: float) -> None:
@@ -596,11 +614,11 @@ class Agent:
             self._vitals.pop(event.name, None)
             self.record_json.pop(event.name, None)
             self.links.forget(event.name)
-            kind = "member.reaped"
+            kind = EventKind.MEMBER_REAPED
         elif event.previous is None:
-            kind = "member.join"
+            kind = EventKind.MEMBER_JOIN
         else:
-            kind = f"member.{event.state}"
+            kind = EventKind(f"member.{event.state}")
         detail: dict[str, Any] = {
             "addr": f"{event.addr[0]}:{event.addr[1]}",
             "incarnation": event.incarnation,
@@ -609,7 +627,7 @@ class Agent:
             detail["previous"] = event.previous
         self.events.add(wall, kind, event.name, **detail)
         self._wake_coordinator()
-        if kind in ("member.dead", "member.suspect", "member.left"):
+        if kind in (EventKind.MEMBER_DEAD, EventKind.MEMBER_SUSPECT, EventKind.MEMBER_LEFT):
             log.info("%s is %s (incarnation %d)", event.name, kind[7:], event.incarnation)
 
     # ----------------------------------------------------------------- AgentView
@@ -762,7 +780,7 @@ class Agent:
         if self.robot is None:
             raise ConfigError(f"{self.name} reads real hardware (no --robot-file): nothing to set")
         self.robot.set(asyncio.get_running_loop().time(), changes)
-        self.events.add(time.time(), "robot.set", self.name, changes=_jsonable(changes))
+        self.events.add(time.time(), EventKind.ROBOT_SET, self.name, changes=_jsonable(changes))
         self._publish()
         assert self.metrics is not None
         return metrics_to_json(self.metrics)

@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 from datetime import datetime, tzinfo
 from typing import Any
 
+from sdrpeer.eventlog import EventKind
 from sdrpeer.vocabulary import LifecycleState, MemberState, ProcessState
 
 STATE_COLORS: dict[str, str] = {
@@ -230,15 +231,15 @@ def format_agent(agent: Mapping[str, Any]) -> str:
     return "\n".join(f"{k + ':':<{width + 1}} {v}" for k, v in pairs)
 
 
-EVENT_COLORS = {
-    "member.join": "32",
-    "member.alive": "32",
-    "member.suspect": "33",
-    "member.dead": "31",
-    "member.left": "90",
-    "member.reaped": "90",
-    "trap": "35",
-    "wire.rejected": "31",
+EVENT_COLORS: dict[str, str] = {
+    EventKind.MEMBER_JOIN: "32",
+    EventKind.MEMBER_ALIVE: "32",
+    EventKind.MEMBER_SUSPECT: "33",
+    EventKind.MEMBER_DEAD: "31",
+    EventKind.MEMBER_LEFT: "90",
+    EventKind.MEMBER_REAPED: "90",
+    EventKind.TRAP: "35",
+    EventKind.WIRE_REJECTED: "31",
 }
 
 

@@ -25,10 +25,17 @@ from typing import Any, Protocol
 from sdrpeer.dashboard.history import History, typical_link
 from sdrpeer.dashboard.moments import Moments
 from sdrpeer.dashboard.stream import Hub, encode_event
+from sdrpeer.eventlog import EventKind
 
 log = logging.getLogger(__name__)
 
-POKE_KINDS = ("instance.state", "election", "plan.", "member.", "recovery.move")
+POKE_KINDS = (
+    EventKind.INSTANCE_STATE,
+    EventKind.ELECTION,
+    "plan.",
+    "member.",
+    EventKind.RECOVERY_MOVE,
+)
 """Event kinds after which pages get a fresh sample at once."""
 
 __all__ = ["DashboardSource", "Feed", "member_summary"]

@@ -25,20 +25,21 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sdrpeer.eventlog import EventKind
 from sdrpeer.vocabulary import MemberState
 
 EVENT_KINDS = frozenset(
     {
-        "election",
-        "allocation",
-        "plan.accepted",
-        "trap",
-        "scenario",
-        "robot.set",
-        "member.dead",
-        "member.suspect",
-        "member.left",
-        "member.alive",
+        EventKind.ELECTION,
+        EventKind.ALLOCATION,
+        EventKind.PLAN_ACCEPTED,
+        EventKind.TRAP,
+        EventKind.SCENARIO,
+        EventKind.ROBOT_SET,
+        EventKind.MEMBER_DEAD,
+        EventKind.MEMBER_SUSPECT,
+        EventKind.MEMBER_LEFT,
+        EventKind.MEMBER_ALIVE,
     }
 )
 """Event kinds the timeline keeps, besides every `recovery.*`."""

@@ -29,6 +29,7 @@ from sdrpeer.client import AgentClient, post_when_elected, wait_for
 from sdrpeer.demo.query import Timeline
 from sdrpeer.demo.timeline import TimelineRecorder, load_timeline
 from sdrpeer.errors import ApiError
+from sdrpeer.eventlog import EventKind
 from sdrpeer.lab.up import UpOptions, start_lab
 from sdrpeer.record.robot import state_to_wire
 from sdrpeer.system.loader import parse_system
@@ -181,7 +182,7 @@ def _times(result: RunResult, clients: dict[str, AgentClient], t_done: float) ->
     cond = [
         e["ts"]
         for e in events
-        if e["kind"] == "recovery.condition"
+        if e["kind"] == EventKind.RECOVERY_CONDITION
         and e["robot"] == allocator
         and (e.get("detail") or {}).get("subject") == "robot-1"
     ]
@@ -209,7 +210,7 @@ def _last_activation(events: list[dict[str, Any]], since: float) -> float | None
     times = [
         e["ts"]
         for e in events
-        if e["kind"] == "instance.state"
+        if e["kind"] == EventKind.INSTANCE_STATE
         and e["ts"] >= since
         and (e.get("detail") or {}).get("state") == state_to_wire(LifecycleState.ACTIVE)
         and (e.get("detail") or {}).get("role") == InstanceRole.ACTIVE
@@ -222,7 +223,7 @@ def recovery_marks(lines: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [
         {"t": line["t"], "kind": "mark", "what": "recovery", "label": "move"}
         for line in lines
-        if line.get("kind") == "event" and line.get("event") == "recovery.move"
+        if line.get("kind") == "event" and line.get("event") == EventKind.RECOVERY_MOVE
     ]
 
 

@@ -49,8 +49,9 @@ from sdrpeer.deploy.status import SinceTracker, status_doc
 from sdrpeer.deploy.touch_shell import TouchShell
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.election.config import ElectionConfig
+from sdrpeer.election.events import Elected, SteppedDown
 from sdrpeer.errors import ApiError
-from sdrpeer.eventlog import EventLog
+from sdrpeer.eventlog import EventKind, EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
@@ -191,12 +192,10 @@ class Coordinator:
             degraded.add(self.name)
         before = self.election.info()
         self.election.update(now, state.alive, self._thresholds(), degraded)
+        self._log_election()
         info = self.election.info()
         if info != before:
-            self.events.add(
-                time.time(), "election", self.name, epoch=info.epoch, leader=info.leader
-            )
-            self.on_change()
+            self.on_change()  # our record carries the election belief
         self.core.step(now, self._view(now, state))
         self._carry_out()
         self.touch.after_sync(now, state, quorum, self.caught_up(state), info.leader)
@@ -242,9 +241,28 @@ class Coordinator:
         elif isinstance(effect, Push):
             self._spawn(self._push(effect))
 
+    def _log_election(self) -> None:
+        """The election core's events, as they happened (claims won, roles given up, leaders
+        changed), into the event log."""
+        wall = time.time()
+        for event in self.election.drain():
+            detail: dict[str, Any]
+            if isinstance(event, Elected):
+                kind, detail = EventKind.ELECTION_ELECTED, {"previous": event.previous}
+            elif isinstance(event, SteppedDown):
+                kind, detail = EventKind.ELECTION_STEPPED_DOWN, {"reason": event.reason}
+            else:
+                kind = EventKind.ELECTION
+                detail = {"leader": event.leader, "previous": event.previous}
+            self.events.add(wall, kind, self.name, epoch=event.epoch, **detail)
+
     def _log_health(self) -> None:
         for event in self.health.drain():
-            kind = "recovery.condition" if isinstance(event, RobotCondition) else "recovery.cleared"
+            kind = (
+                EventKind.RECOVERY_CONDITION
+                if isinstance(event, RobotCondition)
+                else EventKind.RECOVERY_CLEARED
+            )
             self.events.add(  # logged as this robot's judgement of `subject`
                 time.time(),
                 kind,

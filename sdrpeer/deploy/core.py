@@ -61,6 +61,7 @@ from sdrpeer.deploy.plan_change import (
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.view import ClusterState, PlanKey
 from sdrpeer.errors import NotAllocator
+from sdrpeer.eventlog import EventKind
 from sdrpeer.plan import Plan
 from sdrpeer.runtime.spec import InstanceSpec
 from sdrpeer.vocabulary import InstanceRole, LifecycleState
@@ -185,9 +186,11 @@ class DeployCore:
         detail = {"epoch": plan.epoch, "version": plan.version, "allocator": plan.allocator}
         if not self.store.offer(plan):
             fence = self.store.highest_epoch
-            self._effects.append(Log("plan.refused", {**detail, "fence": fence, "source": source}))
+            self._effects.append(
+                Log(EventKind.PLAN_REFUSED, {**detail, "fence": fence, "source": source})
+            )
             return False
-        self._effects.append(Log("plan.accepted", {**detail, "source": source}))
+        self._effects.append(Log(EventKind.PLAN_ACCEPTED, {**detail, "source": source}))
         self._effects.append(Adopted(plan, source))
         return True
 
@@ -254,7 +257,9 @@ class DeployCore:
         newer = self.newer_holders(state)
         yielded = superseded(plan, self.name, remote, newer)
         for name in sorted(yielded - self._yielded):
-            self._effects.append(Log("plan.superseded", {"instance": name, "newer": sorted(newer)}))
+            self._effects.append(
+                Log(EventKind.PLAN_SUPERSEDED, {"instance": name, "newer": sorted(newer)})
+            )
         self._yielded = yielded
         specs = specs_for_robot(plan, self.name, remote, here.active, hold | yielded)
         specs = self._allowed(self._held_down(now, plan, here.cutoff, specs), here.policy)
@@ -291,7 +296,9 @@ class DeployCore:
                 refused[spec.name] = why
         for name, why in sorted(refused.items()):
             if self._refused.get(name) != why:
-                self._effects.append(Log("launch.refused", {"instance": name, "reason": why}))
+                self._effects.append(
+                    Log(EventKind.LAUNCH_REFUSED, {"instance": name, "reason": why})
+                )
         self._refused = refused
         return out
 
@@ -409,7 +416,9 @@ class DeployCore:
                 continue
             self._moving_back = (comp, plan.key)
             self._effects.append(
-                Log("reconcile", {"component": comp, "to": robot, "policy": "keep_original"})
+                Log(
+                    EventKind.RECONCILE, {"component": comp, "to": robot, "policy": "keep_original"}
+                )
             )
             try:
                 result = self._allocate(now, view, Move(comp, robot))

@@ -22,6 +22,7 @@ from dataclasses import replace
 
 from sdrpeer.election.config import ElectionConfig, lan
 from sdrpeer.election.core import Election
+from sdrpeer.election.events import ElectionEvent
 from sdrpeer.election.health import eligible, health_bucket
 from sdrpeer.election.state import Candidate, ElectionState
 from sdrpeer.record.robot import ElectionInfo, RobotRecord
@@ -54,6 +55,7 @@ class ElectionShell:
         self.config = config or lan()
         self.known_epoch = known_epoch
         self.core: Election | None = None
+        self._events: list[ElectionEvent] = []
         self._candidates: dict[str, tuple[RobotRecord, Thresholds, bool, Candidate]] = {}
         """The candidate made of each robot's record (records are immutable: a step remakes
         only those whose record, thresholds or health changed)."""
@@ -79,8 +81,13 @@ class ElectionShell:
         self.core.update(now, view)
         if self.core.next_timer() <= now:
             self.core.handle_timer(now)
-        while self.core.next_event() is not None:
-            pass
+        while (event := self.core.next_event()) is not None:
+            self._events.append(event)
+
+    def drain(self) -> list[ElectionEvent]:
+        """The core's events since the last call (claims won, roles given up, leaders changed)."""
+        events, self._events = self._events, []
+        return events
 
     def _claims(self, name: str, rec: RobotRecord) -> bool:
         """Whether `name` (another robot) publishes a claim to the role."""

@@ -35,7 +35,7 @@ from sdrpeer.deploy.handoff_rules import (
     final_target,
 )
 from sdrpeer.errors import ApiError, CommandError
-from sdrpeer.eventlog import EventLog
+from sdrpeer.eventlog import EventKind, EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.vocabulary import LifecycleState
@@ -126,7 +126,7 @@ class HandoffShell:
                     self._sent[(send.source, target)] = digest
                     self.counters[f"{send.kind}_sent"] += 1
                     if send.kind == "final":
-                        self._event("state.handoff", msg, to_robot=robot)
+                        self._event(EventKind.STATE_HANDOFF, msg, to_robot=robot)
         finally:
             self._busy.discard(send.source)
 
@@ -188,7 +188,7 @@ class HandoffShell:
             return
         self.counters[f"{msg.kind}_restored"] += 1
         if msg.kind == "final":
-            self._event("state.restored", msg)
+            self._event(EventKind.STATE_RESTORED, msg)
 
     # -- bookkeeping ---------------------------------------------------------------------------
 
@@ -199,7 +199,7 @@ class HandoffShell:
     def _drop(self, msg: StateMsg, reason: str) -> None:
         self.counters["expired" if reason == "expired" else f"dropped_{reason}"] += 1
         if msg.kind == "final" or reason == "expired":
-            self._event("state.dropped", msg, reason=reason)
+            self._event(EventKind.STATE_DROPPED, msg, reason=reason)
 
     def _failed(self, counter: str, instance: str, detail: str, *, loud: bool) -> None:
         """Count a failure; a final handoff's or a restore's is also logged and an event (a sync
@@ -208,7 +208,7 @@ class HandoffShell:
         if loud:
             log.info("state handoff: %s: %s: %s", instance, counter, detail)
             self.events.add(
-                time.time(), "state.failed", self.robot, instance=instance, error=detail
+                time.time(), EventKind.STATE_FAILED, self.robot, instance=instance, error=detail
             )
 
     def _event(self, kind: str, msg: StateMsg, **extra: Any) -> None:

@@ -20,7 +20,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from sdrpeer.eventlog import EventLog
+from sdrpeer.eventlog import EventKind, EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, Exhausted, InstanceLoad
@@ -131,9 +131,11 @@ class LocalShell:
         assert self.engine is not None
         while (out := self.engine.next_decision()) is not None:
             if isinstance(out, Exhausted):
-                self.events.add(time.time(), "recovery.exhausted", self.robot, **_fields(out))
+                self.events.add(
+                    time.time(), EventKind.RECOVERY_EXHAUSTED, self.robot, **_fields(out)
+                )
                 continue
-            self.events.add(time.time(), "recovery.decision", self.robot, **_fields(out))
+            self.events.add(time.time(), EventKind.RECOVERY_DECISION, self.robot, **_fields(out))
             task = asyncio.create_task(self._carry_out(out))
             self._bg.add(task)
             task.add_done_callback(self._bg.discard)

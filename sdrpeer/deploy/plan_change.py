@@ -30,6 +30,7 @@ from sdrpeer.deploy.effects import Log
 from sdrpeer.deploy.move import move_inputs, swap_to_standby
 from sdrpeer.deploy.placer import Infeasible, place
 from sdrpeer.deploy.view import ClusterState
+from sdrpeer.eventlog import EventKind
 from sdrpeer.plan import Plan
 from sdrpeer.system.model import SystemDef
 from sdrpeer.vocabulary import InstanceRole
@@ -148,7 +149,7 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             held=ask.held,
         )
         if isinstance(result, Infeasible):
-            logs.append(Log("allocation.infeasible", {"report": str(result)}))
+            logs.append(Log(EventKind.ALLOCATION_INFEASIBLE, {"report": str(result)}))
             if not isinstance(reason, Reissue):
                 return Change(result, logs)
             assert plan is not None
@@ -199,23 +200,23 @@ def _ask(reason: Reason, plan: Plan | None, ctx: Context) -> _Ask | Infeasible:
 def _logs(reason: Reason, old: Plan | None, new: Plan, epoch: int) -> list[Log]:
     if isinstance(reason, Deploy):
         system = None if reason.system is None else reason.system.name
-        return [Log("allocation", {"reason": "deploy", "epoch": epoch, "system": system})]
+        return [Log(EventKind.ALLOCATION, {"reason": "deploy", "epoch": epoch, "system": system})]
     assert old is not None
     moved = moved_components(old, new)
     if isinstance(reason, Reissue):
-        logs = [Log("allocation", {"reason": reason.why, "epoch": epoch})]
+        logs = [Log(EventKind.ALLOCATION, {"reason": reason.why, "epoch": epoch})]
         if reason.recovery and moved:
-            logs.append(Log("recovery.move", {"reason": reason.why, "moved": moved}))
+            logs.append(Log(EventKind.RECOVERY_MOVE, {"reason": reason.why, "moved": moved}))
         return logs
     if isinstance(reason, Recover):
         why = f"{reason.action} for {reason.instance} on {reason.robot}"
-        return [Log("recovery.move", {"reason": why, "moved": moved})]
+        return [Log(EventKind.RECOVERY_MOVE, {"reason": why, "moved": moved})]
     active = old.active_of(reason.component)
     origin = "" if active is None else active.robot
     why = f"move {reason.component} from {origin}" + (f" to {reason.to}" if reason.to else "")
     return [
-        Log("allocation", {"reason": why, "epoch": epoch}),
-        Log("move", {"reason": why, "moved": moved}),
+        Log(EventKind.ALLOCATION, {"reason": why, "epoch": epoch}),
+        Log(EventKind.MOVE, {"reason": why, "moved": moved}),
     ]
 
 

@@ -26,7 +26,7 @@ from typing import Any
 from sdrpeer.deploy.disconnect import CutOff, fleet_of, has_quorum
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.errors import ApiError
-from sdrpeer.eventlog import EventLog
+from sdrpeer.eventlog import EventKind, EventLog
 from sdrpeer.plan import Plan
 from sdrpeer.vocabulary import InstanceRole
 
@@ -107,7 +107,13 @@ class TouchShell:
 
     def _log(self, heard: int) -> None:
         c = self.cutoff
-        kind = "fleet.cut_off" if c.cut else "fleet.rejoined" if c.rejoining else "fleet.in_touch"
+        kind = (
+            EventKind.FLEET_CUT_OFF
+            if c.cut
+            else EventKind.FLEET_REJOINED
+            if c.rejoining
+            else EventKind.FLEET_IN_TOUCH
+        )
         log.info("%s: hears %d of %d robots", kind, heard, self._fleet)
         self.events.add(time.time(), kind, self.name, heard=heard, fleet=self._fleet)
 

@@ -45,6 +45,7 @@ from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.view import ClusterState, PlanKey
 from sdrpeer.errors import NotAllocator
+from sdrpeer.eventlog import EventKind
 from sdrpeer.plan import Plan
 from sdrpeer.record.robot import (
     ElectionInfo,
@@ -320,7 +321,7 @@ class DeploySim:
         for effect in self.cores[i].effects():  # an Adopted plan's own effects are drained by
             # `_apply` (called for it) before the rest of this list
             if isinstance(effect, Log):
-                if effect.kind == "plan.accepted":
+                if effect.kind == EventKind.PLAN_ACCEPTED:
                     self.accepted += 1
                 else:
                     self.logs.append((now, name, effect.kind, effect.detail))
