@@ -63,8 +63,11 @@ def test_the_cores_events_are_passed_on_as_they_happen():
         shell.update(t, alive, NEEDS_BATTERY)
     events = shell.drain()
     assert [type(e) for e in events] == [LeaderChanged, Elected, LeaderChanged]
-    assert events[0].leader is None
-    assert events[1].epoch == 5
-    assert events[2].leader == "robot-1"
+    vacant, elected, leader = events
+    assert isinstance(vacant, LeaderChanged)
+    assert vacant.leader is None
+    assert elected.epoch == 5
+    assert isinstance(leader, LeaderChanged)
+    assert leader.leader == "robot-1"
     shell.update(111.0, alive, NEEDS_BATTERY, degraded={"robot-1"})
     assert [type(e) for e in shell.drain()] == [SteppedDown, LeaderChanged]

@@ -2,15 +2,14 @@
 
 How it works: `RecordingPort` is an InPort that keeps what it receives; `StalledReceiver` is a
 raw receiver that says ok to a hello and then stops reading until released, so the sender's
-socket and queue fill up and its connector policy has to decide; `until` polls a condition with
-a deadline (tests wait on conditions, never for fixed times).
+socket and queue fill up and its connector policy has to decide. (Tests wait on conditions with
+tests/wait.py.)
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,13 +41,6 @@ class RecordingPort:
     def values(self) -> list[Any]:
         """The values received, in arrival order."""
         return [value for _, value, _ in self.frames]
-
-
-async def until(condition: Callable[[], bool], within: float = 5.0, step: float = 0.005) -> None:
-    """Poll `condition` until it holds; TimeoutError after `within` seconds."""
-    async with asyncio.timeout(within):
-        while not condition():  # noqa: ASYNC110 - polls plain attributes, no event to await
-            await asyncio.sleep(step)
 
 
 class StalledReceiver(asyncio.Protocol):
