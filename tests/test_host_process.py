@@ -17,7 +17,9 @@ from tests.hostctl import ROOT, HostPool, measure
 from tests.wait import until
 
 FX = "tests.components_fixture"
-HEAVY = ("aiohttp", "prometheus_client", "yaml", "psutil")
+HEAVY = ("aiohttp", "prometheus_client", "yaml", "psutil", "hashlib", "hmac", "cryptography")
+"""What a host never imports unless it needs it (hashlib and hmac load OpenSSL: +4 MB idle RSS
+when the key derivations imported them at the top of sdrpeer.keys.derive)."""
 
 
 @pytest.fixture

@@ -12,15 +12,14 @@ way, so no secret of one use opens another:
 - `stream_keys`: the two keys of one encrypted data connection (HKDF-SHA256 of the data key both
   ends proved, salted with both handshake nonces and bound to the connection's names), so no two
   connections or directions share a key.
-`cryptography` is imported only by the functions that need HKDF, when they are called: a host
-that never encrypts a stream stays without it.
+Nothing is imported until a function is called (`hashlib`, `hmac`, `secrets` load OpenSSL; HKDF
+comes from `cryptography`): a component host imports this module with its data plane, and one
+that never encrypts a stream stays without them (its idle RSS is a target).
 """
 
 from __future__ import annotations
 
-import hashlib
-import hmac
-import secrets
+import functools
 from collections.abc import Iterable, Sequence
 from typing import Final
 
@@ -38,8 +37,21 @@ GOSSIP_INFO: Final = b"sdrpeer gossip aes-256-gcm v1"
 _PEER_LABEL: Final = b"sdrpeer peer api v1"
 _DATA_PERSON: Final = b"sdrpeer-data-v1"
 _STREAM_INFO: Final = b"sdrpeer data stream aes-256-gcm v1"
-_UNKEYED: Final = secrets.token_hex(32)
-"""The token of an agent without a key: random per process, accepted by no agent."""
+
+
+@functools.cache
+def _unkeyed() -> str:
+    """The token of an agent without a key: random per process, accepted by no agent."""
+    import secrets  # noqa: PLC0415 - see the module docstring
+
+    return secrets.token_hex(32)
+
+
+def _hmac_sha256(key: bytes, label: bytes) -> str:
+    import hashlib  # noqa: PLC0415 - see the module docstring
+    import hmac  # noqa: PLC0415
+
+    return hmac.new(key, label, hashlib.sha256).hexdigest()
 
 
 def _hkdf(key: bytes, length: int, salt: bytes | None, info: bytes) -> bytes:
@@ -57,19 +69,21 @@ def gossip_key(cluster_key: bytes) -> bytes:
 def peer_token(signing_key: bytes | None) -> str:
     """The bearer token an agent presents to its peers (None: no key, a random token)."""
     if signing_key is None:
-        return _UNKEYED
-    return hmac.new(signing_key, _PEER_LABEL, hashlib.sha256).hexdigest()
+        return _unkeyed()
+    return _hmac_sha256(signing_key, _PEER_LABEL)
 
 
 def peer_tokens(keys: Iterable[bytes]) -> list[str]:
     """The tokens an agent accepts from its peers: one per key of its ring, so that during a key
     rotation a peer that already signs with the new key (or still with the old) gets in; none
     without a key."""
-    return [hmac.new(k, _PEER_LABEL, hashlib.sha256).hexdigest() for k in keys]
+    return [_hmac_sha256(k, _PEER_LABEL) for k in keys]
 
 
 def data_key(cluster_key: bytes) -> bytes:
     """The data key of one cluster key."""
+    import hashlib  # noqa: PLC0415 - see the module docstring
+
     return hashlib.blake2b(cluster_key[:64], digest_size=32, person=_DATA_PERSON).digest()
 
 
