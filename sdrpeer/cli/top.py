@@ -2,7 +2,8 @@
 
 How it works: it reads the agent's server-sent event stream (`GET /v1/stream`, the dashboard's:
 one sample a second pushed by the agent, no polling) and draws each `sample` with
-`cli_status.format_top`. On a terminal the screen is cleared and redrawn; piped, each screen is
+`sdrpeer.cli.status.format_top`. On a terminal the screen is cleared and redrawn; piped, each
+screen is
 printed after the last, separated by a blank line. `--iterations N` stops after N screens. A
 dropped stream is reopened (after a second) until the time given by `--reconnect` runs out.
 """
