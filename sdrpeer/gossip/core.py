@@ -4,8 +4,26 @@ How it works:
 - Inputs are `receive(now, src, packet)`, `handle_timer(now)`, `join`, `leave`, `set_record` and
   `broadcast_event`; outputs are drained with `datagrams_to_send()` and `next_event()`, and the
   shell calls `handle_timer` at `next_timer()`. The core never reads a clock or touches a socket.
-- Failure detection is in `probing`, the full-state exchange in `antientropy`, shared state,
-  timers and dissemination in `base`; this module holds the inputs, outputs and merge rules.
+- One class, `Membership`, in four sections: its state and helpers (timers, the broadcast
+  queue, gossip rounds), probing, anti-entropy, and the inputs, outputs and merge rules.
+- Probing (SWIM + Lifeguard): every probe interval (stretched by the local-health score) the next
+  peer of a shuffled round robin is pinged. No ack within the probe timeout: the ping is sent
+  again and k other peers are asked to ping it (PingReq), answering with a Nack when they cannot
+  reach it. Any datagram from the target during the round counts as proof of life. No ack by the
+  end of the round: one more round is run at once (a false suspicion costs a broadcast to every
+  robot and a refutation back, so squaring its rate under loss is worth one probe interval); a
+  second failure makes the target suspect. Missing nacks raise our own health score. Every
+  direct ping's ack gives an RTT sample; a ping without one counts as lost. A direct ping also
+  carries our newest vitals revision until the target acknowledges it.
+- Anti-entropy: every push-pull interval (scaled up above 32 robots) a robot sends a `Digest` of
+  its member table to one peer; equal tables end there. A peer whose digest differs answers with
+  its whole table in `Sync` chunks under the MTU and asks for ours; each side merges the other's
+  and pushes back the records the other lacks. Joining sends the whole table at once. A remote
+  "dead" is merged as a suspicion only. One time in three the partner is the last address of a
+  dead member or a seed: that is how two halves of a healed partition find each other. A robot
+  also *pulls* at once (`_pull`) when it learns it fell behind (a ping carries vitals of a record
+  newer than ours of its sender, or we were declared dead), at most once per peer per
+  `SYNC_REPLY_GAP`.
 - Suspicion (Lifeguard): the timeout starts at max and shrinks towards min as independent
   confirmations arrive; a suspicion at a newer incarnation starts afresh. The suspect is told at
   once and again every quarter minimum timeout (buddy system), answers each with its Alive, and a
@@ -27,29 +45,21 @@ How it works:
 
 from __future__ import annotations
 
+import hashlib
 import heapq
-from collections.abc import Iterable, Mapping, Sequence
+import random
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
 
 from sdrpeer.gossip import formulas
-from sdrpeer.gossip.antientropy import AntiEntropy
-from sdrpeer.gossip.base import (
-    FWD_END,
-    GOSSIP,
-    JOIN,
-    PROBE,
-    PROBE_END,
-    PROBE_TIMEOUT,
-    REAP,
-    RECHECK,
-    SEEN_EVENTS_MAX,
-    SUSPICION,
-    SYNC,
-)
+from sdrpeer.gossip.config import GossipConfig
 from sdrpeer.gossip.events import (
     REAPED,
     CoreEvent,
     EventReceived,
     MemberChanged,
+    ProbeOutcome,
     RecordChanged,
     VitalsChanged,
 )
@@ -72,16 +82,452 @@ from sdrpeer.gossip.messages import (
     Record,
     Suspect,
     Sync,
+    SyncEntry,
     Update,
     VitalsRevision,
 )
-from sdrpeer.gossip.probing import Probing
-from sdrpeer.gossip.table import Member, MemberInfo, ProbeRing, Suspicion
+from sdrpeer.gossip.queue import BroadcastQueue
+from sdrpeer.gossip.table import Member, MemberInfo, PeerSet, ProbeRing, Suspicion
+from sdrpeer.gossip.wire import encoded_size
 from sdrpeer.vocabulary import MemberState
 
+# Timer kinds.
+PROBE, PROBE_TIMEOUT, PROBE_END, GOSSIP, SYNC, SUSPICION, FWD_END, REAP, JOIN, RECHECK = range(10)
 
-class Membership(Probing, AntiEntropy):
+
+SEEN_EVENTS_MAX = 8192
+
+
+class Probe:
+    """One probe round of one target; `pings` maps each ping's seq to when it was sent."""
+
+    __slots__ = ("acked", "confirming", "nacks", "pings", "target", "vitals", "want_nacks")
+
+    def __init__(self, target: str, confirming: bool = False) -> None:
+        self.target = target
+        self.confirming = confirming
+        """This round repeats a failed one before the target is suspected."""
+        self.pings: dict[int, float] = {}
+        self.acked = False
+        self.want_nacks = 0
+        self.nacks = 0
+        self.vitals: dict[int, tuple[int, int]] = {}
+        """For each ping of this round that carried our vitals, which revision (its ack tells
+        that the target has it)."""
+
+
+SYNC_REPLY_GAP = 1.0  # answer one robot's full-state exchange at most this often (seconds)
+
+
+SYNC_ENTRY_OVERHEAD = 16  # msgpack bytes of one sync entry besides its name and host
+
+
+class Membership:
     """One robot's membership view and protocol state (see the module docstring)."""
+
+    # ============================================== state and helpers
+
+    def __init__(
+        self,
+        name: str,
+        addr: Addr,
+        config: GossipConfig,
+        *,
+        now: float,
+        rng: random.Random,
+        sizer: Callable[[Update], int] | None = None,
+        first_version: int = 1,
+    ) -> None:
+        if sizer is None:
+            sizer = encoded_size
+        self.name = name
+        self.addr = addr
+        self.config = config
+        self.rng = rng
+        self._size = sizer
+        self._now = now
+        self.incarnation = 0
+        self.health_score = 0
+        self.leaving = False
+        self._me = Member(name, addr, 0, ALIVE, now)
+        self._members: dict[str, Member] = {name: self._me}
+        self._peers = PeerSet()
+        self._ring = ProbeRing()
+        self._records: dict[str, tuple[int, bytes]] = {}
+        self._first_version = first_version
+        """The version of our first record (a floor kept across restarts by the shell, so a new
+        life never reuses a version an old one spread with other bytes)."""
+        self._vitals: dict[str, VitalsRevision] = {}
+        """The newest vitals revision received from each member."""
+        self._my_vitals: VitalsRevision | None = None
+        self._vitals_acked: dict[str, tuple[int, int]] = {}
+        """Per peer, the newest of our vitals revisions it acknowledged (an ack of a ping that
+        carried it)."""
+        self._entry_hash: dict[str, int] = {}
+        self._dirty: set[str] = {name}
+        self._digest = 0
+        self._queue = BroadcastQueue()
+        self._out: list[tuple[Addr, Packet]] = []
+        self._events: deque[CoreEvent] = deque()
+        self._timers: list[tuple[float, int, int, Any]] = []
+        self._tseq = 0
+        self._seq = 0
+        self._probes: dict[int, Probe] = {}
+        self._probing: dict[str, Probe] = {}
+        self._fwd: dict[int, tuple[Addr, int, bool]] = {}
+        self._gossip_armed = False
+        self._urgent_at = float("-inf")
+        self._event_seq = 0
+        self._seen_events: dict[tuple[str, int], None] = {}
+        self._sync_replied: dict[str, float] = {}
+        self._pulled: dict[Addr, float] = {}
+        """Peer address -> when we last pulled from it (`AntiEntropy._pull`)."""
+        self._dead_addrs: dict[str, tuple[Addr, float]] = {}
+        self._revived: dict[str, float] = {}
+        """Member -> when it last came back from the dead (its verdicts may be stale a while)."""
+        self._seeds: list[Addr] = []
+        self.counters: dict[str, int] = {}
+        self._budget = config.max_datagram - config.packet_overhead - 64
+        self._at(now + rng.uniform(0, config.probe_interval), PROBE, None)
+        self._at(now + self._sync_interval() * rng.uniform(0.5, 1.0), SYNC, None)
+
+    # ----------------------------------------------------------------- dissemination
+    def _enqueue(self, key: tuple[Any, ...], update: Update) -> None:
+        self._queue.push(key, update, self._size(update))
+        if not self._gossip_armed:
+            self._gossip_armed = True
+            self._at(self._now + self.config.gossip_interval, GOSSIP, None)
+
+    def _limit(self) -> int:
+        return formulas.retransmit_limit(self.config.retransmit_mult, self.num_alive())
+
+    def _take(self, budget: int) -> tuple[Update, ...]:
+        if not self._queue:
+            return ()
+        return tuple(self._queue.take(budget, self._limit()))
+
+    def _piggyback(self, target: Member, reserved: int = 0) -> tuple[Update, ...]:
+        budget = self._budget - reserved
+        if target.state == SUSPECT:  # buddy system: the suspect hears it on our next ping
+            fact = self._fact_about(target)
+            return (fact, *self._take(budget - 64))
+        return self._take(budget)
+
+    def _urgent_round(self) -> None:
+        """A gossip round now for news that decides life and death (a death, a new
+        suspicion): each hop then costs a network delay, not the wait for the next round, and
+        the robots' suspicion timers start and end together. At most one such round per
+        quarter gossip interval; the regular rounds carry the rest."""
+        if self._now - self._urgent_at >= self.config.gossip_interval / 4:
+            self._urgent_at = self._now
+            self._gossip_round()
+
+    def _gossip_round(self) -> None:
+        if self._queue:
+            for name in self._peers.sample(self.rng, self.config.gossip_fanout):
+                updates = self._take(self._budget)
+                if not updates:
+                    break
+                self._out.append((self._members[name].addr, Gossip(self.name, updates)))
+        if self._queue and not self._gossip_armed:
+            self._gossip_armed = True
+            self._at(self._now + self.config.gossip_interval, GOSSIP, None)
+
+    # ----------------------------------------------------------------- helpers
+    def _at(self, when: float, kind: int, arg: Any) -> None:
+        self._tseq += 1
+        heapq.heappush(self._timers, (when, self._tseq, kind, arg))
+
+    def _next_seq(self) -> int:
+        self._seq += 1
+        return self._seq
+
+    def _count(self, key: str) -> None:
+        self.counters[key] = self.counters.get(key, 0) + 1
+
+    def num_alive(self) -> int:
+        """Members alive or suspect, ourselves included."""
+        return len(self._peers) + 1
+
+    def _sync_interval(self) -> float:
+        return formulas.push_pull_scale(self.config.push_pull_interval, self.num_alive())
+
+    def _fact_about(self, m: Member) -> Update:
+        if m.state == SUSPECT:
+            return Suspect(m.name, m.incarnation, self.name)
+        if m.state in (DEAD, LEFT):
+            return Dead(m.name, m.incarnation, m.name if m.state == LEFT else self.name)
+        return Alive(m.name, m.addr, m.incarnation)
+
+    # ----------------------------------------------------------------- table digest
+    def _mark(self, name: str) -> None:
+        """`name`'s incarnation, state or record version may have changed (digest upkeep)."""
+        self._dirty.add(name)
+
+    def table_digest(self) -> int:
+        """A 64-bit digest of the members alive or suspect, with their incarnations and record
+        versions: equal tables give equal digests, so anti-entropy can skip the full exchange.
+        Kept up to date incrementally (XOR of per-member hashes over the members marked)."""
+        digest = self._digest
+        for name in self._dirty:
+            old = self._entry_hash.pop(name, None)
+            if old is not None:
+                digest ^= old
+            h = self._hash_of(name)
+            if h is not None:
+                self._entry_hash[name] = h
+                digest ^= h
+        self._dirty.clear()
+        self._digest = digest
+        return digest
+
+    def _hash_of(self, name: str) -> int | None:
+        m = self._members.get(name)
+        if m is None or m.state not in (ALIVE, SUSPECT):
+            return None
+        rec = self._records.get(name)
+        text = f"{name}\0{m.incarnation}\0{rec[0] if rec else 0}".encode()
+        return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "big")
+
+    def digest_from_scratch(self) -> int:
+        """The same digest computed over the whole table (tests check the incremental one)."""
+        digest = 0
+        for name in self._members:
+            h = self._hash_of(name)
+            if h is not None:
+                digest ^= h
+        return digest
+
+    # ============================================== probing (SWIM + Lifeguard)
+
+    def _start_probe(self) -> None:
+        interval = formulas.scaled(self.config.probe_interval, self.health_score)
+        self._at(self._now + interval, PROBE, None)
+        if self.leaving:
+            return
+        target = self._ring.next(self.rng, self._peers)
+        if target is not None:
+            self._probe(target, confirming=False)
+
+    def _probe(self, target: str, *, confirming: bool) -> None:
+        cfg = self.config
+        probe = Probe(target, confirming)
+        self._probing[target] = probe
+        self._ping(probe)
+        timeout = formulas.scaled(cfg.probe_timeout, self.health_score)
+        self._at(self._now + timeout, PROBE_TIMEOUT, probe)
+        self._at(
+            self._now + formulas.scaled(cfg.probe_interval, self.health_score), PROBE_END, probe
+        )
+
+    def _ping(self, probe: Probe) -> int:
+        m = self._members[probe.target]
+        seq = self._next_seq()
+        probe.pings[seq] = self._now
+        self._probes[seq] = probe
+        vitals = self._my_vitals
+        if vitals is not None and self._vitals_acked.get(m.name, (0, 0)) < vitals.key:
+            probe.vitals[seq] = vitals.key
+            updates = self._piggyback(m, len(vitals.payload) + 16)
+        else:
+            vitals = None
+            updates = self._piggyback(m)
+        self._out.append((m.addr, Ping(self.name, seq, m.name, updates, vitals)))
+        return seq
+
+    def _probe_timeout(self, probe: Probe) -> None:
+        m = self._members.get(probe.target)
+        if probe.acked or m is None or m.state not in (ALIVE, SUSPECT):
+            return
+        seq = self._ping(probe)  # a second direct ping, then k indirect ones
+        for name in self._peers.sample(self.rng, self.config.indirect_checks, exclude=m.name):
+            req = PingReq(self.name, seq, m.name, m.addr, True, self._take(self._budget))
+            self._out.append((self._members[name].addr, req))
+            probe.want_nacks += 1
+
+    def _probe_end(self, probe: Probe) -> None:
+        for seq in probe.pings:
+            self._probes.pop(seq, None)
+        for _ in probe.pings:  # every ping whose own ack never came counts as lost
+            self._events.append(ProbeOutcome(probe.target, None, self._now))
+        probe.pings.clear()
+        if self._probing.get(probe.target) is probe:
+            del self._probing[probe.target]
+        if probe.acked:
+            return
+        missing = probe.want_nacks - probe.nacks if probe.want_nacks else 1
+        self._adjust_health(max(0, missing))
+        m = self._members.get(probe.target)
+        if m is None or m.state not in (ALIVE, SUSPECT):
+            return
+        if m.state == ALIVE and not probe.confirming and self.config.confirm_round:
+            self._probe(m.name, confirming=True)  # one more round before accusing anyone
+            return
+        self._merge_suspect(Suspect(m.name, m.incarnation, self.name))
+
+    def _probe_succeeded(self, probe: Probe) -> None:
+        if probe.acked:
+            return
+        probe.acked = True
+        self._adjust_health(-1)
+
+    def _on_ping(self, src: Addr, ping: Ping) -> None:
+        if ping.target != self.name:
+            self._count("misdirected")
+            return
+        m = self._members.get(ping.sender)
+        buddy: list[Update] = []
+        if m is not None and m.state != ALIVE:
+            buddy.append(self._fact_about(m))
+        updates = tuple(buddy) + self._take(self._budget - 64 * len(buddy))
+        self._out.append((src, Ack(self.name, ping.seq, updates)))
+
+    def _on_ack(self, ack: Ack) -> None:
+        probe = self._probes.get(ack.seq)
+        if probe is not None:
+            if ack.sender == probe.target:
+                sent = probe.pings.pop(ack.seq, None)
+                if sent is not None:
+                    self._events.append(ProbeOutcome(probe.target, self._now - sent, self._now))
+                carried = probe.vitals.pop(ack.seq, None)
+                if carried is not None and carried > self._vitals_acked.get(ack.sender, (0, 0)):
+                    self._vitals_acked[ack.sender] = carried
+            self._probe_succeeded(probe)
+            return
+        fwd = self._fwd.pop(ack.seq, None)
+        if fwd is not None:
+            self._out.append((fwd[0], Ack(self.name, fwd[1], self._take(self._budget))))
+
+    def _on_ping_req(self, src: Addr, req: PingReq) -> None:
+        seq = self._next_seq()
+        self._fwd[seq] = (src, req.seq, req.want_nack)
+        m = self._members.get(req.target)
+        updates = self._piggyback(m) if m is not None else self._take(self._budget)
+        self._out.append((req.target_addr, Ping(self.name, seq, req.target, updates)))
+        self._at(self._now + self.config.probe_timeout * 0.8, FWD_END, seq)
+
+    def _fwd_end(self, seq: int) -> None:
+        fwd = self._fwd.pop(seq, None)
+        if fwd is not None and fwd[2]:
+            self._out.append((fwd[0], Nack(self.name, fwd[1])))
+
+    def _adjust_health(self, delta: int) -> None:
+        self.health_score = min(max(0, self.health_score + delta), self.config.awareness_max - 1)
+
+    # ============================================== anti-entropy (digests, push-pull, pulls)
+
+    def _periodic_sync(self) -> None:
+        self._at(self._now + self._sync_interval() * self.rng.uniform(0.5, 1.5), SYNC, None)
+        if self.leaving:
+            return
+        target: Addr | None = None
+        horizon = self._now - self.config.reconnect_time
+        for name, (_, died) in list(self._dead_addrs.items()):
+            if died < horizon:
+                del self._dead_addrs[name]
+        lost = [addr for addr, _ in self._dead_addrs.values()]
+        if self._seeds:  # a seed is worth a reconnect only if it is not already a live peer
+            live = {self._members[name].addr for name in self._peers.names()}
+            lost += [seed for seed in self._seeds if seed not in live]
+        if lost and (not self._peers or self.rng.random() < 1 / 3):
+            target = self.rng.choice(lost)
+        elif self._peers:
+            target = self._members[self._peers.sample(self.rng, 1)[0]].addr
+        if target is not None:
+            n = self.num_alive()
+            digest = Digest(self.name, self.table_digest(), n, self._take(self._budget - 32))
+            self._out.append((target, digest))
+
+    def _on_digest(self, src: Addr, d: Digest) -> None:
+        if d.digest == self.table_digest():
+            self._count("digest_same")
+            return
+        self._count("digest_differs")
+        last = self._sync_replied.get(d.sender)
+        if last is None or self._now - last >= SYNC_REPLY_GAP:
+            self._sync_replied[d.sender] = self._now
+            self._send_state(src, reply=True)
+
+    def _pull(self, dest: Addr) -> None:
+        """Ask the peer at `dest` for what we lack now (rate-limited per peer)."""
+        last = self._pulled.get(dest)
+        if last is not None and self._now - last < SYNC_REPLY_GAP:
+            return
+        self._pulled[dest] = self._now
+        self._count("pulls")
+        self._send_state(dest, reply=True)
+
+    def _retry_join(self, delay: float) -> None:
+        if len(self._members) > 1 or not self._seeds:
+            return
+        for seed in self._seeds:
+            self._send_state(seed, reply=True)
+        delay = min(delay * 2, 5.0)
+        self._at(self._now + delay, JOIN, delay)
+
+    def _entries(self) -> list[SyncEntry]:
+        out: list[SyncEntry] = []
+        records = self._records
+        for m in self._members.values():
+            rec = records.get(m.name)
+            out.append((m.name, m.addr, m.incarnation, m.state, rec[0] if rec else 0))
+        return out
+
+    def _send_state(self, dest: Addr, *, reply: bool) -> None:
+        chunk: list[SyncEntry] = []
+        used = 0
+        for e in self._entries():
+            size = len(e[0]) + len(e[1][0]) + SYNC_ENTRY_OVERHEAD
+            if chunk and used + size > self._budget:
+                self._out.append((dest, Sync(self.name, reply, tuple(chunk))))
+                chunk, used = [], 0
+            chunk.append(e)
+            used += size
+        if chunk:
+            self._out.append((dest, Sync(self.name, reply, tuple(chunk))))
+
+    def _on_sync(self, src: Addr, sync: Sync) -> None:
+        push: list[Update] = []
+        members = self._members
+        for name, addr, inc, state, rec_version in sync.entries:
+            if state == ALIVE:
+                m = members.get(name)
+                if m is None or m is self._me or inc > m.incarnation:
+                    self._merge_alive(Alive(name, addr, inc))
+            elif state in (SUSPECT, DEAD):
+                # A remote death is only a suspicion here: it may be stale (memberlist does this).
+                if name not in self._members and name != self.name:
+                    continue
+                self._merge_suspect(Suspect(name, inc, sync.sender))
+            elif state == LEFT:
+                self._merge_dead(Dead(name, inc, name))
+            mine = self._records.get(name)
+            if mine is not None and mine[0] > rec_version:
+                push.append(Record(name, mine[0], mine[1]))
+            elif name == self.name and mine is not None and rec_version > mine[0]:
+                self._store_own_record(rec_version + 1, mine[1])
+                push.append(Record(name, rec_version + 1, mine[1]))
+        self._push_records(src, push)
+        if sync.reply:
+            last = self._sync_replied.get(sync.sender)
+            if last is None or self._now - last >= SYNC_REPLY_GAP:
+                self._sync_replied[sync.sender] = self._now
+                self._send_state(src, reply=False)
+
+    def _push_records(self, dest: Addr, records: list[Update]) -> None:
+        batch: list[Update] = []
+        used = 0
+        for r in records:
+            size = self._size(r)
+            if batch and used + size > self._budget:
+                self._out.append((dest, Gossip(self.name, tuple(batch))))
+                batch, used = [], 0
+            batch.append(r)
+            used += size
+        if batch:
+            self._out.append((dest, Gossip(self.name, tuple(batch))))
+
+    # ============================================== merges, records, events, timers
 
     # ----------------------------------------------------------------- inputs
     def join(self, now: float, seeds: Sequence[Addr]) -> None:
