@@ -483,7 +483,7 @@ class Agent:
             self.shell.codec.keyring = ring
         self.peer_tokens[:] = peer_tokens(ring.keys)
         if self.coordinator is not None:
-            self.coordinator.token = self.coordinator.handoff.token = peer_token(ring.signing_key)
+            self.coordinator.set_token(peer_token(ring.signing_key))
         if self.instances is not None:  # else the stack takes the new ring's keys when it starts
             self.instances.set_data_keys(data_keys(ring.keys))
         ids = [k.hex() for k in ring.key_ids]

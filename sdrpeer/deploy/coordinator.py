@@ -146,6 +146,10 @@ class Coordinator:
         await self.handoff.stop()
         await peer_client.close()
 
+    def set_token(self, token: str) -> None:
+        """Present `token` to other agents from now on (the keys rotated)."""
+        self.token = self.handoff.token = token
+
     def wake(self) -> None:
         """Something changed (gossip, a member, an instance): step soon."""
         self._wake.set()
