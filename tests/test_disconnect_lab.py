@@ -76,10 +76,8 @@ def placed(status: dict[str, Any]) -> dict[str, str | None]:
     return {c["component"]: c["robot"] for c in status["components"]}
 
 
-@NETNS_ONLY
-def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: RunningLab) -> None:
-    clients = {r.name: AgentClient(str(r.api), r.token, timeout=2) for r in lab.lab.robots}
-    one, three = clients["robot-1"], clients["robot-3"]
+def deploy_onto_robot_3(one: AgentClient, three: AgentClient) -> None:
+    """Deploy the system through robot-1 and wait until robot-3 runs its three actives."""
     system = parse_system(SYSTEM, "cut.yaml").to_json()
     post_when_elected(one, "/v1/deploy", {"system": system}, 30.0)
     until(
@@ -90,6 +88,13 @@ def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: Runni
         poll=POLL,
         retry=NOT_YET,
     )
+
+
+@NETNS_ONLY
+def test_a_robot_cut_off_stands_down_and_a_heal_finds_one_active_copy(lab: RunningLab) -> None:
+    clients = {r.name: AgentClient(str(r.api), r.token, timeout=2) for r in lab.lab.robots}
+    one, three = clients["robot-1"], clients["robot-3"]
+    deploy_onto_robot_3(one, three)
     allocator = one.get("/v1/status")["allocator"]["name"]  # robot-3 (top priority) or not yet
 
     plan = lab.net
@@ -172,16 +177,7 @@ def test_an_agent_restarted_into_the_fleet_launches_nothing_from_its_old_plan(
     touch with the fleet and has the fleet's plan (a namespace lab: its address is kept)."""
     clients = {r.name: AgentClient(str(r.api), r.token, timeout=5) for r in lab.lab.robots}
     one, three = clients["robot-1"], clients["robot-3"]
-    system = parse_system(SYSTEM, "cut.yaml").to_json()
-    post_when_elected(one, "/v1/deploy", {"system": system}, 30.0)
-    until(
-        "actives on robot-3",
-        lambda: actives(three),
-        lambda a: a == {"Cam", "Keep", "Back"},
-        within=WITHIN,
-        poll=POLL,
-        retry=NOT_YET,
-    )
+    deploy_onto_robot_3(one, three)
     os.killpg(lab.procs["robot-3"].pid, signal.SIGKILL)
     lab.procs["robot-3"].wait(10)
     until(

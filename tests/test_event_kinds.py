@@ -9,6 +9,7 @@ import ast
 from pathlib import Path
 
 from sdrpeer.eventlog import EventKind
+from tests.sources import docstrings
 
 ROOT = Path(__file__).resolve().parent.parent / "sdrpeer"
 
@@ -18,24 +19,11 @@ OTHER_MEANINGS = {
 """Modules where a string equal to a kind means something else, with why."""
 
 
-def _docstrings(tree: ast.AST) -> set[int]:
-    """ids of the string constants that are docstrings (of modules, classes, functions and
-    attributes: a bare string statement)."""
-    out = set()
-    for node in ast.walk(tree):
-        for stmt in (
-            getattr(node, "body", []) if isinstance(getattr(node, "body", None), list) else []
-        ):
-            if isinstance(stmt, ast.Expr) and isinstance(stmt.value, ast.Constant):
-                out.add(id(stmt.value))
-    return out
-
-
 def _spelled(source: str, allowed: set[str] | None = None) -> list[str]:
     """`line: 'kind'` of every dotted kind spelled as a string (but `allowed`), and of every
     kind given to events.add or Log as a string constant."""
     tree = ast.parse(source)
-    docs = _docstrings(tree)
+    docs = docstrings(tree)
     dotted = {k.value for k in EventKind if "." in k.value} - (allowed or set())
     found = []
     for node in ast.walk(tree):

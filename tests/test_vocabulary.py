@@ -28,6 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from sdrpeer.vocabulary import InstanceRole, LifecycleState, MemberState, ProcessState
+from tests.sources import docstrings
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "sdrpeer"
@@ -66,17 +67,6 @@ OTHER_MEANINGS: dict[str, dict[str, str]] = {
 _KEY_METHODS = frozenset({"get", "pop", "setdefault"})
 
 
-def _docstrings(tree: ast.AST) -> set[int]:
-    """ids of the string constants that are docstrings (a bare string statement)."""
-    return {
-        id(node.value)
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Expr)
-        and isinstance(node.value, ast.Constant)
-        and isinstance(node.value.value, str)
-    }
-
-
 def _field_names(tree: ast.AST) -> set[int]:
     """ids of the string constants used as the name of a field, not as a value."""
     out: set[int] = set()
@@ -107,7 +97,7 @@ def _field_names(tree: ast.AST) -> set[int]:
 def spelled_words(path: Path) -> Iterator[tuple[int, str]]:
     """(line, constant) for every word spelled in `path` outside docstrings and field names."""
     tree = ast.parse(path.read_text(), str(path))
-    skip = _docstrings(tree) | _field_names(tree)
+    skip = docstrings(tree) | _field_names(tree)
     for node in ast.walk(tree):
         if (
             isinstance(node, ast.Constant)
