@@ -103,6 +103,12 @@ def until(
         time.sleep(min(poll, max(0.0, within - waited)))
 
 
+def _broke(what: str, held: float, window: float, value: object) -> WaitError:
+    return WaitError(
+        f"{what} stopped holding after {held:.2f} s of a {window:g} s window; value: {_last(value)}"
+    )
+
+
 def stays(
     what: str,
     probe: Callable[[], T],
@@ -118,10 +124,7 @@ def stays(
         value = probe()
         held = time.monotonic() - start
         if not ok(value):
-            raise WaitError(
-                f"{what} stopped holding after {held:.2f} s of a {window:g} s window; "
-                f"value: {_last(value)}"
-            )
+            raise _broke(what, held, window, value)
         if held >= window:
             return value
         time.sleep(min(poll, window - held))
@@ -187,10 +190,7 @@ async def stays_async(
         value = probe()
         held = loop.time() - start
         if not ok(value):
-            raise WaitError(
-                f"{what} stopped holding after {held:.2f} s of a {window:g} s window; "
-                f"value: {_last(value)}"
-            )
+            raise _broke(what, held, window, value)
         if held >= window:
             return value
         await asyncio.sleep(min(poll, window - held))
