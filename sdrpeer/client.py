@@ -183,7 +183,8 @@ ELECTION_WAIT = 15.0
 
 
 def post_when_elected(client: AgentClient, path: str, body: Any, timeout: float) -> Any:
-    """POST, retrying while the agents answer 503 (no allocator yet), for at most `timeout` s."""
+    """POST, retrying while the agents answer 503 (no allocator yet, or the allocator hears a
+    robot whose record has not arrived), for at most `timeout` s."""
     deadline = time.monotonic() + min(timeout, ELECTION_WAIT)
     while True:
         try:

@@ -50,8 +50,11 @@ def deploy(cluster: RealCluster, entry: Agent, path: Path) -> dict[str, Any]:
     cluster.wait_until(lambda: status(entry), lambda d: d["allocator"]["name"], "an allocator")
     from sdrpeer.system.loader import load_system  # noqa: PLC0415 - yaml and plugins
 
-    code, body = http(
-        "POST", entry.api + "/v1/deploy", {"system": load_system(path).to_json()}, entry.token
+    doc = {"system": load_system(path).to_json()}
+    code, body = cluster.wait_until(  # 503: a robot's record has not reached the allocator yet
+        lambda: http("POST", entry.api + "/v1/deploy", doc, entry.token),
+        lambda answer: answer[0] != 503,
+        "the deploy answered",
     )
     assert code == 200, body
     return cluster.wait_until(

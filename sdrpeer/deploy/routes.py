@@ -4,8 +4,10 @@ How it works: `POST /v1/deploy` takes a system (the JSON of a `SystemDef`, valid
 CLI's loader; re-checked here by rebuilding it) and gives it to the allocator: this agent if it
 holds the role, else it forwards the request to the allocator's API with the peer token. The
 answer is the plan (200), an infeasible report (409: which constraint ruled out each robot), or
-503 when no allocator is known yet. `GET/POST /v1/plan` are how agents fetch and push plans;
-`POST /v1/move` asks the allocator for a planned move of one component (sdrpeer.deploy.move).
+503 when no allocator is known yet or when the allocator hears robots whose records have not
+arrived (an agent that just joined: the answer may change in a moment, so the CLI retries).
+`GET/POST /v1/plan` are how agents fetch and push plans; `POST /v1/move` asks the allocator for a
+planned move of one component (sdrpeer.deploy.move).
 """
 
 from __future__ import annotations
@@ -58,6 +60,14 @@ async def _allocate(
     except NotAllocator as e:
         return await _forward(request, e.leader, {**body, "origin": origin})
     if isinstance(result, Infeasible):
+        state = coord.cluster()
+        waiting = sorted(state.heard - state.alive.keys())
+        if waiting:
+            return json_error(
+                503,
+                f"the system cannot be placed yet: {', '.join(waiting)} alive but not heard "
+                f"from in full (no robot record yet); retry in a moment\n{result}",
+            )
         return web.json_response(
             {"error": f"the system cannot be placed:\n{result}", "report": str(result)}, status=409
         )
