@@ -196,22 +196,32 @@ def test_a_change_inside_the_cuts_travels_as_vitals_not_as_a_record(
     cluster: RealCluster, trio: list[Agent]
 ) -> None:
     """A battery at 90 % is no decision input (no rule, no trap cut between): robot-2 sees it
-    through robot-1's vitals on its pings, under the record version it already held."""
+    through robot-1's vitals on its pings, under the record version it already held. Another
+    input (the election settling after start) may make a new record inside the window, so up to
+    three changes are tried; a battery change that made a record would do so every time."""
     one, two, _ = trio
-    version = cluster.wait_until(
-        partial(two.member, "robot-1"),
-        lambda m: m["record_version"] > 0,
-        "robot-2 to hold robot-1's record",
-    )["record_version"]
-    status, body = http("POST", one.api + "/v1/robot", {"battery": "90%"}, token=one.token)
-    assert status == 200, body
-    seen = cluster.wait_until(
-        partial(two.member, "robot-1"),
-        lambda m: (m["metrics"] or {}).get("battery_pct") == pytest.approx(90.0, abs=0.2),
-        "robot-2 to see robot-1's battery at 90 %",
-        timeout=PROPAGATION_BOUND,
-    )
-    assert seen["record_version"] == version
+    for attempt in range(3):
+        version = cluster.wait_until(
+            partial(two.member, "robot-1"),
+            lambda m: m["record_version"] > 0,
+            "robot-2 to hold robot-1's record",
+        )["record_version"]
+        battery = 90.0 - attempt
+        status, body = http(
+            "POST", one.api + "/v1/robot", {"battery": f"{battery:g}%"}, token=one.token
+        )
+        assert status == 200, body
+        seen = cluster.wait_until(
+            partial(two.member, "robot-1"),
+            lambda m, b=battery: (
+                (m["metrics"] or {}).get("battery_pct") == pytest.approx(b, abs=0.2)
+            ),  # type: ignore[misc]
+            f"robot-2 to see robot-1's battery at {battery:g} %",
+            timeout=PROPAGATION_BOUND,
+        )
+        if seen["record_version"] == version:
+            break
+    assert seen["record_version"] == version, "every battery change made a new record"
     assert seen["vitals_revision"] >= 1
     info = one.agent_info()
     assert info["published"]["vitals"] >= 1
