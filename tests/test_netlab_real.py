@@ -7,6 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -171,3 +172,20 @@ def test_lab_down_removes_everything_after_the_lab_process_died(tmp_path: Path) 
     links = output(["ip", "link", "show"])
     assert plan.bridge not in links
     assert plan.veth("robot-1") not in links
+
+
+def test_labs_built_at_once_claim_different_ids(tmp_path: Path) -> None:
+    """Four networks built side by side (two `lab up --netns` at once, or tests in parallel):
+    each claims its own id by making its bridge, and each is whole."""
+    dirs = [tmp_path / f"lab{k}" for k in range(4)]
+    with ThreadPoolExecutor(len(dirs)) as pool:
+        plans = list(pool.map(lambda d: net.create(d, 2), dirs))
+    try:
+        assert len({p.lab_id for p in plans}) == len(plans)
+        for plan in plans:
+            for robot in plan.names():
+                shown = output(["ip", "-n", plan.namespace(robot), "-o", "addr", "show", "eth0"])
+                assert f"{plan.address(robot)}/24" in shown
+    finally:
+        left = [x for d in dirs for x in net.destroy(d)]
+    assert left == []

@@ -78,22 +78,33 @@ def load(lab_dir: Path) -> NetPlan | None:
         return None
 
 
+def _claim(robots: int) -> NetPlan:
+    """The first free lab id, claimed by making its bridge: two labs built at once (two `lab up
+    --netns`, or tests side by side) cannot both get an id, since only one `ip link add` of a
+    name succeeds."""
+    for lab_id in range(1, 251):
+        plan = NetPlan(lab_id, robots)
+        if not _free(plan):
+            continue
+        failed = run(plan.setup()[:1], check=False)
+        if not failed:
+            return plan
+        if "exists" not in failed[0]:  # not a race lost to another lab: say what went wrong
+            raise SdrpeerError(failed[0])
+    raise SdrpeerError("no free lab id: 250 namespace labs exist (sdrpeer lab down --all-netns)")
+
+
 def create(lab_dir: Path, robots: int) -> NetPlan:
     """Build a fresh network for `robots` robots; recorded in lab_dir/netns.json first."""
     require_tools()
     existing = load(lab_dir)
     if existing is not None:
         destroy(lab_dir)
-    lab_id = next((i for i in range(1, 251) if _free(NetPlan(i, robots))), None)
-    if lab_id is None:
-        raise SdrpeerError(
-            "no free lab id: 250 namespace labs exist (sdrpeer lab down --all-netns)"
-        )
-    plan = NetPlan(lab_id, robots)
+    plan = _claim(robots)
     lab_dir.mkdir(parents=True, exist_ok=True)
-    (lab_dir / STATE_FILE).write_text(json.dumps({"id": lab_id, "robots": robots}) + "\n")
+    (lab_dir / STATE_FILE).write_text(json.dumps({"id": plan.lab_id, "robots": robots}) + "\n")
     try:
-        run(plan.setup())
+        run(plan.setup()[1:])  # the bridge is made: that was the claim
     except SdrpeerError:
         destroy(lab_dir)
         raise
