@@ -18,3 +18,9 @@ def cluster(tmp_path: Path) -> Iterator[RealCluster]:
         yield net
     finally:
         net.close()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The tests that take 30 s or more by design (`slow`) go first: run side by side
+    (`tools/check` runs pytest-xdist workers), a long test started last would end the run alone."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

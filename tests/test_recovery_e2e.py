@@ -76,7 +76,11 @@ def test_signal_loss_on_the_allocators_robot_moves_the_allocator_first(
     cluster.wait_until(lambda: status(two), lambda d: d["allocator"]["name"] == "robot-1", "r1")
     doc = deploy(cluster, one, fast_system(tmp_path))
     assert {c["robot"] for c in doc["components"]} == {"robot-1"}  # first_fit: the origin
-    epoch = doc["allocator"]["epoch"]
+    before = status(two)["allocator"]
+    assert before["name"] == "robot-1", (
+        f"the allocator left robot-1 before its signal fell: {before}"
+    )
+    epoch = before["epoch"]
     code, _ = http("POST", one.api + "/v1/robot", {"rssi": "-56dBm"}, one.token)
     assert code == 200
     cluster.wait_until(lambda: status(two), all_active_off("robot-1"), "moved off robot-1")
