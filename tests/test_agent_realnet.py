@@ -290,8 +290,10 @@ def test_the_highest_priority_robot_is_elected_when_it_starts_last(tmp_path: Pat
         top = lab.robot_file("robot-3")
         top.write_text(top.read_text() + "priority: 10\n")
         one = lab.start("robot-1")
-        two = lab.start("robot-2", join=[one])
-        three = lab.start("robot-3", join=[one])
+        # the other two side by side: robot-3 must join within robot-1's startup grace, which
+        # two agent starts one after the other overran on a loaded machine
+        spawned = [lab.spawn(name, join=[one]) for name in ("robot-2", "robot-3")]
+        two, three = (lab.started(agent) for agent in spawned)
         for agent in (one, two, three):
             doc = lab.wait_until(
                 partial(agent.get, "/v1/status"),
