@@ -75,7 +75,8 @@ def test_signal_loss_on_the_allocators_robot_moves_the_allocator_first(
     one, two, three = agents
     cluster.wait_until(lambda: status(two), lambda d: d["allocator"]["name"] == "robot-1", "r1")
     doc = deploy(cluster, one, fast_system(tmp_path))
-    assert {c["robot"] for c in doc["components"]} == {"robot-1"}  # first_fit: the origin
+    placed = {c["robot"] for c in doc["components"]}
+    assert placed == {"robot-1"}, cluster.logs()  # first_fit: the origin
     before = status(two)["allocator"]
     assert before["name"] == "robot-1", (
         f"the allocator left robot-1 before its signal fell: {before}"
