@@ -87,6 +87,9 @@ class EventKind(StrEnum):
     """This robot hears a majority again and is catching up."""
     FLEET_IN_TOUCH = "fleet.in_touch"
     """This robot is in touch with the fleet."""
+    PORT_OVERFLOW = "port.overflow"
+    """An instance's connections started losing frames to full buffers (sdrpeer.runtime.overflow);
+    then at most one per port every 30 s while it goes on."""
     STATE_HANDOFF = "state.handoff"
     """A component's state was sent to another instance."""
     STATE_RESTORED = "state.restored"

@@ -221,3 +221,22 @@ class Sleeper(Component):
                         time.sleep(1.0)
         self.n += 1
         self.out.write(self.n)
+
+
+class Laggard(Component):
+    """Takes one value from `inp` every 1/`rate` s, whatever arrives (a consumer slower than
+    its producer); keeps how many it took."""
+
+    execution = Periodic(param="rate")
+    rate = Param(float, 20.0, "values taken per second")
+    inp = InPort("anything")
+
+    def on_initialize(self) -> None:
+        """Nothing taken yet."""
+        self.taken = 0
+
+    def on_execute(self) -> None:
+        """Take the oldest value waiting, if any."""
+        if self.inp.qsize():
+            self.inp.get_nowait()
+            self.taken += 1

@@ -240,6 +240,7 @@ EXPECTED_FAMILIES = {
     "sdrpeer_uptime_seconds": "gauge",
     "sdrpeer_instance_state": "gauge",
     "sdrpeer_instance_sent_bytes_per_second": "gauge",
+    "sdrpeer_instance_lost_frames_per_second": "gauge",
 }
 
 

@@ -42,7 +42,12 @@ DOC: dict[str, Any] = {
         {"component": "PositionEstimationRTC", "state": "unplaced", "standbys": []},
     ],
     "connections": [
-        {"from": "CameraRTC.image", "to": "AnomalyDetectionRTC.image", "bytes_per_s": 194000},
+        {
+            "from": "CameraRTC.image",
+            "to": "AnomalyDetectionRTC.image",
+            "bytes_per_s": 194000,
+            "lost_per_s": 37,
+        },
         {"from": "AnomalyDetectionRTC.alarm", "to": "PositionEstimationRTC.alarm"},
     ],
 }
@@ -54,9 +59,9 @@ CameraRTC              robot-2  active    22:13:20  194.0KB/s  robot-3:inactive
 AnomalyDetectionRTC    robot-3  error     22:14:25  -          robot-1:cold
 PositionEstimationRTC  -        unplaced  -         -          -
 
-FROM                       TO                           TRAFFIC
-CameraRTC.image            AnomalyDetectionRTC.image    194.0KB/s
-AnomalyDetectionRTC.alarm  PositionEstimationRTC.alarm  -"""
+FROM                       TO                           TRAFFIC    LOST
+CameraRTC.image            AnomalyDetectionRTC.image    194.0KB/s  37/s
+AnomalyDetectionRTC.alarm  PositionEstimationRTC.alarm  -          -"""
 
 
 def test_status_snapshot_plain() -> None:

@@ -57,8 +57,8 @@ def test_retention_window_counts_bytes_too() -> None:
 
 
 def test_ack_state_waits_for_older_frames_before_a_refused_one() -> None:
-    sent: list[int] = []
-    a = AckState("s", 1, sent.append)
+    sent = Acks()
+    a = AckState("s", 1, sent)
     a.enq = 2  # frames 1 and 2 queued
     a.refused(3)  # 3 dropped on arrival while 1, 2 wait
     assert a.acked == 0
@@ -73,17 +73,34 @@ def test_ack_state_waits_for_older_frames_before_a_refused_one() -> None:
     a.flush()
     a.flush()  # nothing new: nothing sent
     assert sent == [1, 3, 4]
+    assert sent.dropped == 1  # frame 3, told with the ack that covered it
 
 
 # ---- the InPort's side ---------------------------------------------------------------------
 
 
+class Acks(list[int]):
+    """What a stream's acknowledgements said: the seqs (in order) and the drops they reported."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.dropped = 0
+
+    def __call__(self, seq: int, dropped: int) -> None:
+        self.append(seq)
+        self.dropped += dropped
+
+
+def ignore(seq: int, dropped: int) -> None:
+    """Acknowledgements nobody reads."""
+
+
 def port_with_stream(
     policy: ConnectorPolicy | None = None,
-) -> tuple[InPortRuntime, list[int], str]:
+) -> tuple[InPortRuntime, Acks, str]:
     port = InPortRuntime("in", policy or ConnectorPolicy("fifo", 100, "block"))
-    acks: list[int] = []
-    key = port.attach_stream("c", "session-1", 1, acks.append)
+    acks = Acks()
+    key = port.attach_stream("c", "session-1", 1, acks)
     return port, acks, key
 
 
@@ -105,13 +122,45 @@ def test_inport_acknowledges_what_its_policy_discarded() -> None:
     for seq in (1, 2, 3):
         port.deliver(seq, seq, key)
     assert acks == [1]  # 1 was evicted by 3: it can never be needed again
+    assert acks.dropped == 1  # and the sender is told it was thrown away
     port, acks, key = port_with_stream(ConnectorPolicy("fifo", 2, "drop"))
     for seq in (1, 2, 3):
         port.deliver(seq, seq, key)
-    assert acks == []  # 3 was refused, but 1 and 2 still wait
+    assert acks == [0]  # 3 was refused, but 1 and 2 still wait: only the drop is told
+    assert acks.dropped == 1
     assert port.get_nowait() == 1
     assert port.get_nowait() == 2
-    assert acks == [1, 3]
+    assert acks == [0, 1, 3]
+    assert acks.dropped == 1  # each drop told once
+
+
+@pytest.mark.parametrize(
+    ("policy", "dropped"),
+    [
+        (ConnectorPolicy("new", 8, "overwrite"), 0),  # replacing is the design, not a loss
+        (ConnectorPolicy("skip", 8, "overwrite", skip=1), 0),  # so is thinning
+        (ConnectorPolicy("fifo", 4, "overwrite"), 6),
+        (ConnectorPolicy("fifo", 4, "drop"), 6),
+        (ConnectorPolicy("fifo", 100, "block"), 0),
+    ],
+)
+def test_every_frame_a_policy_discards_is_told_to_the_sender(
+    policy: ConnectorPolicy, dropped: int
+) -> None:
+    """Ten frames into a port nobody reads, then the consumer takes what is left: the acks
+    report exactly the frames the port discarded on a full buffer (what `new` replaces and
+    `skip` thins out is the policy's purpose, counted at the port only)."""
+    port, acks, key = port_with_stream(policy)
+    for seq in range(1, 11):
+        port.deliver(seq, seq, key)
+    while port.qsize():
+        port.get_nowait()
+    assert acks.dropped == dropped
+    if policy.push in ("all", "fifo"):
+        assert port.dropped == dropped
+    else:
+        assert port.dropped + port.skipped == (9 if policy.push == "new" else 5)
+    assert acks[-1] == 10  # everything handled
 
 
 def test_inport_drops_a_replay_within_a_session_and_restarts_on_a_new_one() -> None:
@@ -119,8 +168,8 @@ def test_inport_drops_a_replay_within_a_session_and_restarts_on_a_new_one() -> N
     for seq in (1, 2, 3):
         port.deliver(seq, seq, key)
     port.get_nowait()
-    again: list[int] = []
-    assert port.attach_stream("c", "session-1", 2, again.append) == key  # a reconnect
+    again = Acks()
+    assert port.attach_stream("c", "session-1", 2, again) == key  # a reconnect
     assert again == [1]  # told at once where the port is
     for seq in (2, 3, 4):
         port.deliver(seq, seq, key)
@@ -129,8 +178,8 @@ def test_inport_drops_a_replay_within_a_session_and_restarts_on_a_new_one() -> N
     assert [port.get_nowait() for _ in range(3)] == [2, 3, 4]
     assert again[-1] == 4
     assert acks == [1]
-    fresh: list[int] = []
-    new_key = port.attach_stream("c", "session-2", 1, fresh.append)  # the sender restarted
+    fresh = Acks()
+    new_key = port.attach_stream("c", "session-2", 1, fresh)  # the sender restarted
     port.deliver("x", 1, new_key)
     assert port.get_nowait() == "x"
     assert fresh == [1]
@@ -141,12 +190,11 @@ def test_two_senders_of_one_connection_never_mix() -> None:
     """An old copy of the sender still flushing (session 1) while its successor (session 2)
     starts: each has its own seqs, duplicates and acks."""
     port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
-    old_acks: list[int] = []
-    new_acks: list[int] = []
-    old = port.attach_stream("c", "s1", 1, old_acks.append)
+    old_acks, new_acks = Acks(), Acks()
+    old = port.attach_stream("c", "s1", 1, old_acks)
     for seq in range(1, 901):
         port.deliver(seq, seq, old)
-    new = port.attach_stream("c", "s2", 1, new_acks.append)
+    new = port.attach_stream("c", "s2", 1, new_acks)
     port.deliver("n1", 1, new)
     port.deliver(901, 901, old)  # the old socket still delivering
     port.deliver("n2", 2, new)
@@ -161,12 +209,12 @@ def test_two_senders_of_one_connection_never_mix() -> None:
 def test_sessions_of_a_connection_are_bounded() -> None:
     port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
     for k in range(20):
-        key = port.attach_stream("c", f"s{k}", 1, lambda seq: None)
-        port.detach_stream(key, lambda seq: None)  # not the one attached: stays attached
+        key = port.attach_stream("c", f"s{k}", 1, Acks())
+        port.detach_stream(key, ignore)  # not the one attached: stays attached
     assert len(port._conns) == 20  # attached ones are kept
     port2 = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
     for k in range(20):
-        send = list[int]().append
+        send = Acks()
         key = port2.attach_stream("c", f"s{k}", 1, send)
         port2.detach_stream(key, send)
     assert len(port2._conns) <= 5
@@ -174,7 +222,7 @@ def test_sessions_of_a_connection_are_bounded() -> None:
 
 def test_inport_counts_a_gap_from_the_first_seq_announced() -> None:
     port = InPortRuntime("in", ConnectorPolicy("fifo", 100, "block"))
-    key = port.attach_stream("c", "s", 5, lambda seq: None)
+    key = port.attach_stream("c", "s", 5, ignore)
     port.deliver("a", 7, key)
     assert port.lost == 2
 
@@ -432,3 +480,72 @@ async def test_a_receiver_that_does_not_acknowledge_gets_a_plain_stream(tmp_path
     finally:
         await conn.close()
         await server.close()
+
+
+# ---- the connection's policy at the receiver, and its drops told back -----------------------
+
+
+async def five_thousand_into_a_stalled_port(
+    tmp_path: Path, kind: str, given: dict[str, object] | None
+) -> tuple[Connection, InPortRuntime, list[int]]:
+    """The issue's silent-loss case: a fast producer sends 5,000 small frames into an InPort
+    whose class declares the defaults (all, 8, overwrite) and whose component takes nothing
+    until the producer is done, then everything that waits."""
+    port = InPortRuntime("in", ConnectorPolicy())
+    server = DataServer(lambda name: port if name == "in" else None, unix_path=str(tmp_path / "s"))
+    await server.start()
+    address = f"{kind}://{server.addresses[kind]}"
+    policy = ConnectorPolicy.from_map(given)
+    conn = Connection("c", address, "in", "cam.out", policy, given=given)
+    conn.start()
+    taken: list[int] = []
+    try:
+        await until_async("connected", lambda: conn.connected, bool)
+        for value in range(1, 5001):
+            while not conn.offer(value):
+                await conn.drain()
+            if value % 100 == 0:
+                await asyncio.sleep(0)
+        if given is not None:  # block at the port: the producer waited, take everything
+            while len(taken) < 5000:
+                taken.append(await asyncio.wait_for(port.get(), 10))
+        await until_async(
+            "everything the sender wrote arrived",
+            lambda: (conn.pending, conn.seq, port.frames_in),
+            lambda s: s[0] == 0 and s[1] == s[2],
+            within=20,
+        )
+        while port.qsize():
+            taken.append(port.get_nowait())
+        await until_async(
+            "the last acknowledgement",
+            lambda: conn.unacked,
+            lambda n: n == 0,
+            within=10,
+        )
+    finally:
+        await conn.close()
+        await server.close()
+    return conn, port, taken
+
+
+@pytest.mark.parametrize("kind", ["tcp", "unix"])
+async def test_frames_a_receiving_inport_discards_are_counted_at_the_sender(
+    tmp_path: Path, kind: str
+) -> None:
+    conn, port, taken = await five_thousand_into_a_stalled_port(tmp_path, kind, None)
+    assert taken == list(range(4993, 5001))  # the newest 8 (both queues overwrite)
+    assert port.dropped > 0  # the port's default (overwrite 8) threw frames away
+    assert conn.dropped_remote == port.dropped  # and its acknowledgements told the sender
+    assert conn.dropped + conn.dropped_remote == 5000 - 8  # every lost frame counted there
+
+
+@pytest.mark.parametrize("kind", ["tcp", "unix"])
+async def test_a_connections_policy_reaches_the_receiving_inport(tmp_path: Path, kind: str) -> None:
+    """`full: block, buffer: 64` on the connection (a system file's `policy:`) rules the
+    receiving InPort too, over the class's overwrite: nothing is lost, the producer waits."""
+    given: dict[str, object] = {"full": "block", "buffer": 64}
+    conn, port, taken = await five_thousand_into_a_stalled_port(tmp_path, kind, given)
+    assert taken == list(range(1, 5001))
+    assert port.policy_for("c") == ConnectorPolicy(buffer=64, full="block")
+    assert (port.dropped, conn.dropped, conn.dropped_remote) == (0, 0, 0)

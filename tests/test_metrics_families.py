@@ -19,6 +19,7 @@ GOSSIPED = [
         "state": "active",
         "role": "active",
         "out_bps": 19400,
+        "out_lost": 12,
     },
     {"name": "Cam-s1", "component": "CameraRTC", "state": "inactive", "role": "standby"},
 ]
@@ -115,6 +116,7 @@ async def test_every_family_with_its_type_and_values() -> None:
     assert value("sdrpeer_instance_state", instance="Cam", state="error") == 0.0
     assert value("sdrpeer_instance_state", instance="Cam-s1", state="inactive", role="standby") == 1
     assert value("sdrpeer_instance_sent_bytes_per_second", instance="Cam") == 19400.0
+    assert value("sdrpeer_instance_lost_frames_per_second", instance="Cam") == 12.0
     assert value("sdrpeer_instance_restarts", instance="Cam") == 2.0
     assert value("sdrpeer_instance_cpu_ratio", instance="Cam") == 0.125
     assert value("sdrpeer_port_bytes", port="image", direction="out") == 2000.0

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from sdrpeer.errors import RecordError
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import (
+    FORMAT,
     MAX_LISTED,
     ElectionInfo,
     InstanceInfo,
@@ -90,7 +91,7 @@ def test_minimal_record_and_unknown_names() -> None:
         instances=(InstanceInfo("cam", "camera_driver", "weird-state", "observer", 0.0, 0),),
     )
     assert decode_record(encode_record(r)) == r
-    assert len(encode_record(r)) == 70  # 30 of them are the three free-form strings
+    assert len(encode_record(r)) == 71  # 30 of them are the three free-form strings
 
 
 def test_vitals_round_trip_and_overlay() -> None:
@@ -105,12 +106,14 @@ def test_vitals_round_trip_and_overlay() -> None:
     newer = Vitals(
         metrics=Metrics(80.0, 0, 1 << 30, 50.0, -60.0, None),
         links=LinkSummary(peers=3, typical=LinkStats(1.0, 0.5, 0.2)),
-        loads=tuple((1.0, 1024 * (i + 1), 7) for i in range(len(r.instances))),
+        loads=tuple((1.0, 1024 * (i + 1), 7, i) for i in range(len(r.instances))),
     )
     same = apply_vitals(r, newer)
     assert same.metrics == replace(newer.metrics, mem_total=r.metrics.mem_total)
     assert same.links == replace(newer.links, bounds=r.links.bounds)
     assert [i.rss for i in same.instances] == [1024 * (i + 1) for i in range(10)]
+    assert [i.out_lost for i in same.instances] == list(range(10))
+    assert decode_vitals(encode_vitals(newer)).loads == newer.loads  # out_lost travels
     assert same.instances[0].name == r.instances[0].name  # identity stays the record's
     # Vitals of a newer record than the one held: its instances may differ, only the
     # robot's own values apply.
@@ -159,13 +162,13 @@ def test_record_to_json() -> None:
 def wire(**changes: object) -> bytes:
     """A valid wire array with some positions replaced."""
     base: list[object] = [
-        3,
+        FORMAT,
         [100, 4, 2, None, None, None],
         [3, 1, 1, 0, 1, [None, None, 500], ["p", 1, 1, 900]],
         None,
         0,
         ["C"],
-        [[0, 1, "1", 2, 0, 0, 0, None, 0]],
+        [[0, 1, "1", 2, 0, 0, 0, None, 0, 0]],
         None,
         None,
         None,
@@ -214,11 +217,12 @@ def test_wire_helper_is_valid() -> None:
         ({"links": [1, 1, 1, 0, 9, [None] * 3, ["p", 1, 1, 0] * 9]}, "at most 8 groups"),
         ({"api": 5}, "api: expected a name"),
         ({"priority": 2**40}, "priority"),
-        ({"instances": [[1, 1, "1", 2, 0, 0, 0, None, 0]]}, "instance.component: 1 out of"),
-        ({"instances": [[0, 2, "1", 2, 0, 0, 0, None, 0]]}, "instance.prefix: 2 out of range"),
-        ({"instances": [[0, 1, "1", 99, 0, 0, 0, None, 0]]}, "instance.state: 99 out of range"),
-        ({"instances": [[0, 0, "", 2, 0, 0, 0, None, 0]]}, "instance.name: expected a name"),
-        ({"instances": [[0, 1, "1", 2, 0, 0, 0]]}, "instance: expected a list of 9"),
+        ({"instances": [[1, 1, "1", 2, 0, 0, 0, None, 0, 0]]}, "instance.component: 1 out of"),
+        ({"instances": [[0, 2, "1", 2, 0, 0, 0, None, 0, 0]]}, "instance.prefix: 2 out of range"),
+        ({"instances": [[0, 1, "1", 99, 0, 0, 0, None, 0, 0]]}, "instance.state: 99 out of range"),
+        ({"instances": [[0, 0, "", 2, 0, 0, 0, None, 0, 0]]}, "instance.name: expected a name"),
+        ({"instances": [[0, 1, "1", 2, 0, 0, 0]]}, "instance: expected a list of 10"),
+        ({"instances": [[0, 1, "1", 2, 0, 0, 0, None, 0, -1]]}, "instance.out_lost: -1 out of"),
         ({"metrics": [1, 4, 2, None, None, [10**10, 0]]}, "pos.x: 10000000000 out of range"),
         ({"launch": [["python"]]}, "launch: expected a list of 2"),
         ({"launch": [["python", 5], []]}, "launch.launcher: expected a name"),

@@ -76,6 +76,7 @@ from sdrpeer.record.robot import (
     record_to_json,
     state_to_wire,
 )
+from sdrpeer.runtime.overflow import OverflowWatch
 from sdrpeer.vocabulary import MemberState
 
 if TYPE_CHECKING:
@@ -143,6 +144,7 @@ class Agent:
         self._link_bounds = link_bounds(None)
         self._versions = (1, 0)  # (first record version of this run, reserved limit)
         self._states: dict[str, tuple[str, str]] = {}
+        self._overflows = OverflowWatch()
         self._rate = {"t": 0.0, "in": 0, "out": 0, "in_s": 0.0, "out_s": 0.0}
         self.keyring: Keyring | None = None
         self.peer_tokens: list[str] = []
@@ -400,6 +402,7 @@ class Agent:
         self._update_rates(now)
         infos = () if self.instances is None else self.instances.infos()
         self._log_states(infos)
+        self._log_overflows(now, infos)
         coord = self.coordinator
         record = RobotRecord(
             replace(metrics, cpu_pct=round(self._cpu.add(now, metrics.cpu_pct), 1)),
@@ -450,6 +453,33 @@ class Agent:
                 time.time(), EventKind.INSTANCE_STATE, self.name, instance=gone, state="gone"
             )
         self._states = now
+
+    def _log_overflows(self, now: float, infos: tuple[InstanceInfo, ...]) -> None:
+        """A `port.overflow` warning when an instance's connections start losing frames to
+        full buffers (then at most one per port every 30 s while it goes on)."""
+        if self.instances is None:
+            return
+        components = {i.name: i.component for i in infos}
+        for name, ports in self.instances.port_counters().items():
+            for o in self._overflows.feed(now, name, ports):
+                log.warning(
+                    "%s.%s: %d frames lost to full buffers (%d in all)",
+                    o.instance,
+                    o.port,
+                    o.frames,
+                    o.total,
+                )
+                self.events.add(
+                    time.time(),
+                    EventKind.PORT_OVERFLOW,
+                    self.name,
+                    instance=o.instance,
+                    component=components.get(o.instance),
+                    port=o.port,
+                    frames=o.frames,
+                    total=o.total,
+                )
+        self._overflows.keep(components)
 
     def _update_rates(self, now: float) -> None:
         assert self.shell is not None

@@ -182,6 +182,12 @@ def instance_families(members: list[dict[str, Any]]) -> Iterator[Metric]:
         "Bytes per second an instance's OutPorts sent over the last metrics interval.",
         labels=["robot", "instance", "component"],
     )
+    lost = GaugeMetricFamily(
+        "sdrpeer_instance_lost_frames_per_second",
+        "Frames per second an instance's outgoing connections lost to a full buffer at either "
+        "end (its queues or the receiving InPorts), over the last metrics interval.",
+        labels=["robot", "instance", "component"],
+    )
     for member in members:
         robot = str(member.get("name"))
         for inst in member.get("instances") or []:
@@ -191,8 +197,10 @@ def instance_families(members: list[dict[str, Any]]) -> Iterator[Metric]:
             for s in states:
                 state.add_metric([robot, name, comp, str(inst.get("role")), s], float(s == now))
             sent.add_metric([robot, name, comp], _number(inst.get("out_bps")) or 0.0)
+            lost.add_metric([robot, name, comp], _number(inst.get("out_lost")) or 0.0)
     yield state
     yield sent
+    yield lost
 
 
 def local_instance_families(robot: str, rows: list[dict[str, Any]]) -> Iterator[Metric]:

@@ -67,6 +67,14 @@ def _sends(doc: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _lost(conn: Mapping[str, Any], color: bool) -> str:
+    """Frames/s the sender's connections lose to full buffers (red when any)."""
+    lost = conn.get("lost_per_s")
+    if lost is None:
+        return MISSING
+    return paint(f"{lost}/s", "31", color) if lost else "0"
+
+
 def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = True) -> str:
     """The `sdrpeer status` text (`local`: times in the local zone, else UTC)."""
     alloc = doc.get("allocator") or {}
@@ -101,8 +109,11 @@ def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = 
     conns = doc.get("connections") or []
     if conns:
         lines.append("")
-        edges = [[str(c.get("from")), str(c.get("to")), _rate(c.get("bytes_per_s"))] for c in conns]
-        lines.append(render_table(("FROM", "TO", "TRAFFIC"), edges))
+        edges = [
+            [str(c.get("from")), str(c.get("to")), _rate(c.get("bytes_per_s")), _lost(c, color)]
+            for c in conns
+        ]
+        lines.append(render_table(("FROM", "TO", "TRAFFIC", "LOST"), edges))
     return "\n".join(lines)
 
 

@@ -72,6 +72,7 @@ class Connection:
         window: tuple[int, int] | None = (DEFAULT_FRAMES, DEFAULT_BYTES),
         drain_timeout: float = 5.0,
         auth: DataAuth | None = None,
+        given: dict[str, object] | None = None,
     ) -> None:
         parse_address(to)
         self.conn_id = conn_id
@@ -90,6 +91,9 @@ class Connection:
         """Seconds a repointed link may take to deliver its last acknowledgements."""
         self.auth = auth
         """The host's data keys (sdrpeer.dataplane.auth); with any, links are authenticated."""
+        self.given = policy.to_map() if given is None else dict(given)
+        """The policy map the hello carries: the keys the connection sets itself (a system
+        file's `policy:`); the receiving InPort applies them over its own default."""
         self.session = os.urandom(8).hex()
         """This sender's stream session (a receiver tells a replay from a restart by it)."""
         self.reconnects = 0
@@ -98,6 +102,10 @@ class Connection:
         """Values refused at `offer` because they were oversized or unencodable."""
         self.last_error: str | None = None
         """Why the last dial or link failed."""
+        self.dropped_remote = 0
+        """Frames the receiving InPort's policy discarded (overwrite, drop, skip, new), as its
+        acknowledgements counted them: with `dropped`, every frame this connection lost to a
+        policy (an ack lost with a broken link loses its count)."""
         self._writer = FrameWriter(policy, max_frame)
         self._queue = self._writer.queue
         self._writer_offer = self._writer.offer
@@ -115,6 +123,19 @@ class Connection:
     def dropped(self) -> int:
         """Values discarded by the policy."""
         return self._queue.dropped
+
+    @property
+    def evicted(self) -> int:
+        """Of those, values queued and then evicted for a newer one (overwrite, new): `offer`
+        had returned True for them, so the OutPort did not count them."""
+        return self._queue.evicted
+
+    @property
+    def overflowed(self) -> int:
+        """Values lost at either end because a buffer was full: this queue's overwrites and
+        drops, and the receiving InPort's (`dropped_remote`). Not what `new` and `skip` thin
+        out by design. A connection that starts overflowing is warned about (port.overflow)."""
+        return self._queue.overflowed + self.dropped_remote
 
     @property
     def frames_out(self) -> int:
@@ -260,10 +281,11 @@ class Connection:
     def _never() -> bool:
         return False
 
-    def _acked(self, seq: int) -> None:
+    def _acked(self, seq: int, dropped: int) -> None:
         retention = self._writer.retention
         if retention is not None:
             retention.ack(seq)
+        self.dropped_remote += dropped  # the receiver's drops since its previous ack
 
     def _resume(self, link: Link) -> None:
         if link is self._link:
@@ -283,9 +305,7 @@ class Connection:
         while not self._closing:
             await self._settle()
             to = self.to
-            hello = Hello(
-                self.conn_id, self.in_port, self.from_, self.policy.to_map(), ack=self._offer()
-            )
+            hello = Hello(self.conn_id, self.in_port, self.from_, self.given, ack=self._offer())
             try:
                 async with asyncio.timeout(self.hello_timeout):
                     link = await dial(

@@ -54,7 +54,8 @@ class Hello:
     from_: str
     """The sending `instance.port`."""
     policy: dict[str, Any]
-    """The connector policy map, for the receiver's information."""
+    """The connection's own connector policy map (the keys it sets): the receiving InPort applies
+    them over its declared policy to this connection's frames."""
     version: int = PROTOCOL_VERSION
     """The data stream protocol version."""
     shm: object = None

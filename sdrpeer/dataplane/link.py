@@ -14,8 +14,10 @@ a socket with a ring is only half-closed, so the receiver can still send credits
 the rest (a write to a closed socket would make it drop what it has not read), and closes when
 it reaches the end.
 
-A receiver that acknowledges (it said ``"ack": true`` in its reply) writes ``[seq]`` on the same
-reverse direction as the credits (a credit is a bare uint): `on_ack` gets each seq. Such a link
+A receiver that acknowledges (it said ``"ack": true`` in its reply) writes ``[seq]`` or
+``[seq, dropped]`` on the same reverse direction as the credits (a credit is a bare uint):
+`on_ack` gets each seq and how many more frames the receiving InPort's policy discarded since the
+previous ack. Such a link
 is also only half-closed by `shut`, so the acknowledgements of what the old receiver still takes
 arrive; it closes once it has acknowledged everything or its instance stops.
 
@@ -55,7 +57,7 @@ class Link(asyncio.Protocol):
         self,
         on_resume: Callable[[Link], None],
         on_lost: Callable[[Link], None],
-        on_ack: Callable[[int], None] | None = None,
+        on_ack: Callable[[int, int], None] | None = None,
     ) -> None:
         self.on_resume = on_resume
         self.on_lost = on_lost
@@ -132,7 +134,7 @@ class Link(asyncio.Protocol):
             self._back(early)
 
     def _back(self, data: bytes) -> None:
-        """Credits (uints) and acks (``[seq]``) from the receiver."""
+        """Credits (uints) and acks (``[seq]`` or ``[seq, dropped]``) from the receiver."""
         assert self._reverse is not None
         ring = self.ring
         credited = False
@@ -145,9 +147,9 @@ class Link(asyncio.Protocol):
                     if ring is not None:  # else shut: nothing waits for credits
                         ring.credit(obj)
                         credited = True
-                elif type(obj) is list and len(obj) == 1 and type(obj[0]) is int and self.acks:
+                elif type(obj) is list and self.acks and _is_ack(obj):
                     if self.on_ack is not None:
-                        self.on_ack(obj[0])
+                        self.on_ack(obj[0], obj[1] if len(obj) == 2 else 0)
                 else:
                     raise ValueError(f"unexpected {obj!r:.40}")
         except Exception:  # a bad credit or ack: the receiver is broken, so is the link
@@ -197,7 +199,7 @@ async def dial(
     on_lost: Callable[[Link], None],
     *,
     shm_size: int,
-    on_ack: Callable[[int], None] | None = None,
+    on_ack: Callable[[int, int], None] | None = None,
     auth: DataAuth | None = None,
     encrypt: bool = True,
     max_record: int = MAX_RECORD,
@@ -278,3 +280,8 @@ def _prove(
     if not hello.enc:
         return None, None
     return None, stream_keys(key, nonce, theirs[0], names)
+
+
+def _is_ack(obj: list[Any]) -> bool:
+    """``[seq]`` or ``[seq, dropped]``, unsigned integers."""
+    return 1 <= len(obj) <= 2 and all(type(x) is int and x >= 0 for x in obj)

@@ -55,8 +55,10 @@ class PendingQueue(Generic[T]):
         "_overwrite",
         "_skip",
         "dropped",
+        "evicted",
         "items",
         "limit",
+        "overflowed",
         "simple",
     )
 
@@ -76,6 +78,12 @@ class PendingQueue(Generic[T]):
         self._counter = 0
         self.dropped = 0
         """Values discarded by the policy (skipped, evicted, refused when full, replaced)."""
+        self.evicted = 0
+        """Of those, values that had been queued (`offer` returned True for them: overwrite
+        and new evict the oldest to queue the newest)."""
+        self.overflowed = 0
+        """Of `dropped`, values lost because the buffer was full (overwrite, drop); what `new`
+        replaces and `skip` thins out is the policy's purpose, not an overflow."""
 
     def offer(self, item: T) -> bool:
         """Queue one encoded value per the policy; False when it was not queued."""
@@ -92,9 +100,13 @@ class PendingQueue(Generic[T]):
             items.popleft()
             items.append(item)
             self.dropped += 1
+            self.evicted += 1
+            if not self._new:
+                self.overflowed += 1
             return True
         if not self._block:
             self.dropped += 1
+            self.overflowed += 1
         return False
 
     def take(self) -> list[T]:

@@ -1,7 +1,9 @@
 """What the data server needs from the ports it delivers to (sdrpeer.sdk's InPort fits both).
 
 An `InPortLike` takes frames; an `AckingPort` also acknowledges what its component took, so
-senders can keep and replay the rest (docs/protocol.md section 2, "Acknowledgements").
+senders can keep and replay the rest (docs/protocol.md section 2, "Acknowledgements"), and
+counts back what its policy discarded; a `PolicyPort` queues each connection's frames per the
+connection's own policy (the hello's policy map over the port's default).
 """
 
 from __future__ import annotations
@@ -9,7 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
-__all__ = ["AckingPort", "InPortLike"]
+__all__ = ["AckingPort", "InPortLike", "PolicyPort", "SendAck"]
+
+SendAck = Callable[[int, int], None]
+"""Writes one acknowledgement: the seq, and the frames of the stream the policy discarded."""
 
 
 class InPortLike(Protocol):
@@ -25,13 +30,11 @@ class InPortLike(Protocol):
 class AckingPort(InPortLike, Protocol):
     """An InPort that acknowledges what its component took (sdrpeer.sdk.inport's does)."""
 
-    def attach_stream(
-        self, conn: str, session: str, next_seq: int, send: Callable[[int], None]
-    ) -> str:
+    def attach_stream(self, conn: str, session: str, next_seq: int, send: SendAck) -> str:
         """A socket of an acknowledged stream opened; acks go to `send`; returns the key its
         frames are delivered under."""
 
-    def detach_stream(self, key: str, send: Callable[[int], None]) -> None:
+    def detach_stream(self, key: str, send: SendAck) -> None:
         """That socket closed."""
 
     def acked(self, key: str) -> int:
@@ -39,3 +42,14 @@ class AckingPort(InPortLike, Protocol):
 
     def flush_acks(self) -> None:
         """Send every acknowledgement due now."""
+
+
+class PolicyPort(InPortLike, Protocol):
+    """An InPort that queues each connection's frames per that connection's policy."""
+
+    def connection_policy(self, given: dict[str, Any] | None) -> Any:
+        """The policy a connection whose hello gave the policy map `given` gets (ValueError
+        when a value is bad)."""
+
+    def connect(self, conn: str, policy: Any) -> None:
+        """Register connection `conn` with that policy."""

@@ -24,7 +24,7 @@ import msgpack
 
 from sdrpeer.dataplane.auth import proof_names
 from sdrpeer.dataplane.frames import PROTOCOL_VERSION, Hello, encode_reply, parse_hello
-from sdrpeer.dataplane.port_api import AckingPort, InPortLike
+from sdrpeer.dataplane.port_api import AckingPort, InPortLike, PolicyPort
 from sdrpeer.dataplane.reader import FrameReader
 from sdrpeer.dataplane.seal import TAG, Opener, sealed_writer
 from sdrpeer.dataplane.shm import ReceiverRing
@@ -86,6 +86,7 @@ class Receiver(asyncio.BufferedProtocol):
         self.acking: AckingPort | None = None
         """The port, when this stream is acknowledged."""
         self._proving: tuple[Hello, InPortLike, bool, bytes] | None = None  # hello answered
+        self._policy: Any = None  # the connection's policy at a PolicyPort (from the hello)
         self._last_seq = 0  # the highest seq delivered on this socket
         self._eof = False  # the sender ended its side; we close once all is acknowledged
         self._credited = 0
@@ -274,6 +275,12 @@ class Receiver(asyncio.BufferedProtocol):
         assert self.transport is not None
         if error is None and hello.shm is not None and self.server.shm and self._local():
             self._attach(hello.shm)
+        self._policy = None
+        if error is None and hasattr(port, "connection_policy"):
+            try:
+                self._policy = cast(PolicyPort, port).connection_policy(hello.policy)
+            except (ValueError, TypeError) as exc:
+                error = f"bad hello: policy: {exc}"
         acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
         proof = None
         if error is None and authenticating and auth is not None and hello.auth is not None:
@@ -331,6 +338,8 @@ class Receiver(asyncio.BufferedProtocol):
             self._timer.cancel()
         self.port = port
         self.in_port = hello.in_port
+        if self._policy is not None:  # this connection's frames queue per its own policy
+            cast(PolicyPort, port).connect(hello.conn, self._policy)
         if acks and hello.ack is not None:
             self.acking = cast(AckingPort, port)
             ack = hello.ack
@@ -338,12 +347,13 @@ class Receiver(asyncio.BufferedProtocol):
             self.server.counters["acked"] += 1
         return True
 
-    def _ack(self, seq: int) -> None:
-        """The port acknowledges every frame up to `seq`."""
+    def _ack(self, seq: int, dropped: int) -> None:
+        """The port acknowledges every frame up to `seq`; its policy discarded `dropped` more of
+        this stream's frames since the previous acknowledgement."""
         transport = self.transport
         if transport is None or transport.is_closing() or self._send is None:
             return
-        self._send(_packb([seq]))
+        self._send(_packb([seq, dropped] if dropped else [seq]))
         if self._eof and seq >= self._last_seq:
             transport.close()  # the sender left and has heard everything
 

@@ -100,24 +100,29 @@ def status_doc(
 
 def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str, Any]]:
     """Each connection of the system with the bytes/s its sender's active instance sends now
-    (all its OutPorts; None when not known) and the traffic the system file expects."""
+    and the frames/s its outgoing connections lose to full buffers at either end (all its
+    OutPorts, like the bytes; None when not known), and the traffic the system file expects."""
     if plan.system is None:
         return []
-    sending: dict[str, int] = {}
+    sending: dict[str, tuple[int, int]] = {}
     for robot, rec in alive.items():
         for inst in rec.instances:
             p = plan.active_of(inst.component)
             if p is not None and p.instance == inst.name and p.robot == robot:
-                sending[inst.component] = inst.out_bps
-    return [
-        {
-            "from": f"{c.from_component}.{c.from_port}",
-            "to": f"{c.to_component}.{c.to_port}",
-            "bytes_per_s": sending.get(c.from_component),
-            "expected_bytes_per_s": c.traffic_bytes_per_s,
-        }
-        for c in plan.system.connections
-    ]
+                sending[inst.component] = (inst.out_bps, inst.out_lost)
+    rows = []
+    for c in plan.system.connections:
+        sent = sending.get(c.from_component)
+        rows.append(
+            {
+                "from": f"{c.from_component}.{c.from_port}",
+                "to": f"{c.to_component}.{c.to_port}",
+                "bytes_per_s": None if sent is None else sent[0],
+                "expected_bytes_per_s": c.traffic_bytes_per_s,
+                "lost_per_s": None if sent is None else sent[1],
+            }
+        )
+    return rows
 
 
 def all_active(doc: Mapping[str, Any]) -> bool:

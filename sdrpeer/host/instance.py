@@ -172,7 +172,7 @@ class HostedInstance:
             raise CommandRefused(f"conn 'policy': {exc}") from None
         try:
             connection = Connection(
-                conn_id, to, in_port, f"{self.name}.{out}", policy, auth=self.auth
+                conn_id, to, in_port, f"{self.name}.{out}", policy, auth=self.auth, given=policy_map
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None

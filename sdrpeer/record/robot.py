@@ -34,8 +34,9 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
                  [peer, rtt_10us, jitter_10us, loss_permille, ...]]   (at most MAX_LISTED)
     components= [component name, ...]                 (each distinct component once)
     instances = [[component_index, shared_prefix_len, name_rest, state, role, cpu_dpct,
-                  rss_kib, data_addr|nil, out_bytes_per_s], ...]
-    loads     = [cpu_dpct, rss_kib, out_bytes_per_s, ...]   (3 per instance, in record order)
+                  rss_kib, data_addr|nil, out_bytes_per_s, out_lost_per_s], ...]
+    loads     = [cpu_dpct, rss_kib, out_bytes_per_s, out_lost_per_s, ...]   (4 per instance,
+                 in record order)
     election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
     plan      = [epoch, version, digest, allocator] | nil   (the newest plan this robot holds)
     launch    = [[launcher, ...], [python target pattern, ...]] | nil   (nil: python, any target)
@@ -44,9 +45,10 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
 starts with its component's name (`CameraRTC2` of `CameraRTC`), so only the differing tail is
 sent. Well-known states and roles are sent as a small index, any other as its string.
 Decoding returns the rounded values: `decode_record(encode_record(r))` equals `r` only once `r`
-is already on that grid. Format 3 (this one) added `launch` to format 2, which had replaced format
-1 (whose record listed every link and a timestamp); a record of another format is refused, so a
-fleet is upgraded all at once.
+is already on that grid. Format 4 (this one) added each instance's `out_lost_per_s` (frames its
+outgoing connections lose to full buffers) to format 3, which had added `launch` to format 2,
+which had replaced format 1 (whose record listed every link and a timestamp); a record of another
+format is refused, so a fleet is upgraded all at once.
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ from sdrpeer.launch.policy import DEFAULT_POLICY, LaunchPolicy
 from sdrpeer.record.limits import LIMITS, MAX_COORD_M
 from sdrpeer.vocabulary import InstanceRole, InstanceState, LifecycleState, ProcessState
 
-FORMAT = 3
+FORMAT = 4
 """Version of the wire layout above; a decoder refuses any other."""
 
 STATES: tuple[InstanceState, ...] = (
@@ -203,6 +205,9 @@ class InstanceInfo:
     """Where other robots' senders reach its InPorts (tcp://host:port), while it runs."""
     out_bps: int = 0
     """Bytes per second its OutPorts sent, over the last metrics interval."""
+    out_lost: int = 0
+    """Frames per second its outgoing connections lost to a full buffer at either end (a
+    sender's queue or the receiving InPort; rounded up), over the last metrics interval."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -254,12 +259,14 @@ class Vitals:
 
     metrics: Metrics
     links: LinkSummary
-    loads: tuple[tuple[float, int, int], ...] = ()
+    loads: tuple[tuple[float, int, int, int], ...] = ()
 
 
 def vitals_of(r: RobotRecord) -> Vitals:
     """The measured values of a record."""
-    return Vitals(r.metrics, r.links, tuple((i.cpu_pct, i.rss, i.out_bps) for i in r.instances))
+    return Vitals(
+        r.metrics, r.links, tuple((i.cpu_pct, i.rss, i.out_bps, i.out_lost) for i in r.instances)
+    )
 
 
 def apply_vitals(r: RobotRecord, v: Vitals, *, same_version: bool = True) -> RobotRecord:
@@ -270,8 +277,8 @@ def apply_vitals(r: RobotRecord, v: Vitals, *, same_version: bool = True) -> Rob
     links = replace(v.links, bounds=r.links.bounds)
     if same_version and len(v.loads) == len(instances):
         instances = tuple(
-            replace(i, cpu_pct=cpu, rss=rss, out_bps=out)
-            for i, (cpu, rss, out) in zip(instances, v.loads, strict=True)
+            replace(i, cpu_pct=cpu, rss=rss, out_bps=out, out_lost=lost)
+            for i, (cpu, rss, out, lost) in zip(instances, v.loads, strict=True)
         )
     return replace(r, metrics=metrics, links=links, instances=instances)
 
@@ -372,6 +379,7 @@ def encode_record(r: RobotRecord) -> bytes:
                 _kib(inst.rss),
                 inst.data,
                 max(0, int(inst.out_bps)),
+                max(0, int(inst.out_lost)),
             ]
         )
     e, p = r.election, r.plan
@@ -394,8 +402,8 @@ def encode_record(r: RobotRecord) -> bytes:
 def encode_vitals(v: Vitals) -> bytes:
     """Vitals as compact msgpack bytes (see the module docstring for the layout)."""
     loads: list[int] = []
-    for cpu, rss, out in v.loads:
-        loads += [_fix(cpu, 10), _kib(rss), max(0, int(out))]
+    for cpu, rss, out, lost in v.loads:
+        loads += [_fix(cpu, 10), _kib(rss), max(0, int(out)), max(0, int(lost))]
     metrics = _wire_metrics(v.metrics)
     del metrics[1]  # the capacity: a record's
     links = _wire_links(v.links)
@@ -512,7 +520,7 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
     components = [_str(c, "component") for c in _list(comps, "components")]
     out = []
     for item in _list(x, "instances"):
-        ci, shared, rest, state, role, cpu, rss, data, out_bps = _list(item, "instance", 9)
+        ci, shared, rest, state, role, cpu, rss, data, out_bps, lost = _list(item, "instance", 10)
         component = components[_int(ci, "instance.component", 0, len(components) - 1)]
         prefix = component[: _int(shared, "instance.prefix", 0, len(component))]
         out.append(
@@ -525,6 +533,7 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
                 rss=_int(rss, "instance.rss", 0, 1 << 50) * 1024,
                 data=None if data is None else _str(data, "instance.data"),
                 out_bps=_int(out_bps, "instance.out_bps", 0, 1 << 40),
+                out_lost=_int(lost, "instance.out_lost", 0, 1 << 40),
             )
         )
     return tuple(out)
@@ -608,15 +617,16 @@ def decode_vitals(b: bytes) -> Vitals:
     try:
         _, metrics, links, flat = _list(wire, "vitals", 4)
         flat = _list(flat, "vitals.loads")
-        if len(flat) % 3:
-            raise _Malformed("vitals.loads: expected groups of 3")
+        if len(flat) % 4:
+            raise _Malformed("vitals.loads: expected groups of 4")
         loads = tuple(
             (
                 _int(flat[i], "loads.cpu_pct", 0, 1_000_000) / 10,
                 _int(flat[i + 1], "loads.rss", 0, 1 << 50) * 1024,
                 _int(flat[i + 2], "loads.out_bps", 0, 1 << 40),
+                _int(flat[i + 3], "loads.out_lost", 0, 1 << 40),
             )
-            for i in range(0, len(flat), 3)
+            for i in range(0, len(flat), 4)
         )
         metrics = _list(metrics, "vitals.metrics", 5)
         links = _list(links, "vitals.links", 6)
@@ -677,6 +687,7 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
                 "rss": i.rss,
                 "data": i.data,
                 "out_bps": i.out_bps,
+                "out_lost": i.out_lost,
             }
             for i in r.instances
         ],

@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
@@ -349,6 +350,10 @@ class InstanceManager:
         """Every desired or running instance, sorted by name."""
         return [self.status_of(n) for n in sorted(set(self._desired) | set(self._sups))]
 
+    def port_counters(self) -> dict[str, dict[str, dict[str, int]]]:
+        """Instance -> port -> counters, from each running host's last heartbeat."""
+        return {name: sup.ports for name, sup in self._sups.items() if sup.ports}
+
     def infos(self) -> tuple[InstanceInfo, ...]:
         """What the robot's gossip record says about its instances."""
         return tuple(
@@ -361,6 +366,7 @@ class InstanceManager:
                 rss=sup.rss,
                 data=sup.tcp_address(),
                 out_bps=round(sup.out_bps),
+                out_lost=math.ceil(sup.out_lost_ps),  # one frame lost in a while still shows
             )
             for _, sup in sorted(self._sups.items())
         )

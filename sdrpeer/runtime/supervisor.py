@@ -113,8 +113,10 @@ class Supervisor:
         """The running host's hello (None until it said it)."""
         self.ports: dict[str, dict[str, int]] = {}
         self.out_bps = 0.0
+        self.out_lost_ps = 0.0
+        """Frames per second its outgoing connections lost to full buffers (see `sample`)."""
         """Bytes per second sent by the OutPorts between the last two `sample` calls."""
-        self._last_sent: tuple[float, int] | None = None
+        self._last_sent: tuple[float, int, int] | None = None
         self.connections: dict[str, tuple[ConnectionSpec, str]] = {}
         self.start_latency: float | None = None
         self.cpu_pct = 0.0
@@ -476,16 +478,19 @@ class Supervisor:
 
     # ----------------------------------------------------------------- metrics
     def sample(self) -> tuple[float, int]:
-        """Measure the host's CPU % (since the last call) and RSS bytes now, and the bytes per
-        second its OutPorts sent since the last call (`out_bps`, from the heartbeat's counters)."""
+        """Measure the host's CPU % (since the last call) and RSS bytes now, and per second
+        since the last call the bytes its OutPorts sent (`out_bps`) and the frames their
+        connections lost to full buffers (`out_lost_ps`), from the heartbeat's counters."""
         now = time.monotonic()
         sent = sum(c.get("bytes_out", 0) for c in self.ports.values())
+        lost = sum(c.get("overflowed", 0) for c in self.ports.values())
         last = self._last_sent
-        if last is not None and sent >= last[1] and now > last[0]:
+        if last is not None and sent >= last[1] and lost >= last[2] and now > last[0]:
             self.out_bps = (sent - last[1]) / (now - last[0])
-        else:
-            self.out_bps = 0.0
-        self._last_sent = (now, sent)
+            self.out_lost_ps = (lost - last[2]) / (now - last[0])
+        else:  # the first sample, or a new host process whose counters began again
+            self.out_bps = self.out_lost_ps = 0.0
+        self._last_sent = (now, sent, lost)
         ps = self._ps
         if ps is None:
             self.cpu_pct, self.rss = 0.0, 0

@@ -109,6 +109,11 @@ class InPortRuntime:
         old = self._conns.get(conn)
         self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
 
+    def connection_policy(self, given: dict[str, Any] | None) -> ConnectorPolicy:
+        """The policy a connection whose own policy map is `given` gets at this port: the
+        port's default with the given keys over it (ValueError when one is bad)."""
+        return self.policy.merged(given)
+
     def disconnect(self, conn: str) -> None:
         """Forget connection `conn` (frames already queued stay readable)."""
         self._conns.pop(conn, None)
@@ -136,13 +141,13 @@ class InPortRuntime:
             if (c.arrivals - 1) % (p.skip + 1):
                 self.skipped += 1
                 if a is not None:
-                    self._refused(a, seq)
+                    self._refused(a, seq, overflow=False)
                 return
         elif p.push == "new" and q:
             self.dropped += len(q)
             q.clear()
             if tags is not None:
-                self._taken_all()
+                self._taken_all()  # replaced by design: not an overflow
         if len(q) >= p.buffer:
             if p.full == "drop":
                 self.dropped += 1
@@ -153,7 +158,7 @@ class InPortRuntime:
                 q.popleft()
                 self.dropped += 1
                 if tags is not None:
-                    self._taken_one()
+                    self._evicted_one()
             # "block": never drop here; an acknowledged stream's sender stops at its window.
         q.append(value)
         if tags is not None:
@@ -232,8 +237,8 @@ class InPortRuntime:
         self._ack_soon = True
         loop.call_soon(self.flush_acks)
 
-    def _refused(self, a: AckState, seq: int) -> None:
-        a.refused(seq)
+    def _refused(self, a: AckState, seq: int, *, overflow: bool = True) -> None:
+        a.refused(seq, overflow=overflow)
         if a.dirty:
             self._schedule_acks(a)
 
@@ -255,6 +260,14 @@ class InPortRuntime:
             a.dirty = True
         if a.dirty and not was:  # already dirty: already waiting for the next flush
             self._schedule_acks(a)
+
+    def _evicted_one(self) -> None:
+        """The oldest queued value was evicted by a newer one (overwrite on a full buffer)."""
+        assert self._tags is not None
+        tag = self._tags.popleft()
+        if tag is not None:
+            tag[0].evicted(tag[1])
+            self._schedule_acks(tag[0])
 
     def _taken_all(self) -> None:
         tags = self._tags

@@ -4,8 +4,9 @@ How it works: `ConnectorPolicy` is a frozen, validated dataclass; `from_map` rea
 of a `connect` command or a data-stream hello (every key optional) and `to_map` writes it back.
 Who applies what: the sending data plane applies a connection's policy to its send queue
 (sdrpeer.dataplane.pending: skip, new, buffer, full, block backpressure through `drain()`). The
-receiving `InPortRuntime` applies the policy the InPort declares (or one registered for a
-connection with `InPortRuntime.connect(conn, policy)`) to its read queue: all/fifo queue every
+receiving `InPortRuntime` applies, per connection, the InPort's declared policy with the keys the
+connection's own policy gives over it (`merged`: the data server registers it from the hello
+with `InPortRuntime.connect(conn, policy)`) to its read queue: all/fifo queue every
 frame, skip keeps one of every `skip + 1`, new keeps only the newest; when `buffer` frames wait,
 overwrite evicts the oldest, drop refuses the newest, block keeps it (`wait_space` lets the
 reader pause).
@@ -13,7 +14,7 @@ reader pause).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Final, Literal, cast
 
 __all__ = ["FULL_POLICIES", "PUSH_POLICIES", "ConnectorPolicy"]
@@ -68,6 +69,16 @@ class ConnectorPolicy:
             skip=kw.get("skip", 0),
             encrypt=kw.get("encrypt", True),
         )
+
+    def merged(self, data: dict[str, Any] | None) -> ConnectorPolicy:
+        """This policy with the keys `data` gives (a connection's own policy over a port's
+        default: what the receiving InPort applies); unknown keys ignored, bad values raise."""
+        if data is None:
+            return self
+        if not isinstance(data, dict):
+            raise ValueError(f"policy: expected a map, got {type(data).__name__}")
+        given = {k: data[k] for k in _KEYS if k in data}
+        return replace(self, **given) if given else self
 
     def to_map(self) -> dict[str, Any]:
         """The protocol policy map (every key written)."""

@@ -53,13 +53,16 @@ class PortInfo:
         return out
 
 
+_SINK_COUNTERS: Final = ("bytes_out", "replayed", "evicted", "dropped_remote", "overflowed")
+"""What a data-plane sink counts (`sdrpeer.dataplane.connection.Connection`), summed per port."""
+
+
 class OutPortRuntime:
     """One component instance's output port: fan-out to the attached sinks."""
 
     __slots__ = (
-        "_bytes_gone",
         "_drainers",
-        "_replayed_gone",
+        "_gone",
         "_sinks",
         "doc",
         "dropped",
@@ -72,10 +75,11 @@ class OutPortRuntime:
         self.doc = doc
         self.frames_out = 0
         self.dropped = 0
+        """Values a sink refused (its policy's drop or skip, or full with block and written
+        without waiting for room)."""
         self._sinks: tuple[FrameSink, ...] = ()
         self._drainers: tuple[Callable[[], Awaitable[Any]], ...] = ()
-        self._bytes_gone = 0  # bytes_out of sinks already detached
-        self._replayed_gone = 0  # and their frames replayed
+        self._gone = dict.fromkeys(_SINK_COUNTERS, 0)  # counters of sinks already detached
 
     def write(self, value: Any) -> None:
         """Hand `value` to every sink (hot path: no copy, no await)."""
@@ -97,11 +101,11 @@ class OutPortRuntime:
             self._rebuild()
 
     def detach(self, sink: FrameSink) -> None:
-        """Stop handing frames to `sink`; its byte count stays in the port's counters."""
+        """Stop handing frames to `sink`; its counts stay in the port's counters."""
         if sink in self._sinks:
             self._sinks = tuple(s for s in self._sinks if s is not sink)
-            self._bytes_gone += int(getattr(sink, "bytes_out", 0))
-            self._replayed_gone += int(getattr(sink, "replayed", 0))
+            for key in _SINK_COUNTERS:
+                self._gone[key] += int(getattr(sink, key, 0))
             self._rebuild()
 
     @property
@@ -110,18 +114,26 @@ class OutPortRuntime:
         return self._sinks
 
     def counters(self) -> dict[str, int]:
-        """The protocol's port counters (input-side ones are zero)."""
-        sent = self._bytes_gone + sum(int(getattr(s, "bytes_out", 0)) for s in self._sinks)
-        replayed = self._replayed_gone + sum(int(getattr(s, "replayed", 0)) for s in self._sinks)
+        """The protocol's port counters (input-side ones are zero). `dropped`: values the
+        sending side lost to its connections' policies (refused, or queued and evicted);
+        `dropped_remote`: frames the receiving InPorts discarded on a full buffer, as their
+        acknowledgements told; `overflowed`: frames lost to a full buffer at either end (what
+        the agent warns about: `new` and `skip` thin out by design)."""
+        total = {
+            key: self._gone[key] + sum(int(getattr(s, key, 0)) for s in self._sinks)
+            for key in _SINK_COUNTERS
+        }
         return {
             "frames_in": 0,
             "bytes_in": 0,
             "frames_out": self.frames_out,
-            "bytes_out": sent,
-            "dropped": self.dropped,
+            "bytes_out": total["bytes_out"],
+            "dropped": self.dropped + total["evicted"],
+            "dropped_remote": total["dropped_remote"],
+            "overflowed": total["overflowed"],
             "lost": 0,
             "refused": 0,
-            "replayed": replayed,
+            "replayed": total["replayed"],
         }
 
     def _rebuild(self) -> None:

@@ -43,6 +43,9 @@
   const bytes = (v) => v === null || v === undefined ? "-"
     : v >= 1e6 ? `${(v / 1e6).toFixed(1)} MB/s` : v >= 1e3 ? `${(v / 1e3).toFixed(1)} kB/s`
     : `${Math.round(v)} B/s`;
+  // a connection's label: its port and traffic, and the frames/s lost to full buffers if any
+  const edgeText = (c) => `${c.from.split(".")[1]}: ${bytes(c.bytes_per_s)}` +
+    (c.lost_per_s ? ` · ${c.lost_per_s} lost/s` : "");
   const clock = (ts) => new Date(ts * 1000).toLocaleTimeString([], { hour12: false });
 
   // ------------------------------------------------------------------ state updates
@@ -206,8 +209,9 @@
       const conns = (S.status || {}).connections || [];
       for (const [el, k] of S.topo.labels) {
         const c = conns[k];
-        const text = c ? `${c.from.split(".")[1]}: ${bytes(c.bytes_per_s)}` : "";
+        const text = c ? edgeText(c) : "";
         if (el.textContent !== text) el.textContent = text;
+        el.classList.toggle("lossy", !!(c && c.lost_per_s));
       }
       return;
     }
@@ -246,17 +250,18 @@
     (st.connections || []).forEach((c, k) => {
       const a = pos[where[c.from.split(".")[0]]], b = pos[where[c.to.split(".")[0]]];
       if (!a || !b) return;
-      const label = `${esc(c.from.split(".")[1])}: ${bytes(c.bytes_per_s)}`;
+      const label = esc(edgeText(c));
+      const cls = c.lost_per_s ? "edge-label lossy" : "edge-label";
       if (a[0] === b[0]) {  // same robot: a loop on the box's right side
         const x = a[2], bulge = x + 22 + Math.min(40, Math.abs(b[1] - a[1]) / 3);
         edges += `<path class="edge" d="M ${x} ${a[1]} C ${bulge} ${a[1]}, ${bulge} ${b[1]}, ${x} ${b[1]}"/>` +
-          `<text class="edge-label" data-edge="${k}" x="${bulge - 4}" y="${(a[1] + b[1]) / 2 + 3}">${label}</text>`;
+          `<text class="${cls}" data-edge="${k}" x="${bulge - 4}" y="${(a[1] + b[1]) / 2 + 3}">${label}</text>`;
         return;
       }
       const x1 = a[2], y1 = a[1], x2 = b[0], y2 = b[1];
       const dx = Math.max(40, Math.abs(x2 - x1) / 2);
       edges += `<path class="edge" d="M ${x1} ${y1} C ${x1 + dx} ${y1}, ${x2 - dx} ${y2}, ${x2} ${y2}"/>` +
-        `<text class="edge-label" data-edge="${k}" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${label}</text>`;
+        `<text class="${cls}" data-edge="${k}" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${label}</text>`;
     });
     svg.setAttribute("viewBox", `-2 -2 ${width + 4} ${total + 4}`);
     svg.style.height = `${total + 4}px`;
