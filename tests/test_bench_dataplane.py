@@ -39,10 +39,14 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
             assert len(cell["runs"]) == figures["reps"] == 1
     for name, cell in figures["rtt"].items():
         assert 0 < cell["p50_us"] <= cell["p99_us"], name
-    assert len(figures["targets"]) == 6  # four of the data plane, two of encryption
+    assert len(figures["targets"]) == 8  # five of the data plane, two of encryption, loss
     for target in figures["targets"]:
-        assert _positive(target["ratio"])
+        assert _positive(target["ratio"]) if "ratio" in target else target["silent"] >= 0
         assert isinstance(target["met"], bool)
+    (loss,) = figures["loss"]
+    assert 0 < loss["taken"] < loss["frames"] == 5000  # the consumer is slower than its producer
+    assert loss["dropped_at_receiver_told"] == loss["dropped_at_receiver_counted"] > 0
+    assert loss["silent"] == 0  # every frame not taken was counted where it was sent
     cpu = figures["cpu_per_gb"]
     assert set(cpu) == {"sdrpeer_tcp_acked", "sdrpeer_tcp_acked_enc"}
     for cell in cpu.values():

@@ -1,6 +1,6 @@
 """Data-plane benchmark: sdrpeer streams against pyzmq and plain sockets, between two processes.
 
-Usage: python tools/bench_dataplane.py [--json out.json] [--quick] [--reps N]
+Usage: python tools/bench_dataplane.py [--json out.json] [--quick] [--reps N] [--only SECTIONS]
 
 How it works: every measurement spawns its peer as a subprocess (tools/dataplane_peers.py, one
 role each: its stdout carries one JSON line with its address, then one with its result), so
@@ -12,6 +12,14 @@ sender and receiver are separate processes on this machine, as two component hos
   receiver while receiving, per GB carried, and the MB/s all this machine's cores could carry
   at that cost (the ceiling when both ends share the cores, as here);
 - round trip: the sender times each 100-byte ping until its pong arrives; p50 and p99 in µs.
+- loss (issue 17's silent-loss case): 5,000 frames of 100 B written as fast as an OutPort's
+  `write` does, with the SDK's default policy (all, 8, overwrite) at both ends, into a consumer
+  that takes one frame per event-loop turn (an OnInput component): how many it took, how many
+  the sender counted as dropped in its own queue and as told by the receiver's acknowledgements,
+  and `silent`, what nobody counted at the sender (the target: 0).
+The 100 B target against pyzmq is judged twice: frames counted at the socket (`sdrpeer_tcp`),
+and the path a component sees (`sdrpeer_tcp_acked`: into the InPort, taken, acknowledged), since
+pyzmq's frames are delivered to Python code.
   `asyncio_raw` (a bare asyncio Protocol echo, no framing at all) is the floor of any design
   on asyncio's event loop, shown for scale.
 Contenders: sdrpeer (Connection -> DataServer; policy fifo + block; over TCP, over a Unix socket
@@ -53,11 +61,18 @@ from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.testing import make_policy
+from sdrpeer.sdk.policy import ConnectorPolicy
 
 BIG = 1_000_000
 # (target name, contender, baseline, minimum ratio contender/baseline)
 THROUGHPUT_TARGETS = [
-    ("100 B >= 1.0x pyzmq", ("small", "sdrpeer_tcp"), ("small", "zmq"), 1.0),
+    ("100 B at the socket >= 1.0x pyzmq", ("small", "sdrpeer_tcp"), ("small", "zmq"), 1.0),
+    (
+        "100 B into the InPort (acked) >= 1.0x pyzmq",
+        ("small", "sdrpeer_tcp_acked"),
+        ("small", "zmq"),
+        1.0,
+    ),
     ("1 MB TCP >= 0.8x plain TCP", ("big", "sdrpeer_tcp"), ("big", "plain_tcp"), 0.8),
     ("1 MB same-robot >= 1.5x plain TCP", ("big", "sdrpeer_shm"), ("big", "plain_tcp"), 1.5),
     (
@@ -129,6 +144,49 @@ def sdr_run(kind: str, n: int, size: int) -> tuple[float, float | None]:
         return float(result["end"]) - start, cpu
 
 
+LOSS_FRAMES = 5000
+"""Frames of the silent-loss case (issue 17: OpenRTM's listener got all 5,000)."""
+
+
+async def _sdr_burst(to: str, n: int) -> dict[str, int]:
+    """n frames of 100 B written as fast as a component's OutPort.write does (no waiting for
+    room), with the SDK's default policy; what the sender counted once all was handled."""
+    conn = Connection("loss", to, "sink", "bench.out", ConnectorPolicy(), given={})
+    conn.start()
+    async with asyncio.timeout(10):
+        await conn.wait_connected()
+    value = payload(SMALL)
+    for k in range(n):
+        conn.offer(value)
+        if k % 64 == 63:
+            await asyncio.sleep(0)  # a producer's loop iteration
+    async with asyncio.timeout(30):
+        while conn.pending or conn.unacked:  # noqa: ASYNC110 - acks set no event to wait on
+            await asyncio.sleep(0.01)
+    counted = {"dropped": conn.dropped, "dropped_remote": conn.dropped_remote}
+    await conn.close()
+    return counted
+
+
+def loss_run(n: int = LOSS_FRAMES) -> dict[str, int]:
+    """The silent-loss case between two processes: n frames into an InPort with the SDK's
+    defaults (all, 8, overwrite) and a consumer that takes one frame per event-loop turn.
+    `silent` is what neither the consumer took nor the sender counted as dropped."""
+    with tempfile.TemporaryDirectory() as tmp:
+        peer = Peer("sdr-consumer", 0, os.path.join(tmp, "rx.sock"))
+        sent = asyncio.run(_sdr_burst(f"tcp://{peer.addresses['tcp']}", n))
+        got = peer.finish()
+    counted = sent["dropped"] + sent["dropped_remote"]
+    return {
+        "frames": n,
+        "taken": int(got["taken"]),
+        "dropped_at_sender": sent["dropped"],
+        "dropped_at_receiver_told": sent["dropped_remote"],
+        "dropped_at_receiver_counted": int(got["dropped"]),
+        "silent": n - int(got["taken"]) - counted,
+    }
+
+
 def plain_throughput(n: int, size: int, batch: int = 1) -> float:
     """Seconds the plain socket receiver took; `batch` frames per sendall."""
     peer = Peer("plain-sink", n)
@@ -165,7 +223,7 @@ def zmq_throughput(n: int, size: int) -> float:
 
 
 def measure(
-    quick: bool, reps: int, log: Callable[[str], None], only: str = "small,big,rtt"
+    quick: bool, reps: int, log: Callable[[str], None], only: str = "small,big,rtt,loss"
 ) -> dict[str, Any]:
     """Every figure (or the sections in `only`), medians of `reps` runs."""
     n_small, n_big, m = (20_000, 20, 300) if quick else (300_000, 500, 5000)
@@ -212,6 +270,7 @@ def measure(
         "big": {},
         "rtt": {},
         "cpu_per_gb": {},
+        "loss": [],
     }
     runs: dict[tuple[str, str], list[float]] = {}
     for rep in range(reps):  # interleaved, so slow phases of the machine hit every contender
@@ -226,6 +285,8 @@ def measure(
             runs.setdefault(("small", name), []).append(n_small / run())
         for name, run in big.items():
             runs.setdefault(("big", name), []).append(n_big * BIG / 1e6 / run())
+        if "loss" in only:
+            out["loss"].append(loss_run())
         for name, ping in pings.items():
             times = sorted(ping()[m // 10 :])  # the first tenth warms up
             runs.setdefault(("p50", name), []).append(times[len(times) // 2] * 1e6)
@@ -259,6 +320,15 @@ def measure(
         ratio = paired(("p50", "sdrpeer_tcp"), ("p50", "plain_tcp"))
         met = ratio <= RTT_TARGET
         targets.append({"target": "RTT p50 <= 1.3x plain", "ratio": ratio, "met": met})
+    if out["loss"]:
+        silent = max(r["silent"] for r in out["loss"])
+        targets.append(
+            {
+                "target": "default policies lose nothing silently",
+                "silent": silent,
+                "met": not silent,
+            }
+        )
     out["targets"] = targets
     return out
 
@@ -280,9 +350,24 @@ def render(out: dict[str, Any]) -> str:
         ]
     lines.append("100-byte round trip, µs        p50      p99")
     lines += [f"  {k:<22} {v['p50_us']:>9.1f} {v['p99_us']:>8.1f}" for k, v in out["rtt"].items()]
+    if out["loss"]:
+        lines.append(
+            f"{LOSS_FRAMES:,} frames of 100 B, fast producer into a default InPort (all, 8, "
+            "overwrite), one frame taken per loop turn"
+        )
+        lines.append("  taken  dropped@sender  dropped@receiver (told / counted there)  silent")
+        lines += [
+            f"  {r['taken']:>5}  {r['dropped_at_sender']:>14}  {r['dropped_at_receiver_told']:>16}"
+            f" / {r['dropped_at_receiver_counted']:<21}  {r['silent']:>6}"
+            for r in out["loss"]
+        ]
     lines.append("Targets (median of per-rep ratios)")
     for t in out["targets"]:
-        lines.append(f"  {t['target']:<36} {t['ratio']:>6.2f}x  {'met' if t['met'] else 'MISSED'}")
+        verdict = "met" if t["met"] else "MISSED"
+        if "ratio" in t:
+            lines.append(f"  {t['target']:<44} {t['ratio']:>6.2f}x  {verdict}")
+        else:
+            lines.append(f"  {t['target']:<44} {t['silent']:>6} silent  {verdict}")
     return "\n".join(lines)
 
 
@@ -294,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", metavar="PATH", help="also write every figure to this file")
     parser.add_argument("--quick", action="store_true", help="small counts, one rep: a smoke test")
     parser.add_argument("--reps", type=int, help="runs per cell (default 5, quick 1)")
-    parser.add_argument("--only", default="small,big,rtt", help="sections: small,big,rtt")
+    parser.add_argument("--only", default="small,big,rtt,loss", help="sections: small,big,rtt,loss")
     args = parser.parse_args(argv)
     reps = args.reps or (1 if args.quick else 5)
     out = measure(

@@ -95,6 +95,29 @@ async def _peer_sdr_inport(n: int, unix: str) -> None:
     await server.close()
 
 
+async def _peer_sdr_consumer(unix: str) -> None:
+    """An InPort with the SDK's default policy (all, 8, overwrite) and a consumer that takes
+    one frame per event-loop turn (what an OnInput component does); once nothing has arrived
+    for 0.5 s, it says how many frames it took and what its InPort counted."""
+    from sdrpeer.sdk.inport import InPortRuntime  # noqa: PLC0415 - only this role needs the SDK
+
+    port = InPortRuntime("sink")
+    server = DataServer(lambda name: port, unix_path=unix)
+    await server.start()
+    _emit(server.addresses)
+    taken = 0
+    while True:
+        try:
+            async with asyncio.timeout(0.5 if taken else 30):
+                await port.get()
+        except TimeoutError:
+            break
+        taken += 1
+        await asyncio.sleep(0)
+    _emit({"taken": taken, **port.counters()})
+    await server.close()
+
+
 async def _peer_sdr_echo(reply_to: str) -> None:
     back = Connection("pong", reply_to, "pong", "echo.out", make_policy("fifo", 1024, "block"))
 
@@ -218,6 +241,8 @@ def _run_peer(role: str, n: int, arg: str) -> None:
         asyncio.run(_peer_sdr_sink(n, arg))
     elif role == "sdr-inport":
         asyncio.run(_peer_sdr_inport(n, arg))
+    elif role == "sdr-consumer":
+        asyncio.run(_peer_sdr_consumer(arg))
     elif role == "sdr-echo":
         asyncio.run(_peer_sdr_echo(arg))
     elif role == "plain-sink":
