@@ -55,6 +55,11 @@ def test_publisher_to_receiver(hosts: HostPool, kind: str) -> None:
     counters = wait_frames(rec, 50)
     assert counters["lost"] == 0
     assert counters["refused"] == 0
+    # ints have no length: bytes_in is what the data server received for the port (each frame
+    # [seq, n] is at least 3 bytes of msgpack)
+    assert counters["bytes_in"] >= 3 * counters["frames_in"]
+    beat = rec.wait_t("heartbeat")
+    assert beat["data"]["accepted"] == 1  # the data server's counters travel too
     # the publisher's next heartbeat may have been queued before those frames went out: read
     # on (a bounded number) until one counts them
     out: dict[str, int] = {}
@@ -64,6 +69,7 @@ def test_publisher_to_receiver(hosts: HostPool, kind: str) -> None:
             break
     assert out["frames_out"] > 50
     assert out["bytes_out"] > 0
+    assert 0 < out["frames_sent"] <= out["frames_out"]  # written vs handed to the socket
     assert pub.command("disconnect", conn_id="c1")["ok"] is True
     assert pub.command("exit")["ok"] is True
     assert rec.command("exit")["ok"] is True
@@ -127,5 +133,7 @@ def test_hosts_with_data_keys_authenticate_and_take_new_keys(hosts: HostPool) ->
     before = frames_in(rec)["frames_in"]
     for _ in range(3):  # three heartbeats (~1.5 s): the sender redials, and is refused each time
         assert frames_in(rec)["frames_in"] == before
+    refused = rec.wait_t("heartbeat")["data"]["refused_auth"]
+    assert refused >= 1  # the receiver says why nothing arrives
     assert pub.command("data_keys", keys=[new, old])["ok"] is True
     wait_frames(rec, before + 20)  # the sender redials with the new key

@@ -83,3 +83,5 @@ def test_a_connections_block_policy_keeps_every_frame_at_the_receiver(
     assert got["dropped"] == 0  # the class's overwrite 8 did not apply: the connection's did
     assert (sent["overflowed"], sent["dropped_remote"]) == (0, 0)
     assert overflow_events(agent) == []
+    (lag,) = [r for r in agent.get("/v1/instances") if r["component"] == "Lag"]
+    assert lag["data_plane"]["accepted"] >= 1  # its data server's counters, from heartbeats

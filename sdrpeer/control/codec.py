@@ -139,6 +139,7 @@ _CHECKS: Final[dict[str, Check]] = {
     "dict[str, str]": _map_of(_str, "a map of strings"),
     "dict[str, list[str]]": _map_of(_str_list, "a map of string lists"),
     "dict[str, dict[str, int]]": _map_of(_counters, "a map of counter maps"),
+    "dict[str, int]": _counters,
     "tuple[str, ...]": _str_tuple,
     "Conn": _conn,
 }

@@ -151,12 +151,14 @@ class ControlChannel(asyncio.Protocol):
         on_closed: Callable[[str], None],
         counters: Callable[[], dict[str, dict[str, int]]],
         *,
+        data_counters: Callable[[], dict[str, int]] | None = None,
         clock: Callable[[], float] = time.time,
         heartbeat_interval: float = HEARTBEAT_INTERVAL,
     ) -> None:
         self._on_command = on_command
         self._on_closed = on_closed
         self._counters = counters
+        self._data_counters = data_counters
         self._clock = clock
         self._interval = heartbeat_interval
         self._decoder = ControlDecoder()
@@ -191,7 +193,8 @@ class ControlChannel(asyncio.Protocol):
 
     def send_heartbeat(self) -> None:
         """Write a heartbeat with the current counters."""
-        self.send(Heartbeat(self._clock(), self._counters()))
+        data = None if self._data_counters is None else self._data_counters() or None
+        self.send(Heartbeat(self._clock(), self._counters(), data))
 
     def close(self) -> None:
         """End the channel from our side (after the reports already queued are written)."""

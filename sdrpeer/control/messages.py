@@ -261,6 +261,9 @@ class Heartbeat:
     """When (unix seconds, the host's clock)."""
     ports: dict[str, dict[str, int]]
     """Port name -> counters (frames_in, bytes_in, frames_out, bytes_out, dropped, ...)."""
+    data: dict[str, int] | None = field(default=None, metadata=_OMIT)
+    """The host's data server: accepted, rejected, refused_auth, deliver_error, shm, acked
+    (docs/protocol.md; left out when there is none)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -49,6 +49,7 @@ class Host:
         self.exit_request: tuple[int, Exit] | None = None
         """The `exit` command that ends us (its id and itself), if one does."""
         self._queue: asyncio.Queue[Request | Refusal] = asyncio.Queue()
+        self._server: DataServer | None = None
         self._error = "finalize failed"
 
     async def run(self) -> int:
@@ -58,7 +59,11 @@ class Host:
         runner = ComponentRunner(component)
         if self.config.control_fd is not None:
             self.channel = await ControlChannel.open(
-                self.config.control_fd, self._on_command, self._on_closed, self._counters
+                self.config.control_fd,
+                self._on_command,
+                self._on_closed,
+                self._counters,
+                data_counters=self._data_counters,
             )
             report: ReportTo = self.channel.send
         else:
@@ -71,6 +76,7 @@ class Host:
             unix_path=self._unix_path(),
             auth=auth,
         )
+        self._server = server
         self.inst.on_taking = server.set_taking
         server.set_taking(self.inst.state == LifecycleState.ACTIVE)
         await maybe_await(server.start())
@@ -122,9 +128,23 @@ class Host:
             self.stop.set()
 
     def _counters(self) -> dict[str, dict[str, int]]:
-        """Per-port counters for heartbeats (empty before the instance exists)."""
-        inst = getattr(self, "inst", None)
-        return inst.counters() if inst is not None else {}
+        """Per-port counters for heartbeats (empty before the instance exists). An InPort's
+        `bytes_in` is what the data server received for it: the frames' encoded bytes, for
+        values of any type."""
+        inst: HostedInstance | None = getattr(self, "inst", None)
+        if inst is None:
+            return {}
+        counters = inst.counters()
+        server = self._server
+        if server is not None:
+            for port, n in server.bytes_in.items():
+                if port in counters and port in inst.in_ports:
+                    counters[port]["bytes_in"] = n
+        return counters
+
+    def _data_counters(self) -> dict[str, int]:
+        """The data server's counters for heartbeats (docs/protocol.md)."""
+        return {} if self._server is None else dict(self._server.counters)
 
     async def _serve_commands(self) -> None:
         """Run queued commands in order, answering each one."""

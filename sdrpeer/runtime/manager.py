@@ -406,6 +406,7 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
         "data": {} if sup.hello is None else dict(sup.hello.data),
         "last_error": sup.last_error,
         "ports": sup.ports,
+        "data_plane": sup.data_plane,
         "start_latency_s": None if sup.start_latency is None else round(sup.start_latency, 4),
         "protocol_errors": sup.protocol_errors,
         "faults": [f.to_json() for f in sup.faults],

@@ -112,6 +112,9 @@ class Supervisor:
         self.hello: Hello | None = None
         """The running host's hello (None until it said it)."""
         self.ports: dict[str, dict[str, int]] = {}
+        self.data_plane: dict[str, int] = {}
+        """The host's data server counters from its last heartbeat (accepted, rejected,
+        refused_auth, deliver_error, shm, acked)."""
         self.out_bps = 0.0
         self.out_lost_ps = 0.0
         """Frames per second its outgoing connections lost to full buffers (see `sample`)."""
@@ -306,6 +309,7 @@ class Supervisor:
             child.close()
         self._proc, self.pid, self._kill_reason = proc, proc.pid, None
         self.hello, self.ports, self.connections, self.start_latency = None, {}, {}, None
+        self.data_plane = {}
         try:
             self._ps = psutil.Process(proc.pid)
             self._ps.cpu_percent(None)
@@ -335,6 +339,7 @@ class Supervisor:
             await self._channel.close()
         self._channel, self._ps, self.pid = None, None, None
         self.connections, self.ports, self.hello = {}, {}, None
+        self.data_plane = {}
         self.cpu_pct, self.rss = 0.0, 0
         log.info("%s: host %s", self.name, exit_text(rc))
 
@@ -462,6 +467,7 @@ class Supervisor:
     def _on_heartbeat(self, msg: Heartbeat) -> None:
         self._heard = asyncio.get_running_loop().time()
         self.ports = msg.ports
+        self.data_plane = msg.data or {}
 
     def _on_fault(self, msg: messages.Fault) -> None:
         fault = problems.fault_from_report(msg, time.time())

@@ -53,7 +53,14 @@ class PortInfo:
         return out
 
 
-_SINK_COUNTERS: Final = ("bytes_out", "replayed", "evicted", "dropped_remote", "overflowed")
+_SINK_COUNTERS: Final = (
+    "frames_out",
+    "bytes_out",
+    "replayed",
+    "evicted",
+    "dropped_remote",
+    "overflowed",
+)
 """What a data-plane sink counts (`sdrpeer.dataplane.connection.Connection`), summed per port."""
 
 
@@ -114,7 +121,10 @@ class OutPortRuntime:
         return self._sinks
 
     def counters(self) -> dict[str, int]:
-        """The protocol's port counters (input-side ones are zero). `dropped`: values the
+        """The protocol's port counters (input-side ones are zero). `frames_out`: values the
+        component wrote (whether or not a connection carried them: a standalone host's output
+        rate); `frames_sent` and `bytes_out`: frames its connections handed to a socket, summed
+        over the connections (a frame sent to two receivers counts twice). `dropped`: values the
         sending side lost to its connections' policies (refused, or queued and evicted);
         `dropped_remote`: frames the receiving InPorts discarded on a full buffer, as their
         acknowledgements told; `overflowed`: frames lost to a full buffer at either end (what
@@ -127,6 +137,7 @@ class OutPortRuntime:
             "frames_in": 0,
             "bytes_in": 0,
             "frames_out": self.frames_out,
+            "frames_sent": total["frames_out"],
             "bytes_out": total["bytes_out"],
             "dropped": self.dropped + total["evicted"],
             "dropped_remote": total["dropped_remote"],
