@@ -73,6 +73,7 @@ class Connection:
         drain_timeout: float = 5.0,
         auth: DataAuth | None = None,
         given: dict[str, object] | None = None,
+        type_id: str | None = None,
     ) -> None:
         parse_address(to)
         self.conn_id = conn_id
@@ -91,6 +92,8 @@ class Connection:
         """Seconds a repointed link may take to deliver its last acknowledgements."""
         self.auth = auth
         """The host's data keys (sdrpeer.dataplane.auth); with any, links are authenticated."""
+        self.type_id = type_id
+        """The sending port's message type id, told in the hello (None: any value)."""
         self.given = policy.to_map() if given is None else dict(given)
         """The policy map the hello carries: the keys the connection sets itself (a system
         file's `policy:`); the receiving InPort applies them over its own default."""
@@ -305,7 +308,14 @@ class Connection:
         while not self._closing:
             await self._settle()
             to = self.to
-            hello = Hello(self.conn_id, self.in_port, self.from_, self.given, ack=self._offer())
+            hello = Hello(
+                self.conn_id,
+                self.in_port,
+                self.from_,
+                self.given,
+                ack=self._offer(),
+                type=self.type_id,
+            )
             try:
                 async with asyncio.timeout(self.hello_timeout):
                     link = await dial(

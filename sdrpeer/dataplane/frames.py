@@ -66,6 +66,8 @@ class Hello:
     """The sender's nonce when it authenticates (sdrpeer.dataplane.auth)."""
     enc: bool = False
     """The sender asks for an encrypted stream (sdrpeer.dataplane.seal; with `auth`, on TCP)."""
+    type: str | None = None
+    """The sending port's message type id (sdrpeer.sdk.typed), None when it sends any value."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +101,8 @@ def encode_hello(hello: Hello) -> bytes:
         obj["auth"] = hello.auth
     if hello.enc:
         obj["enc"] = True
+    if hello.type is not None:
+        obj["type"] = hello.type
     return _packb(obj)
 
 
@@ -132,8 +136,20 @@ def parse_hello(obj: object) -> Hello:
     enc = obj.get("enc", False)
     if type(enc) is not bool:
         raise FrameError("malformed", "hello: 'enc' must be true or false")
+    kind = obj.get("type")
+    if kind is not None and (not isinstance(kind, str) or not 0 < len(kind) <= 120):
+        raise FrameError("malformed", "hello: 'type' must be a string of 1-120 chars")
     return Hello(
-        obj["conn"], obj["in"], obj["from"], policy, version, obj.get("shm"), offer, auth, enc
+        obj["conn"],
+        obj["in"],
+        obj["from"],
+        policy,
+        version,
+        obj.get("shm"),
+        offer,
+        auth,
+        enc,
+        kind,
     )
 
 

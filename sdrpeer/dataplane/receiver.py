@@ -275,6 +275,12 @@ class Receiver(asyncio.BufferedProtocol):
         assert self.transport is not None
         if error is None and hello.shm is not None and self.server.shm and self._local():
             self._attach(hello.shm)
+        taken = getattr(port, "type_id", None)
+        if error is None and taken is not None and hello.type is not None and taken != hello.type:
+            error = (
+                f"type mismatch: {hello.from_} sends {hello.type}, {hello.in_port} takes {taken}"
+            )
+            self.server.counters["refused_type"] += 1
         self._policy = None
         if error is None and hasattr(port, "connection_policy"):
             try:

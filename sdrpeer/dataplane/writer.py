@@ -32,6 +32,7 @@ from sdrpeer.dataplane.pending import PendingQueue, PolicyLike
 from sdrpeer.dataplane.retention import Retention
 from sdrpeer.dataplane.shm import SenderRing, ref_frame
 from sdrpeer.errors import FrameError
+from sdrpeer.sdk.typed import WireBlob
 
 BIG: Final = 64 * 1024
 """Bytes values at least this large are queued and written without a copy."""
@@ -48,12 +49,12 @@ class _Big:
 
     __slots__ = ("data", "prefix")
 
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes, prefix: bytes | None = None) -> None:
         self.data = data
-        self.prefix = b"\xc6" + len(data).to_bytes(4, "big")
+        self.prefix = b"\xc6" + len(data).to_bytes(4, "big") if prefix is None else prefix
 
     def __len__(self) -> int:
-        return 5 + len(self.data)
+        return len(self.prefix) + len(self.data)
 
 
 Item = bytes | _Big
@@ -118,6 +119,8 @@ class FrameWriter:
         item: Item
         if type(value) is bytes and len(value) >= BIG:
             item = _Big(value)
+        elif type(value) is WireBlob:  # a typed value carrying a big blob (sdrpeer.sdk.typed)
+            item = _Big(value.data, value.prefix)
         else:
             try:
                 item = self._pack(value)
@@ -142,6 +145,7 @@ class FrameWriter:
             or self._rest is not None
             or self.seq + 1 >= _SEQ32
             or (type(value) is bytes and len(value) >= BIG)
+            or type(value) is WireBlob
             or self.window_full
         ):
             return self.offer(value)

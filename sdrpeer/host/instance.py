@@ -172,7 +172,14 @@ class HostedInstance:
             raise CommandRefused(f"conn 'policy': {exc}") from None
         try:
             connection = Connection(
-                conn_id, to, in_port, f"{self.name}.{out}", policy, auth=self.auth, given=policy_map
+                conn_id,
+                to,
+                in_port,
+                f"{self.name}.{out}",
+                policy,
+                auth=self.auth,
+                given=policy_map,
+                type_id=port.type_id,
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None

@@ -2,6 +2,8 @@
 
 How it works: subclass `Component`, declare `OutPort`/`InPort`/`Param` attributes and an
 execution context (`Periodic` or `OnInput`), override the `on_*` callbacks (sync or async).
+A port may declare its message type (`OutPort(type=Pose)`, a `@message` dataclass: the standard
+robot types or your own, sdrpeer.sdk.typed); connecting two ports of different types is refused.
 The host (`python -m sdrpeer.host`) wraps the instance in a `ComponentRunner`, which drives the
 lifecycle of sdrpeer.sdk.lifecycle and reports every state change at once; the data plane
 attaches sinks to OutPorts and delivers received frames to InPorts (docs/protocol.md). Faults a
@@ -25,12 +27,15 @@ from sdrpeer.sdk.lifecycle import LifecycleState
 from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.policy import ConnectorPolicy
 from sdrpeer.sdk.ports import FrameSink, InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
+from sdrpeer.sdk.robot_types import BatteryState, Image, Odometry, Pose, RangeScan, Velocity
 from sdrpeer.sdk.runner import ComponentRunner
+from sdrpeer.sdk.typed import PortTypeError, message
 
 __all__ = [
     "FAULT_EFFECTS",
     "FAULT_KINDS",
     "HANDOFF_STATES",
+    "BatteryState",
     "CallbackError",
     "Component",
     "ComponentError",
@@ -38,11 +43,13 @@ __all__ = [
     "ConnectorPolicy",
     "FaultEffect",
     "FrameSink",
+    "Image",
     "InPort",
     "InPortRuntime",
     "LifecycleError",
     "LifecycleState",
     "NoData",
+    "Odometry",
     "OnInput",
     "OutPort",
     "OutPortRuntime",
@@ -52,4 +59,9 @@ __all__ = [
     "Periodic",
     "PortError",
     "PortInfo",
+    "PortTypeError",
+    "Pose",
+    "RangeScan",
+    "Velocity",
+    "message",
 ]

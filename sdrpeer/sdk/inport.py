@@ -28,6 +28,7 @@ from typing import Any, Final
 from sdrpeer.sdk.acks import AckState, SendAck
 from sdrpeer.sdk.errors import NoData
 from sdrpeer.sdk.policy import ConnectorPolicy
+from sdrpeer.sdk.typed import PortTypeError, message_type
 
 __all__ = ["InPortRuntime"]
 
@@ -62,6 +63,8 @@ class InPortRuntime:
     __slots__ = (
         "_ack_soon",
         "_conns",
+        "_decode",
+        "_decoded",
         "_dirty",
         "_listener",
         "_new",
@@ -80,11 +83,25 @@ class InPortRuntime:
         "policy",
         "refused",
         "skipped",
+        "type_id",
     )
 
-    def __init__(self, name: str, policy: ConnectorPolicy | None = None, doc: str = "") -> None:
+    def __init__(
+        self,
+        name: str,
+        policy: ConnectorPolicy | None = None,
+        doc: str = "",
+        port_type: type | None = None,
+    ) -> None:
         self.name = name
         self.doc = doc
+        info = None if port_type is None else message_type(port_type)
+        if port_type is not None and info is None:
+            raise TypeError(f"port {name!r}: type= must be a @message dataclass")
+        self._decode = None if info is None else info.decode
+        self._decoded: tuple[Any, Any] = (_NOTHING, _NOTHING)  # (newest as received, decoded)
+        self.type_id = None if info is None else info.type_id
+        """The message type's id (None: any value); senders of another type are refused."""
         self.policy = policy or ConnectorPolicy()
         """The default policy, for connections that were not registered with their own."""
         self.frames_in = self.bytes_in = self.dropped = self.lost = self.refused = 0
@@ -308,6 +325,12 @@ class InPortRuntime:
             if self._tags is not None:
                 self._taken_all()
             self._space_freed()
+        if self._decode is not None:
+            raw, typed = self._decoded
+            if raw is not self._newest:  # decoded once, however often it is read
+                typed = self._typed(self._newest)
+                self._decoded = (self._newest, typed)
+            return typed
         return self._newest
 
     def is_new(self) -> bool:
@@ -325,6 +348,8 @@ class InPortRuntime:
         if not q:
             self._new = False
         self._space_freed()
+        if self._decode is not None:
+            return self._typed(value)
         return value
 
     async def get(self) -> Any:
@@ -334,6 +359,14 @@ class InPortRuntime:
                 self._waiter = asyncio.get_running_loop().create_future()
             await asyncio.shield(self._waiter)
         return self.get_nowait()
+
+    def _typed(self, value: Any) -> Any:
+        """A received value as the port's message type (PortTypeError if it is not one)."""
+        assert self._decode is not None
+        try:
+            return self._decode(value)
+        except PortTypeError as e:
+            raise PortTypeError(f"in-port {self.name!r}: {e}") from None
 
     def __aiter__(self) -> InPortRuntime:
         return self

@@ -21,6 +21,7 @@ from typing import Any, Final, Literal, Protocol, overload
 
 from sdrpeer.sdk.inport import InPortRuntime
 from sdrpeer.sdk.policy import ConnectorPolicy
+from sdrpeer.sdk.typed import PortTypeError, message_type, type_id_of
 
 __all__ = ["FrameSink", "InPort", "InPortRuntime", "OutPort", "OutPortRuntime", "PortInfo"]
 
@@ -44,12 +45,16 @@ class PortInfo:
     """One line for people."""
     policy: ConnectorPolicy | None
     """An InPort's default policy (used for connections that bring none); None for OutPorts."""
+    type_id: str | None = None
+    """The message type's id (sdrpeer.sdk.typed), None when the port takes any value."""
 
     def to_map(self) -> dict[str, Any]:
         """A msgpack/JSON-friendly map."""
         out: dict[str, Any] = {"name": self.name, "kind": self.kind, "doc": self.doc}
         if self.policy is not None:
             out["policy"] = self.policy.to_map()
+        if self.type_id is not None:
+            out["type"] = self.type_id
         return out
 
 
@@ -69,17 +74,27 @@ class OutPortRuntime:
 
     __slots__ = (
         "_drainers",
+        "_encode",
         "_gone",
         "_sinks",
+        "_type",
         "doc",
         "dropped",
         "frames_out",
         "name",
+        "type_id",
     )
 
-    def __init__(self, name: str, doc: str = "") -> None:
+    def __init__(self, name: str, doc: str = "", port_type: type | None = None) -> None:
         self.name = name
         self.doc = doc
+        info = None if port_type is None else message_type(port_type)
+        if port_type is not None and info is None:
+            raise TypeError(f"port {name!r}: type= must be a @message dataclass")
+        self._type = port_type
+        self._encode = None if info is None else info.encode
+        self.type_id = None if info is None else info.type_id
+        """The message type's id (None: any value)."""
         self.frames_out = 0
         self.dropped = 0
         """Values a sink refused (its policy's drop or skip, or full with block and written
@@ -89,7 +104,14 @@ class OutPortRuntime:
         self._gone = dict.fromkeys(_SINK_COUNTERS, 0)  # counters of sinks already detached
 
     def write(self, value: Any) -> None:
-        """Hand `value` to every sink (hot path: no copy, no await)."""
+        """Hand `value` to every sink (hot path: no copy, no await). A typed port takes only
+        its type and sends its fields (sdrpeer.sdk.typed)."""
+        if self._encode is not None:
+            if type(value) is not self._type:
+                raise PortTypeError(
+                    f"out-port {self.name!r} sends {self.type_id}, not {type(value).__name__}"
+                )
+            value = self._encode(value)
         self.frames_out += 1
         for sink in self._sinks:
             if not sink.offer(value):
@@ -157,9 +179,12 @@ class OutPort:
 
     kind: Final = "out"
 
-    def __init__(self, doc: str = "") -> None:
+    def __init__(self, doc: str = "", *, type: type | None = None) -> None:
         self.doc = doc
         self.name = "<unbound>"
+        self.type = type
+        """The message type the port sends (a @message dataclass), None: any value."""
+        self.type_id = type_id_of(type)
 
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
@@ -175,11 +200,11 @@ class OutPort:
 
     def make(self) -> OutPortRuntime:
         """A fresh runtime port for one instance."""
-        return OutPortRuntime(self.name, self.doc)
+        return OutPortRuntime(self.name, self.doc, self.type)
 
     def info(self) -> PortInfo:
         """This port's metadata."""
-        return PortInfo(self.name, "out", self.doc, None)
+        return PortInfo(self.name, "out", self.doc, None, self.type_id)
 
 
 class InPort:
@@ -188,10 +213,17 @@ class InPort:
     kind: Final = "in"
 
     def __init__(
-        self, doc: str = "", policy: ConnectorPolicy | dict[str, Any] | None = None
+        self,
+        doc: str = "",
+        policy: ConnectorPolicy | dict[str, Any] | None = None,
+        *,
+        type: type | None = None,
     ) -> None:
         self.doc = doc
         self.name = "<unbound>"
+        self.type = type
+        """The message type the port takes (a @message dataclass), None: any value."""
+        self.type_id = type_id_of(type)
         if isinstance(policy, dict):
             policy = ConnectorPolicy.from_map(policy)
         self.policy = policy or ConnectorPolicy()
@@ -210,8 +242,8 @@ class InPort:
 
     def make(self) -> InPortRuntime:
         """A fresh runtime port for one instance."""
-        return InPortRuntime(self.name, self.policy, self.doc)
+        return InPortRuntime(self.name, self.policy, self.doc, self.type)
 
     def info(self) -> PortInfo:
         """This port's metadata."""
-        return PortInfo(self.name, "in", self.doc, self.policy)
+        return PortInfo(self.name, "in", self.doc, self.policy, self.type_id)

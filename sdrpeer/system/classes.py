@@ -1,13 +1,13 @@
 """What a component class declares (ports, params), for checking a system file against it.
 
 How it works: for the `python` launcher (`package.module:Class`) the class is imported the way a
-host imports it (sdrpeer.host.loader) and its declared in- and out-ports and params are read from
-the class, without creating an instance. Other launchers (`script`, `exec`, plugins) run code we
-do not import at load time: `inspect_target` returns None for them and their ports and params are
-taken on trust (the host reports them when it starts). A class that cannot be imported is a
-`ValueError` naming the target and the reason. `check_params` converts each param with the
-class's own `Param.convert` (types, choices, min and max), so a bad value fails at load time
-rather than when the host starts.
+host imports it (sdrpeer.host.loader) and its declared in- and out-ports (with the message type
+of each typed port) and params are read from the class, without creating an instance. Other
+launchers (`script`, `exec`, plugins) run code we do not import at load time: `inspect_target`
+returns None for them and their ports and params are taken on trust (the host reports them when
+it starts). A class that cannot be imported is a `ValueError` naming the target and the reason.
+`check_params` converts each param with the class's own `Param.convert` (types, choices, min and
+max), so a bad value fails at load time rather than when the host starts.
 """
 
 from __future__ import annotations
@@ -27,6 +27,12 @@ class ClassInfo:
     cls: type[Component]
     in_ports: tuple[str, ...]
     out_ports: tuple[str, ...]
+    types: tuple[tuple[str, str], ...] = ()
+    """(port, message type id) of every typed port (sdrpeer.sdk.typed)."""
+
+    def port_type(self, port: str) -> str | None:
+        """The port's message type id, None when it takes or sends any value."""
+        return dict(self.types).get(port)
 
     def port_kind(self, port: str) -> str | None:
         """'in', 'out', or None when the class declares no such port."""
@@ -51,7 +57,9 @@ def inspect_target(launcher: str, target: str | tuple[str, ...]) -> ClassInfo | 
     except SdrpeerError as e:
         raise ValueError(f"cannot import the component class: {e}") from None
     names = cls.port_names()  # type: ignore[attr-defined]
-    return ClassInfo(cls, tuple(names["in"]), tuple(names["out"]))
+    declared = cls._sdk_ports.items()  # type: ignore[attr-defined]
+    types = tuple((n, d.type_id) for n, d in declared if getattr(d, "type_id", None) is not None)
+    return ClassInfo(cls, tuple(names["in"]), tuple(names["out"]), types)
 
 
 def check_params(info: ClassInfo, params: dict[str, Any]) -> list[tuple[str, str]]:

@@ -2,8 +2,10 @@
 
 How it works: each end is split at its last dot into a component of the `components:` section and
 a port name. When the component's class was imported (python launcher), the `from` port must be
-one of its OutPorts and the `to` port one of its InPorts; otherwise only the form of the name is
-checked (the host reports its ports when it starts). The policy is checked by the instance spec's
+one of its OutPorts and the `to` port one of its InPorts, and when both ports declare a message
+type the two must be the same (sdrpeer.sdk.typed; the receiving host refuses a mismatch too,
+when the sender connects); otherwise only the form of the name is checked (the host reports its
+ports when it starts). The policy is checked by the instance spec's
 `validate_policy`, so every policy that loads can be sent to an agent. Traffic is `traffic:` when
 given, else the sender's profiled rate for that port, else unknown (None). The same stream given
 twice is an error.
@@ -42,6 +44,7 @@ def read_connections(
             continue
         sender = _end(p, fields, "from", where, components)
         receiver = _end(p, fields, "to", where, components)
+        _same_type(p, (item, where), components, sender, receiver)
         policy: Any = ()
         if "policy" in fields:
             policy = _policy(p, fields["policy"], f"{where}.policy")
@@ -98,6 +101,23 @@ def _end(
         p.add(node, field, message)
         return MISSING, MISSING
     return comp, port
+
+
+def _same_type(
+    p: Problems,
+    at: tuple[yaml.Node, str],
+    components: dict[str, ComponentEntry],
+    sender: tuple[str, str],
+    receiver: tuple[str, str],
+) -> None:
+    """Two typed ends must carry the same message type (an untyped end takes any)."""
+    if MISSING in (*sender, *receiver):
+        return
+    out_info, in_info = components[sender[0]].info, components[receiver[0]].info
+    sends = None if out_info is None else out_info.port_type(sender[1])
+    takes = None if in_info is None else in_info.port_type(receiver[1])
+    if sends is not None and takes is not None and sends != takes:
+        p.add(*at, f"{'.'.join(sender)} sends {sends} but {'.'.join(receiver)} takes {takes}")
 
 
 def _policy(p: Problems, node: yaml.Node, where: str) -> tuple[tuple[str, Any], ...]:
