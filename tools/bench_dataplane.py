@@ -34,9 +34,12 @@ frame; the receiver parses frames out of a recv_into buffer and makes each a byt
 the same loop sending frames coalesced by 256. `sdrpeer_tcp_acked_enc` is `sdrpeer_tcp_acked`
 between two ends holding a data key (a random one per run, given to the receiver process as
 SDRPEER_DATA_KEYS, as an agent gives its hosts): authenticated and AES-GCM encrypted, the
-default between robots. Every cell is the median of --reps runs; the
-contenders run interleaved within each rep, and a target's ratio is the median over reps of the
-ratio measured within one rep (the load of this shared machine shifts between reps).
+default between robots. `sdrpeer_tcp_acked_typed` is `sdrpeer_tcp_acked` with a typed port at
+both ends (sdrpeer.sdk.typed): a 100-byte `Pose` written through an `OutPortRuntime` (checked
+and encoded for every frame) and decoded into a `Pose` by the InPort for its consumer. Every
+cell is the median of --reps runs; the contenders run interleaved within each rep, and a
+target's ratio is the median over reps of the ratio measured within one rep (the load of this
+shared machine shifts between reps).
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ from collections.abc import Callable
 from typing import Any
 
 import zmq
-from dataplane_peers import LEN, Peer, payload
+from dataplane_peers import LEN, Peer, payload, typed_pose
 from dataplane_pings import SMALL, asyncio_pings, plain_pings, sdr_pings, zmq_pings
 
 from sdrpeer.dataplane import Connection
@@ -62,6 +65,7 @@ from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.testing import make_policy
 from sdrpeer.sdk.policy import ConnectorPolicy
+from sdrpeer.sdk.ports import OutPortRuntime
 
 BIG = 1_000_000
 # (target name, contender, baseline, minimum ratio contender/baseline)
@@ -70,6 +74,12 @@ THROUGHPUT_TARGETS = [
     (
         "100 B into the InPort (acked) >= 1.0x pyzmq",
         ("small", "sdrpeer_tcp_acked"),
+        ("small", "zmq"),
+        1.0,
+    ),
+    (
+        "typed 100 B into the InPort (acked) >= 1.0x pyzmq",
+        ("small", "sdrpeer_tcp_acked_typed"),
         ("small", "zmq"),
         1.0,
     ),
@@ -95,14 +105,26 @@ RTT_TARGET = 1.3  # sdrpeer p50 <= 1.3x plain socket p50
 
 
 async def _sdr_send(
-    to: str, n: int, size: int, *, shm: bool, acks: bool = True, keys: list[bytes] | None = None
+    to: str,
+    n: int,
+    size: int,
+    *,
+    shm: bool,
+    acks: bool = True,
+    keys: list[bytes] | None = None,
+    typed: bool = False,
 ) -> tuple[float, float]:
-    """(perf_counter at the first send, CPU seconds this process spent sending)."""
+    """(perf_counter at the first send, CPU seconds this process spent sending). `typed`: a
+    100-byte Pose written through a typed OutPort (encoded for every frame, type told)."""
     buffer = 4096 if size <= 1024 else 4
     policy = make_policy("fifo", buffer, "block")
     size_shm = DEFAULT_SIZE if shm else 0
     auth = DataAuth(keys) if keys else None
-    conn = Connection("bench", to, "sink", "bench.out", policy, shm_size=size_shm, auth=auth)
+    pose = typed_pose() if typed else None
+    port = OutPortRuntime("out", port_type=None if pose is None else type(pose))
+    conn = Connection(
+        "bench", to, "sink", "bench.out", policy, shm_size=size_shm, auth=auth, type_id=port.type_id
+    )
     if not acks:
         conn.window = None  # the receiver's InPort would acknowledge: do not ask it to
     conn.start()
@@ -110,10 +132,18 @@ async def _sdr_send(
         await conn.wait_connected()
     value, offer, drain = payload(size), conn.offer, conn.drain
     start, cpu = time.perf_counter(), time.process_time()
-    for _ in range(n):
-        if not offer(value):
-            await drain()
-            offer(value)
+    if pose is not None:  # as a component's OutPort.send does: wait for room, then write
+        port.attach(conn)
+        write = port.write
+        for _ in range(n):
+            if conn.pending >= buffer:  # full: wait for room (what `send` would await)
+                await drain()
+            write(pose)
+    else:
+        for _ in range(n):
+            if not offer(value):
+                await drain()
+                offer(value)
     await conn.close(linger=60)
     return start, time.process_time() - cpu
 
@@ -132,12 +162,14 @@ def sdr_run(kind: str, n: int, size: int) -> tuple[float, float | None]:
     (tcp_acked between two hosts holding a data key: authenticated and encrypted)."""
     with tempfile.TemporaryDirectory() as tmp:
         role = "sdr-inport" if kind.startswith(("tcp_acked", "tcp_inport")) else "sdr-sink"
+        role += "-typed" if kind.endswith("_typed") else ""
         keys = [os.urandom(32)] if kind.endswith("_enc") else None
         peer = Peer(role, n, os.path.join(tmp, "rx.sock"), keys=keys)
         scheme = "unix" if kind in ("unix", "shm") else "tcp"
         to = f"{scheme}://{peer.addresses[scheme]}"
         acks = kind != "tcp_inport"
-        send = _sdr_send(to, n, size, shm=kind == "shm", acks=acks, keys=keys)
+        typed = kind.endswith("_typed")
+        send = _sdr_send(to, n, size, shm=kind == "shm", acks=acks, keys=keys, typed=typed)
         start, sender_cpu = asyncio.run(send)
         result = peer.finish()
         cpu = sender_cpu + float(result["cpu"]) if "cpu" in result else None
@@ -232,6 +264,7 @@ def measure(
         "sdrpeer_tcp_inport": lambda: sdr_throughput("tcp_inport", n_small, SMALL),
         "sdrpeer_tcp_acked": lambda: sdr_throughput("tcp_acked", n_small, SMALL),
         "sdrpeer_tcp_acked_enc": lambda: sdr_throughput("tcp_acked_enc", n_small, SMALL),
+        "sdrpeer_tcp_acked_typed": lambda: sdr_throughput("tcp_acked_typed", n_small, SMALL),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_small, SMALL),
         "zmq": lambda: zmq_throughput(n_small, SMALL),
         "plain_tcp": lambda: plain_throughput(n_small, SMALL),

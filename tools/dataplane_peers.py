@@ -43,6 +43,13 @@ def payload(size: int) -> bytes:
     return os.urandom(size)
 
 
+def typed_pose() -> Any:
+    """A Pose (sdrpeer.sdk.robot_types) whose msgpack form is 100 bytes, like `payload(100)`."""
+    from sdrpeer.sdk import Pose  # noqa: PLC0415 - only the typed rows need the SDK
+
+    return Pose(1_700_000_000.125, "base_link_front_camera_opt", 1.5, 2.5, 0.1, 0.0, 0.0, 0.4, 0.9)
+
+
 def _emit(obj: object) -> None:
     print(json.dumps(obj), flush=True)
 
@@ -72,11 +79,13 @@ async def _peer_sdr_sink(n: int, unix: str) -> None:
     await server.close()
 
 
-async def _peer_sdr_inport(n: int, unix: str) -> None:
+async def _peer_sdr_inport(n: int, unix: str, port_type: Any = None) -> None:
+    """An InPort (typed: it decodes every value it gives out) and a consumer taking all."""
     from sdrpeer.sdk.inport import InPortRuntime  # noqa: PLC0415 - only this role needs the SDK
     from sdrpeer.sdk.policy import ConnectorPolicy  # noqa: PLC0415
 
-    port = InPortRuntime("sink", ConnectorPolicy("fifo", 1 << 20, "block"))
+    policy = ConnectorPolicy("fifo", 1 << 20, "block")
+    port = InPortRuntime("sink", policy, port_type=port_type)
     keys = keys_from_env(os.environ.get(DATA_KEYS_ENV))  # given: authenticated, encrypted TCP
     auth = DataAuth(keys) if keys else None
     server = DataServer(lambda name: port, unix_path=unix, auth=auth)
@@ -241,6 +250,8 @@ def _run_peer(role: str, n: int, arg: str) -> None:
         asyncio.run(_peer_sdr_sink(n, arg))
     elif role == "sdr-inport":
         asyncio.run(_peer_sdr_inport(n, arg))
+    elif role == "sdr-inport-typed":
+        asyncio.run(_peer_sdr_inport(n, arg, type(typed_pose())))
     elif role == "sdr-consumer":
         asyncio.run(_peer_sdr_consumer(arg))
     elif role == "sdr-echo":
