@@ -32,6 +32,7 @@ from sdrpeer.control.messages import (
     SetParams,
     Snapshot,
     State,
+    Step,
 )
 from sdrpeer.errors import ProtocolError
 
@@ -96,6 +97,15 @@ REPORT_CASES: list[tuple[Report | Part, dict[str, Any]]] = [
         {"t": "heartbeat", "ts": 1.5, "ports": {"image": COUNTERS}},
     ),
     (
+        Heartbeat(1.5, {"image": COUNTERS}, {"accepted": 2, "refused_auth": 1}),
+        {
+            "t": "heartbeat",
+            "ts": 1.5,
+            "ports": {"image": COUNTERS},
+            "data": {"accepted": 2, "refused_auth": 1},
+        },
+    ),
+    (
         Fault("emergency_stop", "bumper", 3.0),
         {"t": "fault", "kind": "emergency_stop", "detail": "bumper", "ts": 3.0},
     ),
@@ -124,6 +134,7 @@ COMMAND_CASES: list[tuple[Command, dict[str, Any]]] = [
     (Exit(), legacy_command("exit", 11)),
     (Snapshot(16 << 20), legacy_command("snapshot", 12, max=16 << 20)),
     (Restore(300_000), legacy_command("restore", 13, size=300_000)),
+    (Step(3), legacy_command("step", 14, n=3)),
 ]  # fmt: skip
 
 

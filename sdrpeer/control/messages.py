@@ -43,6 +43,7 @@ __all__ = [
     "SetParams",
     "Snapshot",
     "State",
+    "Step",
 ]
 
 PROTOCOL: Final = 1
@@ -163,6 +164,15 @@ class Snapshot:
 
 
 @dataclass(frozen=True, slots=True)
+class Step:
+    """Run `n` executions of a `Stepped` execution context now (refused for any other)."""
+
+    T: ClassVar[str] = "step"
+    n: int = 1
+    """How many (>= 1)."""
+
+
+@dataclass(frozen=True, slots=True)
 class Restore:
     """Hand the state its `part`s carried (right before it) to `on_restore`."""
 
@@ -183,6 +193,7 @@ Command = (
     | Exit
     | Snapshot
     | Restore
+    | Step
 )
 """Any command."""
 COMMANDS: Final[tuple[type[Command], ...]] = (
@@ -197,6 +208,7 @@ COMMANDS: Final[tuple[type[Command], ...]] = (
     Exit,
     Snapshot,
     Restore,
+    Step,
 )
 
 

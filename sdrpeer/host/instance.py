@@ -38,6 +38,7 @@ from sdrpeer.control.messages import (
     SetParams,
     Snapshot,
     State,
+    Step,
 )
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
@@ -153,6 +154,10 @@ class HostedInstance:
                 return await handoff.snapshot(self.runner, snapshot)
             case Restore():
                 await handoff.restore(self.runner, request.blob or b"")
+            case Step(n=n):
+                if n < 1:
+                    raise CommandRefused("'n': expected an integer >= 1")
+                await self.runner.step(n)
             case Exit():
                 raise CommandRefused("exit is the host's to carry out")
         return None

@@ -38,6 +38,7 @@ from sdrpeer.control.messages import (
     Disconnect,
     Repoint,
     Reset,
+    Step,
 )
 from sdrpeer.errors import CommandError, LaunchRefused
 from sdrpeer.launch.policy import LaunchPolicy
@@ -122,18 +123,19 @@ class InstanceManager:
         return found
 
     async def act(self, name: str, action: str) -> dict[str, Any]:
-        """activate/deactivate (changes `desired`), reset (the command), restart (the host)."""
+        """activate/deactivate (changes `desired`), reset and step (the commands), restart (the
+        host)."""
         spec = self._desired.get(name)
         if spec is None:
             raise KeyError(name)
         if action in ("activate", "deactivate"):
             new = LifecycleState.ACTIVE if action == "activate" else LifecycleState.INACTIVE
             self._desired[name] = replace(spec, desired=new)
-        elif action == "reset":
+        elif action in ("reset", "step"):
             sup = self._sups.get(name)
             if sup is None:
-                raise CommandError("reset", "closed", f"{name} is not running")
-            await sup.command(Reset())
+                raise CommandError(action, "closed", f"{name} is not running")
+            await sup.command(Reset() if action == "reset" else Step())
         elif action == "restart":
             sup = self._sups.get(name)
             if sup is not None:

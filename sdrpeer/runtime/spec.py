@@ -47,7 +47,7 @@ _INSTANCE_KEYS = frozenset(
 _CONN_KEYS = frozenset({"id", "out", "to", "in", "policy", "to_addr"})
 
 
-INSTANCE_ACTIONS = ("activate", "deactivate", "reset", "restart")
+INSTANCE_ACTIONS = ("activate", "deactivate", "reset", "restart", "step")
 """What can be asked of a running instance (`POST /v1/instances/NAME/ACTION`)."""
 
 

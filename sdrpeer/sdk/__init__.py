@@ -20,7 +20,7 @@ from sdrpeer.sdk.errors import (
     ParamError,
     PortError,
 )
-from sdrpeer.sdk.execution import OnInput, Periodic
+from sdrpeer.sdk.execution import OnInput, Periodic, Stepped
 from sdrpeer.sdk.faults import FAULT_EFFECTS, FAULT_KINDS, FaultEffect
 from sdrpeer.sdk.handoff import HANDOFF_STATES
 from sdrpeer.sdk.lifecycle import LifecycleState
@@ -62,6 +62,7 @@ __all__ = [
     "PortTypeError",
     "Pose",
     "RangeScan",
+    "Stepped",
     "Velocity",
     "message",
 ]

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from typing import Any, ClassVar, Final
 
 from sdrpeer.sdk.errors import ComponentError, ParamError, PortError
-from sdrpeer.sdk.execution import ExecutionContext, OnInput, Periodic
+from sdrpeer.sdk.execution import ExecutionContext, OnInput, Periodic, Stepped
 from sdrpeer.sdk.faults import FAULT_KINDS, FaultHook, check_kind
 from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.ports import InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
@@ -74,8 +74,10 @@ class Component:
                     raise ComponentError(
                         f"{where}: Periodic(param={ex.param!r}) names no int/float Param"
                     )
-        else:
-            raise ComponentError(f"{where}: expected Periodic(...) or OnInput(...), got {ex!r}")
+        elif not isinstance(ex, Stepped):
+            raise ComponentError(
+                f"{where}: expected Periodic(...), OnInput(...) or Stepped(), got {ex!r}"
+            )
 
     def __init__(self, name: str | None = None, params: Mapping[str, Any] | None = None) -> None:
         cls = type(self)
@@ -180,6 +182,15 @@ class Component:
 
     def on_initialize(self) -> Any:
         """CREATED -> INACTIVE: acquire resources (open devices, load models)."""
+
+    def on_startup(self) -> Any:
+        """The execution context started (right after `on_initialize`; OpenRTM's onStartup)."""
+
+    def on_shutdown(self) -> Any:
+        """The execution context stops (at finalize, before `on_finalize`; onShutdown)."""
+
+    def on_rate_changed(self, hz: float) -> Any:
+        """A `Periodic(param=...)` rate changed while running (OpenRTM's onRateChanged)."""
 
     def on_activated(self) -> Any:
         """INACTIVE -> ACTIVE: start working."""

@@ -2,10 +2,12 @@
 
 How it works: a Component class names one with `execution = Periodic(hz=10.0)`,
 `Periodic(param="rate")` (the rate read from a numeric Param before every period, so it can be
-changed live; a rate <= 0 pauses execution) or `OnInput("port")` (once per frame accepted by that
-InPort). These are plain frozen descriptions, checked against the class when it is created;
-`ComponentRunner` (sdrpeer.sdk.runner) runs them, calling `on_execute` only while ACTIVE and
-`on_error` instead while in ERROR.
+changed live, `on_rate_changed` told; a rate <= 0 pauses execution), `OnInput("port")` (once per
+frame accepted by that InPort) or `Stepped()` (only when the caller advances it:
+`ComponentRunner.step(n)`, the host's `step` command, `POST /v1/instances/NAME/step`; OpenRTM's
+ExtTrig, for simulators and deterministic tests). These are plain frozen descriptions, checked
+against the class when it is created; `ComponentRunner` (sdrpeer.sdk.runner) runs them, calling
+`on_execute` only while ACTIVE and `on_error` instead while in ERROR.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["ExecutionContext", "OnInput", "Periodic"]
+__all__ = ["ExecutionContext", "OnInput", "Periodic", "Stepped"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,4 +42,9 @@ class OnInput:
     """The InPort's name (its attribute name on the class)."""
 
 
-ExecutionContext = Periodic | OnInput
+@dataclass(frozen=True, slots=True)
+class Stepped:
+    """Run `on_execute` only when the caller steps the context (no clock, no input trigger)."""
+
+
+ExecutionContext = Periodic | OnInput | Stepped

@@ -9,8 +9,11 @@ same loop iteration as the exception, and only then run `on_aborting` (when leav
 transition method then raises CallbackError (the host answers `reply ok=false` with its text).
 One background task is the execution context: `Periodic` keeps a grid of deadlines (skipping
 ahead when it falls a whole period behind) and sleeps on a future that state and params changes
-wake early; `OnInput` runs once per frame accepted by the port and not yet consumed. While
-ACTIVE it calls `on_execute`; while in ERROR `on_error` (a failure there is logged once).
+wake early; `OnInput` runs once per frame accepted by the port and not yet consumed; `Stepped`
+has no task: `step(n)` runs n executions when the caller says. While ACTIVE it calls
+`on_execute`; while in ERROR `on_error` (a failure there is logged once). `on_startup` follows
+`on_initialize` (the context starts), `on_shutdown` precedes `on_finalize`, and a
+`Periodic(param=...)` rate changed while running calls `on_rate_changed(hz)`.
 Because a transition waits for a running `on_execute`, an async `on_execute` must return
 (read with `read()`/`get_nowait()`, not an endless `async for`). Faults (sdrpeer.sdk.faults) reach
 the `on_fault` hooks at once; a move to ERROR they ask for is applied by `_settle`, the first
@@ -29,7 +32,7 @@ from typing import Any, Final
 
 from sdrpeer.sdk.component import Component
 from sdrpeer.sdk.errors import CallbackError, LifecycleError
-from sdrpeer.sdk.execution import OnInput, Periodic
+from sdrpeer.sdk.execution import OnInput, Periodic, Stepped
 from sdrpeer.sdk.faults import FaultHook, FaultRelay
 from sdrpeer.sdk.handoff import call_restore, call_snapshot, check_handoff
 from sdrpeer.sdk.inport import InPortRuntime
@@ -103,6 +106,7 @@ class ComponentRunner:
             target = next_state(self._state, "initialize")
             self._start()
             await self._guarded("on_initialize", self.component.on_initialize)
+            await self._guarded("on_startup", self.component.on_startup)
             self._initialized = True
             self._set(target)
 
@@ -147,10 +151,11 @@ class ComponentRunner:
                     self._set(S.INACTIVE)
             target = next_state(self._state, "finalize")
             error: str | None = None
-            try:
-                await self._call(self.component.on_finalize)
-            except Exception as exc:
-                error = self._record("on_finalize", exc)
+            for name in ("on_shutdown", "on_finalize"):
+                try:
+                    await self._call(getattr(self.component, name))
+                except Exception as exc:
+                    error = self._record(name, exc)
             self._set(target, error)
             task, self._task = self._task, None
         if task is not None:
@@ -186,7 +191,26 @@ class ComponentRunner:
                 )
                 await self._guarded(f"{name}.on_change", fn, value)
             await self._guarded("on_params_changed", self.component.on_params_changed, changed)
+            ex = type(self.component).execution
+            if isinstance(ex, Periodic) and ex.param in changed:
+                rate = float(changed[ex.param])
+                await self._guarded("on_rate_changed", self.component.on_rate_changed, rate)
             return changed
+
+    async def step(self, n: int = 1) -> int:
+        """Run `n` executions of a `Stepped` context now (`on_execute` while ACTIVE, `on_error`
+        in ERROR), one after the other; how many ran `on_execute`. LifecycleError when the
+        context is not Stepped or the component is neither ACTIVE nor in ERROR."""
+        if not isinstance(type(self.component).execution, Stepped):
+            raise LifecycleError("step", self._state.value, "its execution context is not Stepped")
+        if n < 1:
+            raise ValueError(f"step: n must be >= 1, got {n}")
+        before = self.executions
+        for _ in range(n):
+            if self._state not in _RUNNING:
+                raise LifecycleError("step", self._state.value, "it is not ACTIVE")
+            await self._tick()
+        return self.executions - before
 
     async def snapshot(self) -> Any:
         """`on_snapshot()`'s value (None without one); INACTIVE, ACTIVE or ERROR (handoff rules)."""
@@ -280,6 +304,8 @@ class ComponentRunner:
         comp = type(self.component)
         if comp.on_execute is Component.on_execute and comp.on_error is Component.on_error:
             return  # nothing would ever run
+        if isinstance(comp.execution, Stepped):
+            return  # the caller runs it: `step`
         name = f"sdrpeer-exec-{self.component.instance_name}"
         self._task = asyncio.get_running_loop().create_task(self._run(), name=name)
 
