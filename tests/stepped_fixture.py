@@ -2,20 +2,11 @@
 
 from __future__ import annotations
 
-from sdrpeer.sdk import Component, OutPort, Stepped
+from sdrpeer.sdk import Stepped
+from tests.components_fixture import Counter
 
 
-class SteppedCounter(Component):
-    """Writes 1, 2, 3, ... on `out`, one per step."""
+class SteppedCounter(Counter):
+    """Counter's 1, 2, 3, ... on `out`, one per step instead of one per period."""
 
     execution = Stepped()
-    out = OutPort("the count")
-
-    def on_initialize(self) -> None:
-        """From zero."""
-        self.n = 0
-
-    def on_execute(self) -> None:
-        """One more."""
-        self.n += 1
-        self.out.write(self.n)
