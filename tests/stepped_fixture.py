@@ -9,4 +9,4 @@ from tests.components_fixture import Counter
 class SteppedCounter(Counter):
     """Counter's 1, 2, 3, ... on `out`, one per step instead of one per period."""
 
-    execution = Stepped()
+    execution = Stepped()  # type: ignore[assignment]  # Counter's is Periodic
