@@ -11,6 +11,8 @@ component detects (`report_fault`) follow sdrpeer.sdk.faults; its working state 
 instance through `on_snapshot`/`on_restore` (sdrpeer.sdk.handoff).
 """
 
+from typing import TYPE_CHECKING, Any
+
 from sdrpeer.sdk.component import Component
 from sdrpeer.sdk.errors import (
     CallbackError,
@@ -27,9 +29,24 @@ from sdrpeer.sdk.lifecycle import LifecycleState
 from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.policy import ConnectorPolicy
 from sdrpeer.sdk.ports import FrameSink, InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
-from sdrpeer.sdk.robot_types import BatteryState, Image, Odometry, Pose, RangeScan, Velocity
 from sdrpeer.sdk.runner import ComponentRunner
 from sdrpeer.sdk.typed import PortTypeError, message
+
+if TYPE_CHECKING:  # loaded on first use (`__getattr__`): a host whose component uses none of
+    # them does not pay for building their message types at start
+    from sdrpeer.sdk.robot_types import BatteryState, Image, Odometry, Pose, RangeScan, Velocity
+
+_ROBOT_TYPES = frozenset({"BatteryState", "Image", "Odometry", "Pose", "RangeScan", "Velocity"})
+
+
+def __getattr__(name: str) -> Any:
+    """The standard robot types (sdrpeer.sdk.robot_types), imported when first asked for."""
+    if name in _ROBOT_TYPES:
+        from sdrpeer.sdk import robot_types  # noqa: PLC0415 - lazy on purpose
+
+        return getattr(robot_types, name)
+    raise AttributeError(f"module 'sdrpeer.sdk' has no attribute {name!r}")
+
 
 __all__ = [
     "FAULT_EFFECTS",
