@@ -506,7 +506,7 @@ async def five_thousand_into_a_stalled_port(
                 await conn.drain()
             if value % 100 == 0:
                 await asyncio.sleep(0)
-        if given is not None:  # block at the port: the producer waited, take everything
+        if given is not None:  # block at the port: every frame waits there, take them all
             while len(taken) < 5000:
                 taken.append(await asyncio.wait_for(port.get(), 10))
         await until_async(
@@ -543,9 +543,22 @@ async def test_frames_a_receiving_inport_discards_are_counted_at_the_sender(
 @pytest.mark.parametrize("kind", ["tcp", "unix"])
 async def test_a_connections_policy_reaches_the_receiving_inport(tmp_path: Path, kind: str) -> None:
     """`full: block, buffer: 64` on the connection (a system file's `policy:`) rules the
-    receiving InPort too, over the class's overwrite: nothing is lost, the producer waits."""
+    receiving InPort too, over the class's overwrite: nothing is evicted (the frames wait at the
+    port, bounded by the sender's window of unacknowledged frames, not by `buffer`)."""
     given: dict[str, object] = {"full": "block", "buffer": 64}
     conn, port, taken = await five_thousand_into_a_stalled_port(tmp_path, kind, given)
     assert taken == list(range(1, 5001))
     assert port.policy_for("c") == ConnectorPolicy(buffer=64, full="block")
     assert (port.dropped, conn.dropped, conn.dropped_remote) == (0, 0, 0)
+
+
+def test_the_receiver_takes_only_buffer_and_full_from_a_connection() -> None:
+    """`push` and `skip` are the sender's (applied there, not twice); `full: block` holds only for
+    an acknowledged stream, whose sender's window bounds the queue."""
+    port = InPortRuntime("in", ConnectorPolicy("new", 4, "drop"))
+    given: dict[str, object] = {"push": "skip", "skip": 2, "buffer": 3, "full": "block"}
+    assert port.connection_policy(given) == ConnectorPolicy("new", 3, "block")
+    assert port.connection_policy(given, acked=False) == ConnectorPolicy("new", 3, "drop")
+    assert port.connection_policy({}) == port.policy
+    with pytest.raises(ValueError, match="push"):
+        port.connection_policy({"push": "later"})  # every key is still checked

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import msgpack
 import pytest
 from hypothesis import given, settings
@@ -9,6 +11,7 @@ from hypothesis import strategies as st
 
 from sdrpeer.dataplane.frames import (
     INCOMPLETE,
+    AckOffer,
     FrameDecoder,
     Hello,
     big_frame_header,
@@ -39,6 +42,10 @@ def test_hello_round_trip() -> None:
     decoder.feed(encode_hello(HELLO))
     assert parse_hello(decoder.next_map()) == HELLO
     assert decoder.next_map() is None
+    typed = replace(HELLO, ack=AckOffer("s", 3, drops=True), type="sdrpeer/Pose#4a699e8d")
+    assert parse_hello(msgpack.unpackb(encode_hello(typed))) == typed
+    old = replace(HELLO, ack=AckOffer("s", 3))  # a sender that does not read drop counts
+    assert "drops" not in msgpack.unpackb(encode_hello(old))["ack"]
 
 
 @pytest.mark.parametrize(
@@ -48,6 +55,18 @@ def test_hello_round_trip() -> None:
         ({"v": 1, "in": "x", "from": "a.b"}, "'conn'"),
         ({"v": "1", "conn": "c", "in": "x", "from": "a.b"}, "'v'"),
         ({"v": 1, "conn": "c", "in": "x", "from": "a.b", "policy": 3}, "'policy'"),
+        ({"v": 1, "conn": "c", "in": "x", "from": "a.b", "type": 7}, "'type'"),
+        ({"v": 1, "conn": "c", "in": "x", "from": "a.b", "type": "t" * 121}, "'type'"),
+        (
+            {
+                "v": 1,
+                "conn": "c",
+                "in": "x",
+                "from": "a.b",
+                "ack": {"session": "s", "next": 1, "drops": 1},
+            },
+            "'ack.drops'",
+        ),
     ],
 )
 def test_bad_hello_is_malformed(obj: object, problem: str) -> None:

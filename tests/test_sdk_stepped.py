@@ -156,3 +156,39 @@ def test_a_hosted_stepped_component_runs_on_the_step_command(hosts: HostPool) ->
     assert "cannot step: component is INACTIVE" in refused["error"]
     assert host.command("exit")["ok"] is True
     assert host.wait_exit() == 0
+
+
+class Flaky(Component):
+    execution = Stepped()
+
+    def on_initialize(self) -> None:
+        self.calls: list[str] = getattr(self, "calls", [])
+        self.calls.append("on_initialize")
+
+    def on_startup(self) -> None:
+        self.calls.append("on_startup")
+        if self.calls.count("on_startup") == 1:
+            raise RuntimeError("the context would not start")
+
+    def on_shutdown(self) -> None:
+        self.calls.append("on_shutdown")
+
+    def on_finalize(self) -> None:
+        self.calls.append("on_finalize")
+
+
+async def test_a_failed_startup_is_retried_by_reset_and_shutdown_only_follows_a_startup() -> None:
+    flaky = Flaky()
+    runner = ComponentRunner(flaky)
+    with pytest.raises(Exception, match="on_startup"):
+        await runner.initialize()
+    await runner.reset()  # on_initialize succeeded: not again; on_startup is owed
+    assert flaky.calls == ["on_initialize", "on_startup", "on_startup"]
+    await runner.finalize()
+    assert flaky.calls[-2:] == ["on_shutdown", "on_finalize"]
+    never = Flaky()
+    runner = ComponentRunner(never)
+    with pytest.raises(Exception, match="on_startup"):
+        await runner.initialize()
+    await runner.finalize()  # the context never started: no on_shutdown
+    assert never.calls == ["on_initialize", "on_startup", "on_finalize"]

@@ -122,9 +122,19 @@ def test_typed_ports_check_what_is_written_and_decode_what_is_read() -> None:
     newest = port.read()
     assert newest == Pose(1.0, "map", 3.0, 4.0)
     assert port.read() is newest  # decoded once
-    port.deliver(42, 3, "c")  # an untyped sender's value
-    with pytest.raises(PortTypeError, match="in-port 'pose': expected a sdrpeer/Pose"):
-        port.get_nowait()
+    port.deliver(42, 3, "c")  # an untyped sender's value: refused and counted, never queued
+    assert (port.refused, port.qsize()) == (1, 0)
+    assert port.read() is newest
+
+
+def test_a_nested_type_is_read_after_it_was_taken() -> None:
+    """get_nowait() then read() decode the same received list: decoding must not change it."""
+    info = message_type(Odometry)
+    assert info is not None
+    port = InPortRuntime("odom", port_type=Odometry)
+    port.deliver(msgpack.unpackb(msgpack.packb(info.encode(ODOM))), 1, "c")
+    assert port.get_nowait() == ODOM
+    assert port.read() == ODOM
 
 
 async def stream(

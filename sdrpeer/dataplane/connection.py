@@ -94,9 +94,10 @@ class Connection:
         """The host's data keys (sdrpeer.dataplane.auth); with any, links are authenticated."""
         self.type_id = type_id
         """The sending port's message type id, told in the hello (None: any value)."""
-        self.given = policy.to_map() if given is None else dict(given)
+        self.given = {} if given is None else dict(given)
         """The policy map the hello carries: the keys the connection sets itself (a system
-        file's `policy:`); the receiving InPort applies them over its own default."""
+        file's `policy:`; none by default); the receiving InPort applies its `buffer` and `full`
+        over its own declared policy."""
         self.session = os.urandom(8).hex()
         """This sender's stream session (a receiver tells a replay from a restart by it)."""
         self.reconnects = 0
@@ -358,7 +359,7 @@ class Connection:
             return None
         retention = self._writer.retention
         first = retention.base if retention is not None else self._writer.seq + 1
-        return AckOffer(self.session, first)
+        return AckOffer(self.session, first, drops=True)
 
     def _adopt(self, link: Link) -> None:
         """Make `link` the current one: replay what is unacknowledged, set up the window."""

@@ -78,10 +78,16 @@ class AckOffer:
     """Random, per sending connection object: a new one means the sender restarted."""
     next: int
     """The seq of the first frame on this socket (earlier ones were acknowledged)."""
+    drops: bool = False
+    """The sender reads `[seq, dropped]` acks (the receiver's full-buffer drops); without it
+    a receiver writes `[seq]` only, as before."""
 
     def to_map(self) -> dict[str, Any]:
         """The protocol map."""
-        return {"session": self.session, "next": self.next}
+        out: dict[str, Any] = {"session": self.session, "next": self.next}
+        if self.drops:
+            out["drops"] = True
+        return out
 
 
 def encode_hello(hello: Hello) -> bytes:
@@ -129,7 +135,10 @@ def parse_hello(obj: object) -> Hello:
             raise FrameError("malformed", "hello: 'ack.session' must be a string of 1-64 chars")
         if type(nxt) is not int or nxt < 1:
             raise FrameError("malformed", "hello: 'ack.next' must be an integer >= 1")
-        offer = AckOffer(session, nxt)
+        drops = ack.get("drops", False)
+        if type(drops) is not bool:
+            raise FrameError("malformed", "hello: 'ack.drops' must be true or false")
+        offer = AckOffer(session, nxt, drops)
     auth = obj.get("auth")
     if auth is not None and (type(auth) is not bytes or len(auth) != 16):
         raise FrameError("malformed", "hello: 'auth' must be a 16-byte nonce")

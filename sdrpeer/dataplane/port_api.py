@@ -47,9 +47,9 @@ class AckingPort(InPortLike, Protocol):
 class PolicyPort(InPortLike, Protocol):
     """An InPort that queues each connection's frames per that connection's policy."""
 
-    def connection_policy(self, given: dict[str, Any] | None) -> Any:
-        """The policy a connection whose hello gave the policy map `given` gets (ValueError
-        when a value is bad)."""
+    def connection_policy(self, given: dict[str, Any] | None, *, acked: bool = True) -> Any:
+        """The policy a connection whose hello gave the policy map `given` gets (`acked`: an
+        acknowledged stream; ValueError when a value is bad)."""
 
     def connect(self, conn: str, policy: Any) -> None:
         """Register connection `conn` with that policy."""

@@ -87,6 +87,7 @@ class Receiver(asyncio.BufferedProtocol):
         """The port, when this stream is acknowledged."""
         self._proving: tuple[Hello, InPortLike, bool, bytes] | None = None  # hello answered
         self._policy: Any = None  # the connection's policy at a PolicyPort (from the hello)
+        self._drops = False  # the sender reads [seq, dropped] acks (its hello's ack map said)
         self._last_seq = 0  # the highest seq delivered on this socket
         self._eof = False  # the sender ended its side; we close once all is acknowledged
         self._credited = 0
@@ -284,7 +285,9 @@ class Receiver(asyncio.BufferedProtocol):
         self._policy = None
         if error is None and hasattr(port, "connection_policy"):
             try:
-                self._policy = cast(PolicyPort, port).connection_policy(hello.policy)
+                acked = hello.ack is not None and hasattr(port, "attach_stream")
+                policy_port = cast(PolicyPort, port)
+                self._policy = policy_port.connection_policy(hello.policy, acked=acked)
             except (ValueError, TypeError) as exc:
                 error = f"bad hello: policy: {exc}"
         acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
@@ -349,6 +352,7 @@ class Receiver(asyncio.BufferedProtocol):
         if acks and hello.ack is not None:
             self.acking = cast(AckingPort, port)
             ack = hello.ack
+            self._drops = ack.drops
             self.key = self.acking.attach_stream(hello.conn, ack.session, ack.next, self._ack)
             self.server.counters["acked"] += 1
         return True
@@ -359,7 +363,8 @@ class Receiver(asyncio.BufferedProtocol):
         transport = self.transport
         if transport is None or transport.is_closing() or self._send is None:
             return
-        self._send(_packb([seq, dropped] if dropped else [seq]))
+        told = dropped and self._drops  # only to a sender that said it reads them
+        self._send(_packb([seq, dropped] if told else [seq]))
         if self._eof and seq >= self._last_seq:
             transport.close()  # the sender left and has heard everything
 

@@ -101,8 +101,12 @@ def create(lab_dir: Path, robots: int) -> NetPlan:
     if existing is not None:
         destroy(lab_dir)
     plan = _claim(robots)
-    lab_dir.mkdir(parents=True, exist_ok=True)
-    (lab_dir / STATE_FILE).write_text(json.dumps({"id": plan.lab_id, "robots": robots}) + "\n")
+    try:
+        lab_dir.mkdir(parents=True, exist_ok=True)
+        (lab_dir / STATE_FILE).write_text(json.dumps({"id": plan.lab_id, "robots": robots}) + "\n")
+    except OSError:  # nothing would record the claim: give the bridge back
+        run(plan.teardown(), check=False)
+        raise
     try:
         run(plan.setup()[1:])  # the bridge is made: that was the claim
     except SdrpeerError:

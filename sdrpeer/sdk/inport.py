@@ -62,6 +62,7 @@ class InPortRuntime:
 
     __slots__ = (
         "_ack_soon",
+        "_arity",
         "_conns",
         "_decode",
         "_decoded",
@@ -99,6 +100,7 @@ class InPortRuntime:
         if port_type is not None and info is None:
             raise TypeError(f"port {name!r}: type= must be a @message dataclass")
         self._decode = None if info is None else info.decode
+        self._arity = 0 if info is None else info.arity
         self._decoded: tuple[Any, Any] = (_NOTHING, _NOTHING)  # (newest as received, decoded)
         self.type_id = None if info is None else info.type_id
         """The message type's id (None: any value); senders of another type are refused."""
@@ -126,10 +128,20 @@ class InPortRuntime:
         old = self._conns.get(conn)
         self._conns[conn] = _Conn(policy or self.policy, old.last_seq if old else -1)
 
-    def connection_policy(self, given: dict[str, Any] | None) -> ConnectorPolicy:
+    def connection_policy(
+        self, given: dict[str, Any] | None, *, acked: bool = True
+    ) -> ConnectorPolicy:
         """The policy a connection whose own policy map is `given` gets at this port: the
-        port's default with the given keys over it (ValueError when one is bad)."""
-        return self.policy.merged(given)
+        port's declared policy with the connection's `buffer` and `full` over it (its `push`
+        and `skip` are the sender's: applied there, not twice). `full: block` holds only for
+        an acknowledged stream (`acked`: the sender's window bounds what waits); otherwise the
+        port's own `full` stays, so a hello cannot make the queue unbounded. ValueError when a
+        value is bad."""
+        self.policy.merged(given)  # every key checked, even those not applied here
+        keys = {k: v for k, v in (given or {}).items() if k in ("buffer", "full")}
+        if keys.get("full") == "block" and not acked:
+            del keys["full"]
+        return self.policy.merged(keys)
 
     def disconnect(self, conn: str) -> None:
         """Forget connection `conn` (frames already queued stay readable)."""
@@ -148,6 +160,11 @@ class InPortRuntime:
         if last >= 0 and seq > last + 1:
             self.lost += seq - last - 1
         c.last_seq = seq
+        if self._decode is not None and (type(value) is not list or len(value) != self._arity):
+            self.refused += 1  # not this port's type (an untyped sender): never queued
+            if a is not None:
+                self._refused(a, seq, overflow=False)
+            return
         self.frames_in += 1
         self.bytes_in += _size(value)
         p = c.policy

@@ -68,6 +68,7 @@ class ComponentRunner:
         self._waiter: asyncio.Future[None] | None = None
         self._pending = 0
         self._initialized = False
+        self._started = False  # on_startup succeeded: on_shutdown is owed at finalize
         self._on_error_failed = False
         component._fault_hook = self._faults.report
         ex = type(component).execution
@@ -106,8 +107,9 @@ class ComponentRunner:
             target = next_state(self._state, "initialize")
             self._start()
             await self._guarded("on_initialize", self.component.on_initialize)
-            await self._guarded("on_startup", self.component.on_startup)
             self._initialized = True
+            await self._guarded("on_startup", self.component.on_startup)
+            self._started = True
             self._set(target)
 
     async def activate(self) -> None:
@@ -127,7 +129,8 @@ class ComponentRunner:
             self._set(target)
 
     async def reset(self) -> None:
-        """ERROR -> INACTIVE (on_reset; then on_initialize if that had never succeeded)."""
+        """ERROR -> INACTIVE (on_reset; then on_initialize and on_startup if they had never
+        succeeded)."""
         async with self._lock:
             await self._settle()
             target = next_state(self._state, "reset")
@@ -135,6 +138,9 @@ class ComponentRunner:
             if not self._initialized:
                 await self._guarded("on_initialize", self.component.on_initialize)
                 self._initialized = True
+            if not self._started:
+                await self._guarded("on_startup", self.component.on_startup)
+                self._started = True
             self._on_error_failed = False
             self._set(target)
 
@@ -151,7 +157,8 @@ class ComponentRunner:
                     self._set(S.INACTIVE)
             target = next_state(self._state, "finalize")
             error: str | None = None
-            for name in ("on_shutdown", "on_finalize"):
+            names = ("on_shutdown", "on_finalize") if self._started else ("on_finalize",)
+            for name in names:
                 try:
                     await self._call(getattr(self.component, name))
                 except Exception as exc:

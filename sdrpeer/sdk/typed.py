@@ -83,6 +83,11 @@ class MessageType:
     decode: Callable[[Any], Any]
     """A wire form (a list) -> the dataclass."""
 
+    @property
+    def arity(self) -> int:
+        """How many fields its wire array has."""
+        return len(self.fields)
+
 
 def _type_name(hint: Any, where: str) -> tuple[str, MessageType | None]:
     """A field's type name, and its message type when it is one."""
@@ -187,7 +192,8 @@ def _decoder(
     def decode(wire: Any) -> Any:
         if type(wire) is not list or len(wire) != n:
             raise PortTypeError(f"expected a {type_id} ({n} fields), got {wire!r:.60}")
-        if nested:
+        if nested:  # into a copy: the received list may be decoded again (read() after get)
+            wire = list(wire)
             for i, sub in nested.items():
                 wire[i] = sub.decode(wire[i])
         try:
