@@ -253,8 +253,9 @@ class RealCluster:
         return agent
 
     def start_many(self, n: int) -> list[Agent]:
-        """robot-1 .. robot-n, the others joining robot-1, and wait until all see n alive.
-        The others start side by side (each waits only for robot-1's address)."""
+        """robot-1 .. robot-n, the others joining robot-1, and wait until all see n alive and
+        hold every robot's record. The others start side by side (each waits only for robot-1's
+        address)."""
         first = self.start("robot-1")
         spawned = [self.spawn(f"robot-{i}", join=[first]) for i in range(2, n + 1)]
         others = [self.started(agent) for agent in spawned]
@@ -262,6 +263,13 @@ class RealCluster:
         names = {a.name for a in agents}
         for agent in agents:
             self.wait_states(agent, dict.fromkeys(names, "alive"), what="convergence")
+        for agent in agents:  # and every robot's record has reached every agent: an allocator
+            # deciding before a record arrived would leave that robot out of a placement
+            self.wait_until(
+                agent.members,
+                lambda members: all((members.get(n) or {}).get("metrics") for n in names),
+                f"{agent.name} to hold every robot's record",
+            )
         return agents
 
     def kill(self, agent: Agent) -> None:

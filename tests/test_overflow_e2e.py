@@ -58,8 +58,9 @@ def test_frames_lost_to_a_full_inport_are_counted_warned_and_shown(
         "drops",
     )
     assert sent["overflowed"] >= sent["dropped_remote"]  # the InPort's, told back by its acks
-    got = ports(agent, "Lag")["inp"]
-    assert got["dropped"] > 0  # and the receiving side counts them too
+    cluster.wait_until(  # and the receiving side counts them too (from Lag's heartbeats)
+        lambda: ports(agent, "Lag").get("inp", {}), lambda c: c.get("dropped", 0) > 0, "Lag drops"
+    )
     row = cluster.wait_until(
         lambda: status(agent)["connections"][0], lambda c: (c["lost_per_s"] or 0) > 0, "lost/s"
     )
