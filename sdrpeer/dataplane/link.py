@@ -16,8 +16,8 @@ it reaches the end.
 
 A receiver that acknowledges (it said ``"ack": true`` in its reply) writes ``[seq]`` or
 ``[seq, dropped]`` on the same reverse direction as the credits (a credit is a bare uint):
-`on_ack` gets each seq and how many more frames the receiving InPort's policy discarded since the
-previous ack. Such a link
+`on_ack` gets each seq and how many more frames the receiving InPort dropped on a full buffer
+since the previous ack (0 from `[seq]`). Such a link
 is also only half-closed by `shut`, so the acknowledgements of what the old receiver still takes
 arrive; it closes once it has acknowledged everything or its instance stops.
 

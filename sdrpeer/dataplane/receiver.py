@@ -274,23 +274,22 @@ class Receiver(asyncio.BufferedProtocol):
             if port is None:
                 error = f"unknown in-port {hello.in_port!r}"
         assert self.transport is not None
-        if error is None and hello.shm is not None and self.server.shm and self._local():
-            self._attach(hello.shm)
+        can_ack = hello.ack is not None and hasattr(port, "attach_stream")
         taken = getattr(port, "type_id", None)
         if error is None and taken is not None and hello.type is not None and taken != hello.type:
             error = (
                 f"type mismatch: {hello.from_} sends {hello.type}, {hello.in_port} takes {taken}"
             )
             self.server.counters["refused_type"] += 1
-        self._policy = None
         if error is None and hasattr(port, "connection_policy"):
             try:
-                acked = hello.ack is not None and hasattr(port, "attach_stream")
                 policy_port = cast(PolicyPort, port)
-                self._policy = policy_port.connection_policy(hello.policy, acked=acked)
+                self._policy = policy_port.connection_policy(hello.policy, acked=can_ack)
             except (ValueError, TypeError) as exc:
                 error = f"bad hello: policy: {exc}"
-        acks = error is None and hello.ack is not None and hasattr(port, "attach_stream")
+        if error is None and hello.shm is not None and self.server.shm and self._local():
+            self._attach(hello.shm)  # only for a hello that is accepted
+        acks = error is None and can_ack
         proof = None
         if error is None and authenticating and auth is not None and hello.auth is not None:
             nonce = auth.nonce()

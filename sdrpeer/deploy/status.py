@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from sdrpeer.plan import Plan
-from sdrpeer.record.robot import RobotRecord, state_to_wire
+from sdrpeer.record.robot import InstanceInfo, RobotRecord, state_to_wire
 from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 
@@ -104,22 +104,22 @@ def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str,
     OutPorts, like the bytes; None when not known), and the traffic the system file expects."""
     if plan.system is None:
         return []
-    sending: dict[str, tuple[int, int]] = {}
+    sending: dict[str, InstanceInfo] = {}
     for robot, rec in alive.items():
         for inst in rec.instances:
             p = plan.active_of(inst.component)
             if p is not None and p.instance == inst.name and p.robot == robot:
-                sending[inst.component] = (inst.out_bps, inst.out_lost)
+                sending[inst.component] = inst
     rows = []
     for c in plan.system.connections:
-        sent = sending.get(c.from_component)
+        sender = sending.get(c.from_component)
         rows.append(
             {
                 "from": f"{c.from_component}.{c.from_port}",
                 "to": f"{c.to_component}.{c.to_port}",
-                "bytes_per_s": None if sent is None else sent[0],
+                "bytes_per_s": None if sender is None else sender.out_bps,
                 "expected_bytes_per_s": c.traffic_bytes_per_s,
-                "lost_per_s": None if sent is None else sent[1],
+                "lost_per_s": None if sender is None else sender.out_lost,
             }
         )
     return rows

@@ -28,7 +28,7 @@ from typing import Any, Final
 from sdrpeer.sdk.acks import AckState, SendAck
 from sdrpeer.sdk.errors import NoData
 from sdrpeer.sdk.policy import ConnectorPolicy
-from sdrpeer.sdk.typed import PortTypeError, message_type
+from sdrpeer.sdk.typed import PortTypeError, port_message
 
 __all__ = ["InPortRuntime"]
 
@@ -96,9 +96,7 @@ class InPortRuntime:
     ) -> None:
         self.name = name
         self.doc = doc
-        info = None if port_type is None else message_type(port_type)
-        if port_type is not None and info is None:
-            raise TypeError(f"port {name!r}: type= must be a @message dataclass")
+        info = port_message(port_type)
         self._decode = None if info is None else info.decode
         self._arity = 0 if info is None else info.arity
         self._decoded: tuple[Any, Any] = (_NOTHING, _NOTHING)  # (newest as received, decoded)

@@ -21,7 +21,7 @@ from typing import Any, Final, Literal, Protocol, overload
 
 from sdrpeer.sdk.inport import InPortRuntime
 from sdrpeer.sdk.policy import ConnectorPolicy
-from sdrpeer.sdk.typed import PortTypeError, message_type, type_id_of
+from sdrpeer.sdk.typed import PortTypeError, port_message, type_id_of
 
 __all__ = ["FrameSink", "InPort", "InPortRuntime", "OutPort", "OutPortRuntime", "PortInfo"]
 
@@ -88,9 +88,7 @@ class OutPortRuntime:
     def __init__(self, name: str, doc: str = "", port_type: type | None = None) -> None:
         self.name = name
         self.doc = doc
-        info = None if port_type is None else message_type(port_type)
-        if port_type is not None and info is None:
-            raise TypeError(f"port {name!r}: type= must be a @message dataclass")
+        info = port_message(port_type)
         self._type = port_type
         self._encode = None if info is None else info.encode
         self.type_id = None if info is None else info.type_id

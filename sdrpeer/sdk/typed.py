@@ -40,6 +40,7 @@ __all__ = [
     "WireBlob",
     "message",
     "message_type",
+    "port_message",
     "type_id_of",
 ]
 
@@ -98,8 +99,8 @@ def _type_name(hint: Any, where: str) -> tuple[str, MessageType | None]:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if origin is list and len(args) == 1 and args[0] in _LISTS:
         return _LISTS[args[0]], None
-    nested = getattr(hint, "__sdr_message__", None)
-    if isinstance(nested, MessageType):
+    nested = message_type(hint)
+    if nested is not None:
         return nested.type_id, nested
     raise TypeError(
         f"{where}: a message field must be float, int, bool, str, bytes, list[float], "
@@ -117,6 +118,8 @@ def message(name: str) -> Callable[[type[T]], type[T]]:
             raise TypeError(f"@message({name!r}) needs a dataclass, got {cls.__name__}")
         hints = typing.get_type_hints(cls)
         fields = [f.name for f in dataclasses.fields(cls)]
+        if not fields:
+            raise TypeError(f"@message({name!r}): {cls.__name__} has no fields")
         kinds: list[tuple[str, str]] = []
         nested: dict[int, MessageType] = {}
         for i, field in enumerate(fields):
@@ -127,8 +130,6 @@ def message(name: str) -> Callable[[type[T]], type[T]]:
         layout = ";".join(f"{f}:{t}" for f, t in kinds)
         digest = blake2b(f"{name}({layout})".encode(), digest_size=4).hexdigest()
         type_id = f"{name}#{digest}"
-        if not fields:
-            raise TypeError(f"@message({name!r}): {cls.__name__} has no fields")
         flat = _flat(fields, nested)
         blob = kinds[-1][1] == "bytes"
         info = MessageType(
@@ -210,11 +211,18 @@ def message_type(cls: Any) -> MessageType | None:
     return info if isinstance(info, MessageType) else None
 
 
-def type_id_of(port_type: Any) -> str | None:
-    """The type id a port declared with `type=` carries (None: untyped)."""
+def port_message(port_type: Any) -> MessageType | None:
+    """The message type of a port declared with `type=` (None: untyped); TypeError when
+    `port_type` is not a `@message` dataclass."""
     if port_type is None:
         return None
     info = message_type(port_type)
     if info is None:
         raise TypeError(f"a port type must be a @message dataclass, got {port_type!r}")
-    return info.type_id
+    return info
+
+
+def type_id_of(port_type: Any) -> str | None:
+    """The type id a port declared with `type=` carries (None: untyped)."""
+    info = port_message(port_type)
+    return None if info is None else info.type_id
