@@ -30,7 +30,8 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     assert figures["quick"] is True
     small = {"sdrpeer_tcp", "sdrpeer_tcp_acked", "sdrpeer_tcp_inport", "sdrpeer_unix", "zmq"}
     small |= {"plain_tcp", "sdrpeer_tcp_acked_enc"}
-    assert set(figures["small"]) == small | {"plain_tcp_coalesced", "sdrpeer_tcp_acked_typed"}
+    typed = {"sdrpeer_tcp_acked_typed", "zmq_typed"}
+    assert set(figures["small"]) == small | {"plain_tcp_coalesced"} | typed
     assert set(figures["big"]) == small | {"sdrpeer_shm"}
     assert set(figures["rtt"]) == {"sdrpeer_tcp", "plain_tcp", "zmq", "asyncio_raw"}
     for section in ("small", "big"):
@@ -39,7 +40,7 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
             assert len(cell["runs"]) == figures["reps"] == 1
     for name, cell in figures["rtt"].items():
         assert 0 < cell["p50_us"] <= cell["p99_us"], name
-    assert len(figures["targets"]) == 9  # six of the data plane, two of encryption, loss
+    assert len(figures["targets"]) == 10  # seven of the data plane, two of encryption, loss
     for target in figures["targets"]:
         assert _positive(target["ratio"]) if "ratio" in target else target["silent"] >= 0
         assert isinstance(target["met"], bool)

@@ -36,7 +36,9 @@ between two ends holding a data key (a random one per run, given to the receiver
 SDRPEER_DATA_KEYS, as an agent gives its hosts): authenticated and AES-GCM encrypted, the
 default between robots. `sdrpeer_tcp_acked_typed` is `sdrpeer_tcp_acked` with a typed port at
 both ends (sdrpeer.sdk.typed): a 100-byte `Pose` written through an `OutPortRuntime` (checked
-and encoded for every frame) and decoded into a `Pose` by the InPort for its consumer. Every
+and encoded for every frame) and decoded into a `Pose` by the InPort for its consumer;
+`zmq_typed` carries the same Pose over pyzmq as a developer would by hand (its fields packed as
+a msgpack array, made back into a Pose): the typed target is judged against both. Every
 cell is the median of --reps runs; the contenders run interleaved within each rep, and a
 target's ratio is the median over reps of the ratio measured within one rep (the load of this
 shared machine shifts between reps).
@@ -56,6 +58,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import msgpack
 import zmq
 from dataplane_peers import LEN, Peer, payload, typed_pose
 from dataplane_pings import SMALL, asyncio_pings, plain_pings, sdr_pings, zmq_pings
@@ -66,6 +69,7 @@ from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.testing import make_policy
 from sdrpeer.sdk.policy import ConnectorPolicy
 from sdrpeer.sdk.ports import OutPortRuntime
+from sdrpeer.sdk.typed import message_type
 
 BIG = 1_000_000
 # (target name, contender, baseline, minimum ratio contender/baseline)
@@ -81,6 +85,12 @@ THROUGHPUT_TARGETS = [
         "typed 100 B into the InPort (acked) >= 1.0x pyzmq",
         ("small", "sdrpeer_tcp_acked_typed"),
         ("small", "zmq"),
+        1.0,
+    ),
+    (
+        "typed 100 B into the InPort (acked) >= 1.0x pyzmq typed by hand",
+        ("small", "sdrpeer_tcp_acked_typed"),
+        ("small", "zmq_typed"),
         1.0,
     ),
     ("1 MB TCP >= 0.8x plain TCP", ("big", "sdrpeer_tcp"), ("big", "plain_tcp"), 0.8),
@@ -235,16 +245,25 @@ def plain_throughput(n: int, size: int, batch: int = 1) -> float:
     return seconds
 
 
-def zmq_throughput(n: int, size: int) -> float:
-    """Seconds the pyzmq PULL receiver took."""
-    peer = Peer("zmq-pull", n)
+def zmq_throughput(n: int, size: int, *, typed: bool = False) -> float:
+    """Seconds the pyzmq PULL receiver took. `typed`: each frame the same 100-byte Pose as
+    the typed sdrpeer row, packed as a msgpack array of its fields and made back into a Pose
+    (what a developer does to send typed messages over pyzmq)."""
+    peer = Peer("zmq-pull-typed" if typed else "zmq-pull", n)
     ctx = zmq.Context()
     sock = ctx.socket(zmq.PUSH)
     sock.connect(f"tcp://{peer.addresses['tcp']}")
     value = payload(size)
     start = time.perf_counter()
-    for _ in range(n):
-        sock.send(value)
+    if typed:
+        pose = typed_pose()
+        flat = message_type(type(pose)).flat  # type: ignore[union-attr]
+        packb = msgpack.packb
+        for _ in range(n):
+            sock.send(packb(flat(pose)))
+    else:
+        for _ in range(n):
+            sock.send(value)
     seconds = float(peer.finish()["end"]) - start
     sock.close(linger=0)
     ctx.term()
@@ -267,6 +286,7 @@ def measure(
         "sdrpeer_tcp_acked_typed": lambda: sdr_throughput("tcp_acked_typed", n_small, SMALL),
         "sdrpeer_unix": lambda: sdr_throughput("unix", n_small, SMALL),
         "zmq": lambda: zmq_throughput(n_small, SMALL),
+        "zmq_typed": lambda: zmq_throughput(n_small, SMALL, typed=True),
         "plain_tcp": lambda: plain_throughput(n_small, SMALL),
         "plain_tcp_coalesced": lambda: plain_throughput(n_small, SMALL, batch=256),
     }

@@ -10,7 +10,9 @@ into the SDK's InPort, a consumer task taking every frame as a component would, 
 is acknowledged and the sender keeps its window), sdr-echo (DataServer
 whose frames go back through a Connection to ARG), asyncio-echo (a bare asyncio Protocol),
 plain-sink / plain-echo (blocking sockets, 4-byte length prefix per frame: the sink parses
-frames out of a recv_into buffer and makes each a bytes object), zmq-pull / zmq-rep (pyzmq).
+frames out of a recv_into buffer and makes each a bytes object), zmq-pull / zmq-rep (pyzmq),
+zmq-pull-typed (each frame a msgpack array made back into the Pose `typed_pose` gives: a typed
+stream done by hand with pyzmq).
 BENCH_PROFILE=path runs the role under cProfile and writes its stats there.
 """
 
@@ -26,6 +28,7 @@ import sys
 import time
 from typing import Any
 
+import msgpack
 import zmq
 
 from sdrpeer.dataplane import Connection, DataServer
@@ -217,13 +220,19 @@ def recv_exact(sock: socket.socket, size: int) -> bytes:
 
 def _peer_zmq(role: str, n: int) -> None:
     ctx = zmq.Context()
-    sock = ctx.socket(zmq.PULL if role == "zmq-pull" else zmq.REP)
+    sock = ctx.socket(zmq.REP if role == "zmq-rep" else zmq.PULL)
     port = sock.bind_to_random_port("tcp://127.0.0.1")
     _emit({"tcp": f"127.0.0.1:{port}"})
     if role == "zmq-rep":
         while (msg := sock.recv()) != b"":
             sock.send(msg)
         sock.send(b"")
+    elif role == "zmq-pull-typed":  # the same Pose, msgpack arrays, made back into Poses
+        make = type(typed_pose())
+        unpackb = msgpack.unpackb
+        for _ in range(n):
+            make(*unpackb(sock.recv()))
+        _emit({"end": time.perf_counter()})
     else:
         for _ in range(n):
             sock.recv()

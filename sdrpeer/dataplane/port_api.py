@@ -3,7 +3,9 @@
 An `InPortLike` takes frames; an `AckingPort` also acknowledges what its component took, so
 senders can keep and replay the rest (docs/protocol.md section 2, "Acknowledgements"), and
 counts back what its policy discarded; a `PolicyPort` queues each connection's frames per the
-connection's own policy (the hello's policy map over the port's default).
+connection's own policy (the hello's policy map over the port's default). A port may also
+have `deliver_many(frames, conn)`, the frames of one read at once, oldest first (what the data
+server calls when it is there: the SDK's InPort queues them in one loop).
 """
 
 from __future__ import annotations

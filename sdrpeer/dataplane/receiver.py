@@ -213,14 +213,22 @@ class Receiver(asyncio.BufferedProtocol):
         if self.ring is not None:
             self._deliver_from_ring(frames)
             return
-        deliver = self.port.deliver
         conn = self.key
-        for seq, value in frames:
+        many = getattr(self.port, "deliver_many", None)
+        if many is not None:  # the whole read at once (sdrpeer.sdk.inport)
             try:
-                deliver(value, seq, conn)
+                many(frames, conn)
             except Exception as exc:
                 self.server.counters["deliver_error"] += 1
                 self.server.report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
+        else:
+            deliver = self.port.deliver
+            for seq, value in frames:
+                try:
+                    deliver(value, seq, conn)
+                except Exception as exc:
+                    self.server.counters["deliver_error"] += 1
+                    self.server.report("deliver_error", self.conn, f"{type(exc).__name__}: {exc}")
         if frames and self.acking is not None:
             self._last_seq = max(self._last_seq, frames[-1][0])
 

@@ -5,8 +5,9 @@ It counts sequence gaps per connection as `lost` (a connection's first frame set
 seq that goes back means the sender restarted), applies the connection's `ConnectorPolicy` (see
 sdrpeer.sdk.policy) to one shared arrival-ordered queue, remembers the newest value for `read()`,
 and wakes waiting readers and the OnInput execution context. It is synchronous, allocation-free
-on the common path, and never raises for a well-typed call. The component reads with `read()`
-(newest), `get_nowait()`/`get()`/`async for` (oldest first).
+on the common path, and never raises for a well-typed call; `deliver_many` takes a read's
+worth of frames at once (the data plane's path: one call, one wake-up, per read). The
+component reads with `read()` (newest), `get_nowait()`/`get()`/`async for` (oldest first).
 
 Acknowledged streams (sdrpeer.sdk.acks): a data-plane socket whose sender keeps frames until
 they are acknowledged calls `attach_stream(conn, session, next_seq, send)` and delivers under
@@ -35,6 +36,7 @@ __all__ = ["InPortRuntime"]
 _NOTHING: Final = object()
 _SESSION_SEP: Final = "\x1f"
 _SESSIONS_KEPT: Final = 4
+_IN_ORDER: Final = ("all", "fifo")
 
 
 class _Conn:
@@ -49,14 +51,6 @@ class _Conn:
         self.acks: AckState | None = None
 
 
-def _size(value: Any) -> int:
-    if isinstance(value, bytes | bytearray | str):
-        return len(value)
-    if isinstance(value, memoryview):
-        return value.nbytes
-    return 0
-
-
 class InPortRuntime:
     """One component instance's input port: per-connection policy, one arrival-ordered queue."""
 
@@ -68,13 +62,13 @@ class InPortRuntime:
         "_decoded",
         "_dirty",
         "_listener",
+        "_make",
         "_new",
         "_newest",
         "_queue",
         "_space_waiter",
         "_tags",
         "_waiter",
-        "bytes_in",
         "doc",
         "dropped",
         "duplicates",
@@ -98,13 +92,14 @@ class InPortRuntime:
         self.doc = doc
         info = port_message(port_type)
         self._decode = None if info is None else info.decode
+        self._make = None if info is None else info.build
         self._arity = 0 if info is None else info.arity
         self._decoded: tuple[Any, Any] = (_NOTHING, _NOTHING)  # (newest as received, decoded)
         self.type_id = None if info is None else info.type_id
         """The message type's id (None: any value); senders of another type are refused."""
         self.policy = policy or ConnectorPolicy()
         """The default policy, for connections that were not registered with their own."""
-        self.frames_in = self.bytes_in = self.dropped = self.lost = self.refused = 0
+        self.frames_in = self.dropped = self.lost = self.refused = 0
         self.skipped = 0
         self.duplicates = 0
         """Frames of an acknowledged stream received twice (a replay after a reconnect)."""
@@ -117,7 +112,8 @@ class InPortRuntime:
         self._conns: dict[str, _Conn] = {}
         self._waiter: asyncio.Future[None] | None = None
         self._space_waiter: asyncio.Future[None] | None = None
-        self._listener: Callable[[], None] | None = None
+        self._listener: Callable[[int], None] | None = None
+        """Told how many frames were queued, after each delivery (the OnInput context's)."""
 
     # -- the data plane's side -------------------------------------------------------------
 
@@ -164,7 +160,6 @@ class InPortRuntime:
                 self._refused(a, seq, overflow=False)
             return
         self.frames_in += 1
-        self.bytes_in += _size(value)
         p = c.policy
         q = self._queue
         tags = self._tags
@@ -207,7 +202,58 @@ class InPortRuntime:
             if not w.done():
                 w.set_result(None)
         if self._listener is not None:
-            self._listener()
+            self._listener(1)
+
+    def deliver_many(self, frames: list[list[Any]], conn: str) -> None:
+        """`deliver` every ``[seq, value]`` of `frames`, oldest first: the data plane's batch,
+        one call per read. Frames in order on an all/fifo connection with room for all of
+        them (the common case) are queued in one tight loop, waking readers once; from the
+        first other one on (a gap back, a wrong shape, a policy that thins or a buffer that
+        could fill) each goes through `deliver`."""
+        c = self._conns.get(conn)
+        if c is None:
+            c = self._conns[conn] = _Conn(self.policy, -1)
+        q = self._queue
+        n = 0
+        if c.policy.push in _IN_ORDER and len(q) + len(frames) <= c.policy.buffer:
+            a = c.acks
+            last = c.last_seq
+            arity = self._arity if self._decode is not None else -1
+            append = q.append
+            tags = self._tags
+            tag_append = None if tags is None else tags.append
+            lost = 0
+            for seq, value in frames:
+                if arity >= 0 and (type(value) is not list or len(value) != arity):
+                    break  # not the port's type: `deliver` refuses it
+                if seq != last + 1:
+                    if seq <= last:
+                        break  # a replay or a restarted sender: `deliver` sorts it out
+                    if last >= 0:
+                        lost += seq - last - 1
+                last = seq
+                append(value)
+                if tag_append is not None:
+                    tag_append(None if a is None else (a, seq))
+                n += 1
+            if n:
+                c.last_seq = last
+                self.lost += lost
+                self.frames_in += n
+                if a is not None:
+                    a.enq += n
+                self._newest = q[-1]
+                self._new = True
+                w = self._waiter
+                if w is not None:
+                    self._waiter = None
+                    if not w.done():
+                        w.set_result(None)
+                if self._listener is not None:
+                    self._listener(n)
+        deliver = self.deliver
+        for seq, value in frames[n:] if n else frames:
+            deliver(value, seq, conn)
 
     # -- acknowledged streams (see the module doc) -------------------------------------------
 
@@ -272,25 +318,6 @@ class InPortRuntime:
     def _refused(self, a: AckState, seq: int, *, overflow: bool = True) -> None:
         a.refused(seq, overflow=overflow)
         if a.dirty:
-            self._schedule_acks(a)
-
-    def _taken_one(self) -> None:
-        """The oldest queued value left the queue (the hot path of a consumer: inlined)."""
-        assert self._tags is not None
-        tag = self._tags.popleft()
-        if tag is None:
-            return
-        a, seq = tag
-        was = a.dirty
-        if a.drops:
-            a.taken(seq)
-        else:
-            a.deq += 1
-            if seq <= a.acked:
-                return
-            a.acked = seq
-            a.dirty = True
-        if a.dirty and not was:  # already dirty: already waiting for the next flush
             self._schedule_acks(a)
 
     def _evicted_one(self) -> None:
@@ -358,11 +385,31 @@ class InPortRuntime:
         if not q:
             raise NoData(f"in-port {self.name!r}: queue is empty")
         value = q.popleft()
-        if self._tags is not None:
-            self._taken_one()
+        tags = self._tags
+        if tags is not None:  # the taken frame's stream moves on (a consumer's hot path: inline)
+            tag = tags.popleft()
+            if tag is not None:
+                a, seq = tag
+                if a.drops:
+                    a.taken(seq)
+                    if a.dirty:
+                        self._schedule_acks(a)
+                else:
+                    a.deq += 1
+                    if seq > a.acked:
+                        a.acked = seq
+                        if not a.dirty:  # already dirty: already waiting for the next flush
+                            a.dirty = True
+                            self._schedule_acks(a)
         if not q:
             self._new = False
-        self._space_freed()
+        if self._space_waiter is not None:
+            self._space_freed()
+        if self._make is not None:  # its shape was checked on arrival
+            try:
+                return self._make(*value)
+            except TypeError as e:
+                raise PortTypeError(f"in-port {self.name!r}: not a {self.type_id}: {e}") from None
         if self._decode is not None:
             return self._typed(value)
         return value
@@ -394,10 +441,12 @@ class InPortRuntime:
         return len(self._queue)
 
     def counters(self) -> dict[str, int]:
-        """The protocol's port counters, plus `skipped` (frames thinned by push="skip")."""
+        """The protocol's port counters, plus `skipped` (frames thinned by push="skip").
+        `bytes_in` is the data plane's to count (what its server received for the port: a
+        host reports that), 0 here."""
         return {
             "frames_in": self.frames_in,
-            "bytes_in": self.bytes_in,
+            "bytes_in": 0,
             "frames_out": 0,
             "bytes_out": 0,
             "dropped": self.dropped,

@@ -302,9 +302,9 @@ class ComponentRunner:
         if w is not None and not w.done():
             w.set_result(None)
 
-    def _on_input(self) -> None:
+    def _on_input(self, frames: int) -> None:
         if self._state in _RUNNING:
-            self._pending += 1
+            self._pending += frames
             self._kick()
 
     def _start(self) -> None:

@@ -83,6 +83,10 @@ class MessageType:
     """A value -> a tuple (nested messages as tuples, never a WireBlob)."""
     decode: Callable[[Any], Any]
     """A wire form (a list) -> the dataclass."""
+    build: Callable[..., Any] | None = None
+    """The class itself when its wire array is its fields one to one (no nested message):
+    `build(*wire)` makes the value from a list already known to hold `arity` elements (what
+    an InPort checked on arrival), skipping `decode`'s checks. None: use `decode`."""
 
     @property
     def arity(self) -> int:
@@ -140,6 +144,7 @@ def message(name: str) -> Callable[[type[T]], type[T]]:
             _with_blob(flat) if blob else flat,
             flat,
             _decoder(cls, type_id, len(fields), nested),
+            None if nested else cls,
         )
         cls.__sdr_message__ = info  # type: ignore[attr-defined]
         return cls
