@@ -3,7 +3,8 @@
 An `InPortLike` takes frames; an `AckingPort` also acknowledges what its component took, so
 senders can keep and replay the rest (docs/protocol.md section 2, "Acknowledgements"), and
 counts back what its policy discarded; a `PolicyPort` queues each connection's frames per the
-connection's own policy (the hello's policy map over the port's default).
+connection's own policy (the hello's policy map over the port's default). A `ServicePortLike`
+answers the calls of a service binding (sdrpeer.sdk.services' provider fits).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
-__all__ = ["AckingPort", "InPortLike", "PolicyPort", "SendAck"]
+__all__ = ["AckingPort", "InPortLike", "PolicyPort", "SendAck", "ServicePortLike"]
 
 SendAck = Callable[[int, int], None]
 """Writes one acknowledgement: the seq, and the frames of the stream the policy discarded."""
@@ -53,3 +54,16 @@ class PolicyPort(InPortLike, Protocol):
 
     def connect(self, conn: str, policy: Any) -> None:
         """Register connection `conn` with that policy."""
+
+
+class ServicePortLike(Protocol):
+    """A provided service port (sdrpeer.sdk.services' `ServiceProviderRuntime` is one)."""
+
+    interface_id: str
+    """What a consumer's hello must name (`svc`)."""
+
+    def serve(
+        self, call_id: int, method: str, arg: Any, reply: Callable[[int, bool, Any], None]
+    ) -> None:
+        """Answer one call through `reply` (call id, ok, value or ``[kind, message]``), now or
+        later."""
