@@ -203,6 +203,11 @@ class ServiceProviderRuntime:
         """Requests answered with an error."""
         self._tasks: set[asyncio.Task[None]] = set()
 
+    @property
+    def running(self) -> int:
+        """Calls whose async handler has not finished yet."""
+        return len(self._tasks)
+
     def serve(self, call_id: int, method: str, arg: Any, reply: Reply) -> None:
         """Answer one request through `reply` (now, or when an async handler finishes)."""
         if not self.serving:
