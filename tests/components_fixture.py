@@ -286,10 +286,12 @@ class EchoService(Component):
 
 
 class EchoCaller(Component):
-    """Calls `ECHO.echo` with its call number every period; `other` requires `OTHER_ECHO`."""
+    """Calls `method` of `ECHO` every period (`echo` with its call number, `boom`, or `slow` for
+    one second); `other` requires `OTHER_ECHO` and calls it too once bound."""
 
     execution = Periodic(param="rate")
     rate = Param(float, 20.0, "calls per second")
+    method = Param(str, "echo", "echo, boom or slow")
     svc = ServiceConsumer(ECHO, "the echo it calls")
     other = ServiceConsumer(OTHER_ECHO, "a mismatched interface")
     out = OutPort("each echoed number")
@@ -299,10 +301,12 @@ class EchoCaller(Component):
         self.n = 0
 
     async def on_execute(self) -> None:
-        """One echo call; its reply goes out on `out` (failures are counted by the port)."""
+        """One call; an echo's reply goes out on `out` (the port counts failures by kind)."""
         self.n += 1
+        method = self.param_values()["method"]
         with contextlib.suppress(ServiceCallError):
-            self.out.write(await self.svc.echo(self.n, timeout=0.5))
+            reply = await self.svc.call(method, 1.0 if method == "slow" else self.n, timeout=0.3)
+            self.out.write(reply)
         if self.other.link is not None:
             with contextlib.suppress(ServiceCallError):
                 await self.other.call("echo", self.n, timeout=0.5)

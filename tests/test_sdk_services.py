@@ -121,7 +121,8 @@ def test_service_ports_are_reported_with_role_interface_and_methods() -> None:
     assert PathPlanner.service_ports()["planner"].to_map()["role"] == "provides"
     assert EchoCaller.port_names() == {"in": [], "out": ["out"]}  # data ports only
     counters = EchoCaller("C").port_counters()
-    assert counters["svc"] == {"calls": 0, "failed": 0}
+    assert counters["svc"] == {"calls": 0, "failed": 0, "timeouts": 0, "unavailable": 0}
+    assert PathPlanner("P").port_counters()["planner"] == {"calls": 0, "failed": 0}
 
 
 def test_a_provider_answers_only_while_serving_and_reports_handler_errors() -> None:

@@ -195,7 +195,7 @@ class Component:
         """Port name -> counters, as sent in the control channel's `heartbeat`."""
         out = {n: p.counters() for n, p in self._ports.items()}
         for n, service in self._services.items():
-            out[n] = {"calls": service.calls, "failed": service.failed}
+            out[n] = service.counters()
         return out
 
     # -- faults (sdrpeer.sdk.faults): callable from any callback or thread --------------------

@@ -208,6 +208,10 @@ class ServiceProviderRuntime:
         """Calls whose async handler has not finished yet."""
         return len(self._tasks)
 
+    def counters(self) -> dict[str, int]:
+        """For heartbeats: calls answered, and of those with an error."""
+        return {"calls": self.calls, "failed": self.failed}
+
     def serve(self, call_id: int, method: str, arg: Any, reply: Reply) -> None:
         """Answer one request through `reply` (now, or when an async handler finishes)."""
         if not self.serving:
@@ -367,6 +371,19 @@ class ServiceCaller:
         """Calls made."""
         self.failed = 0
         """Calls that raised a ServiceCallError."""
+        self.timeouts = 0
+        """Of those, ServiceTimeout."""
+        self.unavailable = 0
+        """Of those, ServiceUnavailable (the rest are the provider's ServiceError)."""
+
+    def counters(self) -> dict[str, int]:
+        """For heartbeats: calls, failed, and of those timeouts and unavailable."""
+        return {
+            "calls": self.calls,
+            "failed": self.failed,
+            "timeouts": self.timeouts,
+            "unavailable": self.unavailable,
+        }
 
     def bind(self, link: CallLink | None) -> None:
         """Send calls through `link` (None: unbound, calls fail with ServiceUnavailable)."""
@@ -391,8 +408,10 @@ class ServiceCaller:
         try:
             value = await self._call(method, wire, timeout)
             return _decode(self.interface.reply_type(method), value)
-        except ServiceCallError:
+        except ServiceCallError as exc:
             self.failed += 1
+            self.timeouts += isinstance(exc, ServiceTimeout)
+            self.unavailable += isinstance(exc, ServiceUnavailable)
             raise
 
     async def _call(self, method: str, wire: Any, timeout: float) -> Any:  # noqa: ASYNC109
