@@ -4,7 +4,7 @@ How it works: `plan(start, goal, step)` is the pure rule: a straight path from `
 in steps of at most `step` metres (both ends included). `PathPlanner` provides `planner`
 (methods `compute`, typed `Goal` -> `Path`, and `status`, untyped: how many paths it computed
 and the instance that answered). `PlanCaller` runs periodically (`rate`, 5 Hz): each period it
-calls `planner.compute` towards a goal that moves along a circle, with a timeout of half a
+calls `planner.compute` towards a goal that moves along a circle, with a timeout of one
 period; a path that comes back is written on `path` (its waypoint count), a failed call is
 counted by the SDK in the port's `failed` and logged (first of each kind). System file wiring:
 a connection `from: PlanCaller.planner` `to: PathPlanner.planner`.
@@ -107,7 +107,7 @@ class PlanCaller(Component):
         self.n += 1
         angle = self.n * 0.1
         goal = Goal(0.0, 0.0, 3 * math.cos(angle), 3 * math.sin(angle))
-        timeout = 0.5 / max(self.param_values()["rate"], 0.1)
+        timeout = 1.0 / max(self.param_values()["rate"], 0.1)
         try:
             path = await self.planner.call("compute", goal, timeout=timeout)
         except ServiceCallError as exc:
