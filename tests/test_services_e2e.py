@@ -52,7 +52,7 @@ def planner_on(robot: str) -> Any:
     def ok(doc: dict[str, Any]) -> bool:
         rows = {c["component"]: c for c in doc["components"]}
         planner = rows.get("Planner", {})
-        return planner.get("robot") == robot and planner.get("state") == "active"
+        return bool(planner.get("robot") == robot and planner.get("state") == "active")
 
     return ok
 
