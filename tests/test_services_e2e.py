@@ -66,6 +66,7 @@ def test_calls_succeed_again_after_the_provider_moves(cluster: RealCluster, tmp_
     row = cluster.wait_until(lambda: caller_row(two), lambda r: paths(r) >= 10, "10 paths")
     before = row["connections"][0]
     assert before["in"] == "planner"
+    assert row["services"]["planner"]["role"] == "requires"  # from the host's hello
     code, _ = http("POST", one.api + "/v1/robot", {"rssi": "-56dBm"}, one.token)
     assert code == 200
     cluster.wait_until(lambda: status(two), planner_on("robot-2"), "the planner moved", 20)
