@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.errors import SystemFileError
-from sdrpeer.system.loader import parse_system
+from sdrpeer.system.loader import load_system, parse_system
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "services" / "planning.yaml"
 
 HEAD = (
     "name: s\n"  # 1
@@ -96,3 +98,10 @@ def test_an_encrypt_policy_is_allowed(tmp_path: Path) -> None:
     text = HEAD + "  - {from: Caller.planner, to: Planner.planner, policy: {encrypt: false}}\n"
     conn = parse_system(text, "sys.yaml", base_dir=tmp_path).connections[0]
     assert conn.policy == (("encrypt", False),)
+
+
+def test_the_example_system_binds_the_planner_pair() -> None:
+    system = load_system(EXAMPLE)
+    (conn,) = system.connections
+    assert conn.id == "Caller.planner->Planner.planner"
+    assert system.component("Planner").params_map() == {"step": 0.25}

@@ -202,6 +202,7 @@ class ServiceProviderRuntime:
         self.failed = 0
         """Requests answered with an error."""
         self._tasks: set[asyncio.Task[None]] = set()
+        self._logged: set[tuple[str, str]] = set()  # (method, error kind) already warned about
 
     @property
     def running(self) -> int:
@@ -252,8 +253,18 @@ class ServiceProviderRuntime:
         reply(call_id, True, wire)
 
     def _raised(self, reply: Reply, call_id: int, method: str, exc: Exception) -> None:
-        log.info("%s.%s raised %s: %s", self.name, method, type(exc).__name__, exc)
-        self._fail(reply, call_id, type(exc).__name__, str(exc))
+        kind = type(exc).__name__
+        first = (method, kind) not in self._logged  # a warning the first time, then debug
+        self._logged.add((method, kind))
+        log.log(
+            logging.WARNING if first else logging.DEBUG,
+            "%s.%s raised %s: %s",
+            self.name,
+            method,
+            kind,
+            exc,
+        )
+        self._fail(reply, call_id, kind, str(exc))
 
     def _fail(self, reply: Reply, call_id: int, kind: str, message: str) -> None:
         self.calls += 1
