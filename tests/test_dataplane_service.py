@@ -246,3 +246,17 @@ async def test_malformed_requests_are_answered_or_refused_never_a_crash(
     assert out == [[7, False, ["UnknownMethod", "no method 'nope' (have: echo, boom, slow)"]]]
     caller, _ = caller_for(provider.tcp, keys=False)
     assert await caller.call("echo", "still here", timeout=2) == "still here"
+
+
+async def test_a_repoint_while_dialing_sends_the_next_call_to_the_new_address(
+    providers: Callable[..., Any],
+) -> None:
+    new = await providers()
+    caller, client = caller_for("tcp://127.0.0.1:9")  # nothing listens: the dial is refused
+    first = asyncio.ensure_future(caller.call("echo", 1, timeout=2))
+    await until_async("the first dial", lambda: client.counters["dials"] == 1)
+    client.repoint(new.tcp)
+    with pytest.raises(ServiceUnavailable):
+        await first
+    assert await caller.call("echo", 2, timeout=2) == 2
+    assert new.port.calls == 1

@@ -194,6 +194,7 @@ class ServiceClient:
         """Send the next calls to `to` (the provider moved); calls in flight fail."""
         parse_address(to)
         self.to = to
+        self._dialing = None  # a dial still under way to the old address fails its callers
         self._drop_link(f"re-pointed to {to}")
 
     async def close(self) -> None:
@@ -243,7 +244,8 @@ class ServiceClient:
             text = str(exc) or type(exc).__name__
             raise ConnectionError(f"provider at {to}: {text}") from None
         finally:
-            self._dialing = None
+            if self._dialing is asyncio.current_task():  # not a newer dial (after a repoint)
+                self._dialing = None
         if self._closed or to != self.to:
             link.transport.close()
             raise ConnectionError(f"re-pointed from {to} while connecting")
