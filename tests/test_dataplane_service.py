@@ -252,11 +252,29 @@ async def test_a_repoint_while_dialing_sends_the_next_call_to_the_new_address(
     providers: Callable[..., Any],
 ) -> None:
     new = await providers()
-    caller, client = caller_for("tcp://127.0.0.1:9")  # nothing listens: the dial is refused
-    first = asyncio.ensure_future(caller.call("echo", 1, timeout=2))
-    await until_async("the first dial", lambda: client.counters["dials"] == 1)
-    client.repoint(new.tcp)
-    with pytest.raises(ServiceUnavailable):
-        await first
-    assert await caller.call("echo", 2, timeout=2) == 2
-    assert new.port.calls == 1
+    accepted: list[asyncio.StreamWriter] = []
+
+    async def never_answer(_: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        accepted.append(writer)
+
+    silent = await asyncio.start_server(never_answer, "127.0.0.1", 0)
+    port = silent.sockets[0].getsockname()[1]
+    caller = EchoCaller("Caller").consumer("svc")
+    client = ServiceClient(
+        "b1", f"tcp://127.0.0.1:{port}", "svc", "Caller.svc", ECHO.id,
+        auth=DataAuth([KEY]), dial_timeout=1.0,
+    )  # fmt: skip
+    caller.bind(client)
+    try:
+        first = asyncio.ensure_future(caller.call("echo", 1, timeout=5))
+        await until_async("the first dial", lambda: client.counters["dials"] == 1)
+        client.repoint(new.tcp)
+        assert await caller.call("echo", 2, timeout=0.9) == 2  # before the old dial gives up
+        with pytest.raises(ServiceUnavailable, match=r"provider at tcp://127\.0\.0\.1:"):
+            await first
+        assert new.port.calls == 1
+    finally:
+        for writer in accepted:
+            writer.close()
+        silent.close()
+        await silent.wait_closed()
