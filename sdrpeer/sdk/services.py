@@ -187,7 +187,9 @@ class ServiceInfo:
 class ServiceProviderRuntime:
     """One instance's provided service: answers the requests its data server hands it."""
 
-    def __init__(self, name: str, interface: Interface, handlers: Mapping[str, Callable[..., Any]]):
+    def __init__(
+        self, name: str, interface: Interface, handlers: Mapping[str, Callable[..., Any]]
+    ) -> None:
         self.name = name
         self.interface = interface
         self.interface_id = interface.id
