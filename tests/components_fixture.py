@@ -1,14 +1,28 @@
 """Small components the host tests run: a publisher, a recorder, a crasher, one with params,
-fault reporters, ones with a state to hand over."""
+fault reporters, ones with a state to hand over, a service provider and its caller."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import os
 import threading
 import time
 from typing import Any
 
-from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Periodic
+from sdrpeer.sdk import (
+    Component,
+    InPort,
+    Interface,
+    OnInput,
+    OutPort,
+    Param,
+    Periodic,
+    ServiceCallError,
+    ServiceConsumer,
+    ServiceProvider,
+    Stepped,
+)
 
 
 class Counter(Component):
@@ -240,3 +254,59 @@ class Laggard(Component):
         if self.inp.qsize():
             self.inp.get_nowait()
             self.taken += 1
+
+
+ECHO = Interface.of("test/Echo", "echo", "boom", "slow")
+"""The fixture service: `echo` returns its argument, `boom` raises, `slow` sleeps first."""
+OTHER_ECHO = Interface.of("test/Echo", "echo", "boom")
+"""Same name, other methods: another interface id (a consumer of it is refused)."""
+
+
+class EchoService(Component):
+    """Provides `ECHO` on `svc` (stepped: it only answers calls)."""
+
+    execution = Stepped()
+    svc = ServiceProvider(ECHO, "echoes")
+
+    @svc.method
+    def echo(self, arg: Any) -> Any:
+        """`arg`, unchanged."""
+        return arg
+
+    @svc.method
+    def boom(self, arg: Any) -> Any:
+        """Always raises ValueError(arg)."""
+        raise ValueError(str(arg))
+
+    @svc.method
+    async def slow(self, seconds: float) -> float:
+        """Answers `seconds` after that many seconds."""
+        await asyncio.sleep(seconds)
+        return seconds
+
+
+class EchoCaller(Component):
+    """Calls `method` of `ECHO` every period (`echo` with its call number, `boom`, or `slow` for
+    one second); `other` requires `OTHER_ECHO` and calls it too once bound."""
+
+    execution = Periodic(param="rate")
+    rate = Param(float, 20.0, "calls per second")
+    method = Param(str, "echo", "echo, boom or slow")
+    svc = ServiceConsumer(ECHO, "the echo it calls")
+    other = ServiceConsumer(OTHER_ECHO, "a mismatched interface")
+    out = OutPort("each echoed number")
+
+    def on_initialize(self) -> None:
+        """No call yet."""
+        self.n = 0
+
+    async def on_execute(self) -> None:
+        """One call; an echo's reply goes out on `out` (the port counts failures by kind)."""
+        self.n += 1
+        method = self.param_values()["method"]
+        with contextlib.suppress(ServiceCallError):
+            reply = await self.svc.call(method, 1.0 if method == "slow" else self.n, timeout=0.3)
+            self.out.write(reply)
+        if self.other.link is not None:
+            with contextlib.suppress(ServiceCallError):
+                await self.other.call("echo", self.n, timeout=0.5)

@@ -33,14 +33,17 @@ def test_quick_bench_writes_every_figure(tmp_path: Path) -> None:
     typed = {"sdrpeer_tcp_acked_typed", "zmq_typed"}
     assert set(figures["small"]) == small | {"plain_tcp_coalesced"} | typed
     assert set(figures["big"]) == small | {"sdrpeer_shm"}
-    assert set(figures["rtt"]) == {"sdrpeer_tcp", "plain_tcp", "zmq", "asyncio_raw"}
+    rtt = {"sdrpeer_tcp", "sdrpeer_service", "plain_tcp", "zmq", "asyncio_raw"}
+    assert set(figures["rtt"]) == rtt
     for section in ("small", "big"):
         for name, cell in figures[section].items():
             assert _positive(cell["median"]), (section, name)
             assert len(cell["runs"]) == figures["reps"] == 1
     for name, cell in figures["rtt"].items():
         assert 0 < cell["p50_us"] <= cell["p99_us"], name
-    assert len(figures["targets"]) == 10  # seven of the data plane, two of encryption, loss
+    assert len(figures["targets"]) == 11  # 7 of the data plane, 2 of encryption, loss, service
+    names = [t["target"] for t in figures["targets"]]
+    assert "service call p50 <= 1.5x data-port RTT" in names
     for target in figures["targets"]:
         assert _positive(target["ratio"]) if "ratio" in target else target["silent"] >= 0
         assert isinstance(target["met"], bool)

@@ -81,8 +81,14 @@ POLICY = {"push": "fifo", "buffer": 64, "full": "block", "skip": 0}
 KEYS = ["00" * 32, "ff" * 16]
 COUNTERS = {"frames_out": 10, "bytes_out": 800, "dropped": 0}
 
+SERVICES = {
+    "planner": {"role": "provides", "interface": "demo/Planner#0a1b2c3d", "methods": ["compute"]},
+    "map": {"role": "requires", "interface": "demo/Map#00ff00ff", "methods": ["get", "put"]},
+}
+
 REPORT_CASES: list[tuple[Report | Part, dict[str, Any]]] = [
     (Hello(**HELLO), legacy_hello(**HELLO)),
+    (Hello(**HELLO, services=SERVICES), legacy_hello(**HELLO, services=SERVICES)),
     (State("INACTIVE", 1795000000.25), legacy_state("INACTIVE", 1795000000.25)),
     (State("ERROR", 12.5, "boom"), legacy_state("ERROR", 12.5, "boom")),
     (
@@ -180,6 +186,18 @@ def test_what_a_foreign_peer_may_leave_out_or_add() -> None:
         ({"t": "hello", **HELLO, "ports": {"in": "x"}}, "hello: 'ports' must be a map of string"),
         ({"t": "hello", **HELLO, "data": {"tcp": 1}}, "hello: 'data' must be a map of strings"),
         ({"t": "hello", **HELLO, "component": None}, "hello: 'component' must be a string"),
+        (
+            {"t": "hello", **HELLO, "services": {"p": {**SERVICES["map"], "role": "serves"}}},
+            "hello: 'services' must be a map of service maps",
+        ),
+        (
+            {"t": "hello", **HELLO, "services": {"p": {**SERVICES["map"], "methods": [1]}}},
+            "hello: 'services' must be a map of service maps",
+        ),
+        (
+            {"t": "hello", **HELLO, "services": {"p": {"role": "provides", "interface": "i"}}},
+            "hello: 'services' must be a map of service maps",
+        ),
         ({"t": "reply", "id": 1, "ok": 1}, "reply: 'ok' must be a boolean, got 1"),
         ({"t": "reply", "id": 1, "ok": True, "size": "9"}, "reply: 'size' must be an integer"),
         ({"t": "part", "of": 1, "data": "text"}, "part: 'data' must be bytes"),

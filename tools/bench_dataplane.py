@@ -12,6 +12,10 @@ sender and receiver are separate processes on this machine, as two component hos
   receiver while receiving, per GB carried, and the MB/s all this machine's cores could carry
   at that cost (the ceiling when both ends share the cores, as here);
 - round trip: the sender times each 100-byte ping until its pong arrives; p50 and p99 in µs.
+  `sdrpeer_tcp` is a data-port round trip (an OutPort's connection there, another back);
+  `sdrpeer_service` a service call (sdrpeer.sdk.services: `ServiceCaller.call("echo", 100 B)`
+  to a provided service in the peer, request and reply on one socket), against which the
+  target compares it (both over TCP without data keys).
 - loss (issue 17's silent-loss case): 5,000 frames of 100 B written as fast as an OutPort's
   `write` does, with the SDK's default policy (all, 8, overwrite) at both ends, into a consumer
   that takes one frame per event-loop turn (an OnInput component): how many it took, how many
@@ -61,7 +65,7 @@ from typing import Any
 import msgpack
 import zmq
 from dataplane_peers import LEN, Peer, payload, typed_pose
-from dataplane_pings import SMALL, asyncio_pings, plain_pings, sdr_pings, zmq_pings
+from dataplane_pings import SMALL, asyncio_pings, plain_pings, sdr_pings, svc_pings, zmq_pings
 
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
@@ -109,6 +113,7 @@ THROUGHPUT_TARGETS = [
     ),
 ]
 RTT_TARGET = 1.3  # sdrpeer p50 <= 1.3x plain socket p50
+SERVICE_TARGET = 1.5  # a service call's p50 <= 1.5x the data-port round trip's p50
 
 
 # ---- senders (the parent process) ---------------------------------------------------------
@@ -311,6 +316,7 @@ def measure(
     }
     pings: dict[str, Callable[[], list[float]]] = {
         "sdrpeer_tcp": lambda: asyncio.run(sdr_pings(m)),
+        "sdrpeer_service": lambda: asyncio.run(svc_pings(m)),
         "plain_tcp": lambda: plain_pings(m),
         "zmq": lambda: zmq_pings(m),
         "asyncio_raw": lambda: asyncio.run(asyncio_pings(m)),
@@ -373,6 +379,10 @@ def measure(
         ratio = paired(("p50", "sdrpeer_tcp"), ("p50", "plain_tcp"))
         met = ratio <= RTT_TARGET
         targets.append({"target": "RTT p50 <= 1.3x plain", "ratio": ratio, "met": met})
+        ratio = paired(("p50", "sdrpeer_service"), ("p50", "sdrpeer_tcp"))
+        met = ratio <= SERVICE_TARGET
+        label = "service call p50 <= 1.5x data-port RTT"
+        targets.append({"target": label, "ratio": ratio, "met": met})
     if out["loss"]:
         silent = max(r["silent"] for r in out["loss"])
         targets.append(

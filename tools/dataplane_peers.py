@@ -8,11 +8,12 @@ arrived (`time.perf_counter`, the same clock in both processes), or (echoes) ans
 until its stdin closes. Roles: sdr-sink (DataServer counting N frames), sdr-inport (DataServer
 into the SDK's InPort, a consumer task taking every frame as a component would, so the stream
 is acknowledged and the sender keeps its window), sdr-echo (DataServer
-whose frames go back through a Connection to ARG), asyncio-echo (a bare asyncio Protocol),
-plain-sink / plain-echo (blocking sockets, 4-byte length prefix per frame: the sink parses
-frames out of a recv_into buffer and makes each a bytes object), zmq-pull / zmq-rep (pyzmq),
-zmq-pull-typed (each frame a msgpack array made back into the Pose `typed_pose` gives: a typed
-stream done by hand with pyzmq).
+whose frames go back through a Connection to ARG), svc-provider (a DataServer providing a
+service whose `echo` method returns its argument: sdrpeer.sdk.services), asyncio-echo (a bare
+asyncio Protocol), plain-sink / plain-echo (blocking sockets, 4-byte length prefix per frame:
+the sink parses frames out of a recv_into buffer and makes each a bytes object), zmq-pull /
+zmq-rep (pyzmq), zmq-pull-typed (each frame a msgpack array made back into the Pose
+`typed_pose` gives: a typed stream done by hand with pyzmq).
 BENCH_PROFILE=path runs the role under cProfile and writes its stats there.
 """
 
@@ -39,6 +40,8 @@ from sdrpeer.keys.datakeys import keys_from_env, keys_to_env
 
 LEN = struct.Struct(">I")
 """The plain socket loop's frame header: the payload's length."""
+SERVICE = "bench/Echo"
+"""The interface the svc-provider role provides (one method, `echo`)."""
 
 
 def payload(size: int) -> bytes:
@@ -148,6 +151,23 @@ async def _peer_sdr_echo(reply_to: str) -> None:
     _emit(server.addresses)
     await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)  # until parent exits
     await back.close()
+    await server.close()
+
+
+async def _peer_svc_provider() -> None:
+    """A provided service (the SDK's provider runtime, ACTIVE) whose `echo` returns its argument,
+    behind a DataServer: what a provider host serves a service binding with."""
+    from sdrpeer.sdk import Interface, ServiceProviderRuntime  # noqa: PLC0415 - this role only
+
+    def echo(value: Any) -> Any:
+        return value
+
+    port = ServiceProviderRuntime("svc", Interface.of(SERVICE, "echo"), {"echo": echo})
+    port.serving = True
+    server = DataServer(lambda name: None, resolve_service=lambda name: port)
+    await server.start()
+    _emit(server.addresses)
+    await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)  # until parent exits
     await server.close()
 
 
@@ -271,6 +291,8 @@ def _run_peer(role: str, n: int, arg: str) -> None:
         _peer_plain_echo()
     elif role == "asyncio-echo":
         asyncio.run(_peer_asyncio_echo())
+    elif role == "svc-provider":
+        asyncio.run(_peer_svc_provider())
     else:
         _peer_zmq(role, n)
 

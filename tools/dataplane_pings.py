@@ -3,8 +3,9 @@
 How it works: each function starts its echo peer (tools/dataplane_peers.py), then sends `m`
 100-byte pings one at a time and times each until its pong is back (`time.perf_counter`); the
 caller drops the first tenth (warm-up) and takes p50/p99. `sdr_pings` goes Connection ->
-DataServer both ways (policy all); `asyncio_pings` is a bare asyncio Protocol, no framing: the
-floor under any design on asyncio's event loop.
+DataServer both ways (policy all); `svc_pings` is a service call (sdrpeer.sdk.services) over a
+service binding, request and reply on one socket; `asyncio_pings` is a bare asyncio Protocol,
+no framing: the floor under any design on asyncio's event loop.
 """
 
 from __future__ import annotations
@@ -15,10 +16,12 @@ import time
 from typing import Any
 
 import zmq
-from dataplane_peers import LEN, Peer, payload, recv_exact
+from dataplane_peers import LEN, SERVICE, Peer, payload, recv_exact
 
 from sdrpeer.dataplane import Connection, DataServer
+from sdrpeer.dataplane.service import ServiceClient
 from sdrpeer.dataplane.testing import make_policy
+from sdrpeer.sdk import Interface, ServiceCaller
 
 SMALL = 100
 """Bytes per ping."""
@@ -55,6 +58,27 @@ async def sdr_pings(m: int) -> list[float]:
     await conn.close()
     peer.stop()
     await server.close()
+    return times
+
+
+async def svc_pings(m: int) -> list[float]:
+    """Round trips of service calls: a `ServiceCaller` (the SDK's consumer port) bound to a
+    `ServiceClient` calls `echo` on the peer's provided service (request and reply on one
+    socket), timed from `call` until it returns the reply."""
+    peer = await asyncio.to_thread(Peer, "svc-provider")
+    interface = Interface.of(SERVICE, "echo")
+    caller = ServiceCaller("svc", interface)
+    to = f"tcp://{peer.addresses['tcp']}"
+    client = ServiceClient("call", to, "svc", "bench.svc", interface.id)
+    caller.bind(client)
+    value, times = payload(SMALL), []
+    await caller.call("echo", value, timeout=10)  # connected before the first timed call
+    for _ in range(m):
+        t0 = time.perf_counter()
+        await caller.call("echo", value, timeout=10)
+        times.append(time.perf_counter() - t0)
+    await client.close()
+    peer.stop()
     return times
 
 

@@ -67,7 +67,8 @@ class InstancesView(Protocol):
 
     def status(self) -> list[dict[str, Any]]:
         """Every desired or running instance: name, component, state, desired, role, pid,
-        cpu_pct, rss, restarts, since, connections, data, last_error, ports, start_latency_s."""
+        cpu_pct, rss, restarts, since, connections, data, services (the host's service ports),
+        last_error, ports, start_latency_s."""
         ...
 
     def status_of(self, name: str) -> dict[str, Any]:

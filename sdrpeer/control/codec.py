@@ -116,6 +116,27 @@ def _counters(v: Any) -> dict[str, int]:
     return v
 
 
+SERVICE_ROLES: Final = ("provides", "requires")
+
+
+def _service(v: Any) -> dict[str, Any]:
+    """A hello's service port map: role, interface id, method names."""
+    what = 'a service map {"role": provides|requires, "interface": str, "methods": [str]}'
+    if (
+        not isinstance(v, dict)
+        or set(v) != {"role", "interface", "methods"}
+        or v["role"] not in SERVICE_ROLES
+        or not isinstance(v["interface"], str)
+        or not v["interface"]
+    ):
+        raise _Wrong(what)
+    try:
+        _str_list(v["methods"])
+    except _Wrong:
+        raise _Wrong(what) from None
+    return v
+
+
 def _optional(check: Check) -> Check:
     def optional(v: Any) -> Any:
         return None if v is None else check(v)
@@ -140,6 +161,7 @@ _CHECKS: Final[dict[str, Check]] = {
     "dict[str, list[str]]": _map_of(_str_list, "a map of string lists"),
     "dict[str, dict[str, int]]": _map_of(_counters, "a map of counter maps"),
     "dict[str, int]": _counters,
+    "dict[str, dict[str, Any]]": _map_of(_service, "a map of service maps"),
     "tuple[str, ...]": _str_tuple,
     "Conn": _conn,
 }

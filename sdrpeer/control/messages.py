@@ -232,6 +232,9 @@ class Hello:
     """Parameter name -> current value."""
     data: dict[str, str]
     """The data server's addresses: `{"tcp": "HOST:PORT", "unix": "/path"}`."""
+    services: dict[str, dict[str, Any]] | None = field(default=None, metadata=_OMIT)
+    """Service ports by name (sdrpeer.sdk.services): `{"role": "provides" | "requires",
+    "interface": id, "methods": [names]}`; absent when the component declares none."""
 
 
 @dataclass(frozen=True, slots=True)

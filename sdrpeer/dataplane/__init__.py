@@ -3,7 +3,8 @@
 `Connection` is the sending side (an OutPort's sink; `link` is one of its sockets), `DataServer`
 the receiving side (one per host), `frames` the codec both share, `pending` the sender's policy
 queue, `writer`/`reader` the two ends' buffers, `shm` the shared-memory ring big values take
-between two processes on one machine.
+between two processes on one machine, `service` the service bindings (a consumer's calls to a
+provided service port, over the same listener and handshake).
 """
 
 from sdrpeer.dataplane.connection import Connection

@@ -68,6 +68,9 @@ class Hello:
     """The sender asks for an encrypted stream (sdrpeer.dataplane.seal; with `auth`, on TCP)."""
     type: str | None = None
     """The sending port's message type id (sdrpeer.sdk.typed), None when it sends any value."""
+    svc: str | None = None
+    """A service binding (sdrpeer.dataplane.service): the consumer's interface id, and `in_port`
+    names the provider's service port; None for a data stream."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,6 +112,8 @@ def encode_hello(hello: Hello) -> bytes:
         obj["enc"] = True
     if hello.type is not None:
         obj["type"] = hello.type
+    if hello.svc is not None:
+        obj["svc"] = hello.svc
     return _packb(obj)
 
 
@@ -148,6 +153,9 @@ def parse_hello(obj: object) -> Hello:
     kind = obj.get("type")
     if kind is not None and (not isinstance(kind, str) or not 0 < len(kind) <= 120):
         raise FrameError("malformed", "hello: 'type' must be a string of 1-120 chars")
+    svc = obj.get("svc")
+    if svc is not None and (not isinstance(svc, str) or not 0 < len(svc) <= 120):
+        raise FrameError("malformed", "hello: 'svc' must be a string of 1-120 chars")
     return Hello(
         obj["conn"],
         obj["in"],
@@ -159,6 +167,7 @@ def parse_hello(obj: object) -> Hello:
         auth,
         enc,
         kind,
+        svc,
     )
 
 

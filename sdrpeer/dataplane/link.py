@@ -58,10 +58,14 @@ class Link(asyncio.Protocol):
         on_resume: Callable[[Link], None],
         on_lost: Callable[[Link], None],
         on_ack: Callable[[int, int], None] | None = None,
+        on_reply: Callable[[list[Any]], None] | None = None,
     ) -> None:
         self.on_resume = on_resume
         self.on_lost = on_lost
         self.on_ack = on_ack
+        self.on_reply = on_reply
+        """Takes each ``[call_id, ok, value]`` of a service binding (sdrpeer.dataplane.service);
+        raising breaks the link."""
         loop = asyncio.get_running_loop()
         self.reply: asyncio.Future[tuple[str | None, dict[str, Any]]] = loop.create_future()
         """The receiver's answer: (error or None, the reply map)."""
@@ -100,6 +104,12 @@ class Link(asyncio.Protocol):
         """From now on seal what is written and open what comes back."""
         self.write = sealed_writer(send_key, self.transport.write)
         self._opener = Opener(receive_key, max_record)
+
+    def use_replies(self, max_reply: int) -> None:
+        """The receiver answers calls (a service binding): read its replies."""
+        self._reverse = msgpack.Unpacker(
+            raw=False, strict_map_key=False, max_buffer_size=max_reply + 64 * 1024
+        )
 
     def _listen(self) -> None:
         if self._reverse is None:
@@ -150,6 +160,8 @@ class Link(asyncio.Protocol):
                 elif type(obj) is list and self.acks and _is_ack(obj):
                     if self.on_ack is not None:
                         self.on_ack(obj[0], obj[1] if len(obj) == 2 else 0)
+                elif type(obj) is list and len(obj) == 3 and self.on_reply is not None:
+                    self.on_reply(obj)
                 else:
                     raise ValueError(f"unexpected {obj!r:.40}")
         except Exception:  # a bad credit or ack: the receiver is broken, so is the link
@@ -203,11 +215,14 @@ async def dial(
     auth: DataAuth | None = None,
     encrypt: bool = True,
     max_record: int = MAX_RECORD,
+    on_reply: Callable[[list[Any]], None] | None = None,
+    max_reply: int = 64 * 1024,
 ) -> Link:
     """Open a link to `to` and get the receiver's ok (bound it with `asyncio.timeout`);
     FrameError("refused") with the receiver's error (or when it does not prove it holds a data
     key, with `auth`, or does not encrypt a TCP link `encrypt` asks for), OSError when it
-    cannot be reached."""
+    cannot be reached. With `on_reply` (a service binding, sdrpeer.dataplane.service) the
+    receiver's replies of up to `max_reply` bytes go there."""
     nonce = auth.nonce() if auth is not None and auth.enabled else None
     kind, host, port = parse_address(to)
     hello = replace(hello, auth=nonce, enc=encrypt and nonce is not None and kind == "tcp")
@@ -216,7 +231,7 @@ async def dial(
     link: Link | None = None
 
     def protocol() -> Link:
-        return Link(on_resume, on_lost, on_ack)
+        return Link(on_resume, on_lost, on_ack, on_reply)
 
     try:
         if kind == "tcp":
@@ -256,6 +271,8 @@ async def dial(
         raise FrameError("refused", error)
     if reply.get("ack") is True and hello.ack is not None:
         link.use_acks()
+    if on_reply is not None:
+        link.use_replies(max_reply)
     link.take_early()
     return link
 

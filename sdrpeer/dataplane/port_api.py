@@ -5,7 +5,8 @@ senders can keep and replay the rest (docs/protocol.md section 2, "Acknowledgeme
 counts back what its policy discarded; a `PolicyPort` queues each connection's frames per the
 connection's own policy (the hello's policy map over the port's default). A port may also
 have `deliver_many(frames, conn)`, the frames of one read at once, oldest first (what the data
-server calls when it is there: the SDK's InPort queues them in one loop).
+server calls when it is there: the SDK's InPort queues them in one loop). A `ServicePortLike`
+answers the calls of a service binding (sdrpeer.sdk.services' provider fits).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
-__all__ = ["AckingPort", "InPortLike", "PolicyPort", "SendAck"]
+__all__ = ["AckingPort", "InPortLike", "PolicyPort", "SendAck", "ServicePortLike"]
 
 SendAck = Callable[[int, int], None]
 """Writes one acknowledgement: the seq, and the frames of the stream the policy discarded."""
@@ -55,3 +56,16 @@ class PolicyPort(InPortLike, Protocol):
 
     def connect(self, conn: str, policy: Any) -> None:
         """Register connection `conn` with that policy."""
+
+
+class ServicePortLike(Protocol):
+    """A provided service port (sdrpeer.sdk.services' `ServiceProviderRuntime` is one)."""
+
+    interface_id: str
+    """What a consumer's hello must name (`svc`)."""
+
+    def serve(
+        self, call_id: int, method: str, arg: Any, reply: Callable[[int, bool, Any], None]
+    ) -> None:
+        """Answer one call through `reply` (call id, ok, value or ``[kind, message]``), now or
+        later."""

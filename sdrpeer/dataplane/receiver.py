@@ -8,7 +8,9 @@ only), delivers every frame at once, writes back ring credits and acknowledgemen
 the socket open after the sender's end of stream until what it delivered is acknowledged. On an
 authenticated TCP connection whose sender asks for it, everything after the proof is encrypted
 (sdrpeer.dataplane.seal): the socket then reads into the `Opener`'s buffer, and each record is
-decrypted straight into the `FrameReader`'s buffer, as if its bytes had been read there.
+decrypted straight into the `FrameReader`'s buffer, as if its bytes had been read there. A hello
+with ``svc`` opens a service binding instead (sdrpeer.dataplane.service): its frames are requests
+for the provided service port it names, and the replies go back on the same socket.
 """
 
 from __future__ import annotations
@@ -24,9 +26,10 @@ import msgpack
 
 from sdrpeer.dataplane.auth import proof_names
 from sdrpeer.dataplane.frames import PROTOCOL_VERSION, Hello, encode_reply, parse_hello
-from sdrpeer.dataplane.port_api import AckingPort, InPortLike, PolicyPort
+from sdrpeer.dataplane.port_api import AckingPort, InPortLike, PolicyPort, ServicePortLike
 from sdrpeer.dataplane.reader import FrameReader
 from sdrpeer.dataplane.seal import TAG, Opener, sealed_writer
+from sdrpeer.dataplane.service import ServiceStream, request_frame
 from sdrpeer.dataplane.shm import ReceiverRing
 from sdrpeer.errors import FrameError
 from sdrpeer.keys.derive import stream_keys
@@ -59,6 +62,8 @@ class Intake(Protocol):
     bytes_in: Counter[str]
     resolve: Callable[[str], InPortLike | None]
     """The in-port a hello names, None when there is no such port."""
+    resolve_service: Callable[[str], ServicePortLike | None]
+    """The provided service port a service hello names, None when there is no such port."""
 
     def admit(self, receiver: Receiver) -> bool:
         """Count `receiver` among the open connections; False when no more are allowed."""
@@ -277,6 +282,8 @@ class Receiver(asyncio.BufferedProtocol):
         elif authenticating and hello.auth is None:
             error = "this receiver only takes authenticated connections (a data key's nonce)"
             self.server.counters["refused_auth"] += 1
+        elif hello.svc is not None:
+            port, error = self._service(hello)
         else:
             port = self.server.resolve(hello.in_port)
             if port is None:
@@ -295,7 +302,13 @@ class Receiver(asyncio.BufferedProtocol):
                 self._policy = policy_port.connection_policy(hello.policy, acked=can_ack)
             except (ValueError, TypeError) as exc:
                 error = f"bad hello: policy: {exc}"
-        if error is None and hello.shm is not None and self.server.shm and self._local():
+        if (
+            error is None
+            and hello.shm is not None
+            and self.server.shm
+            and self._local()
+            and (hello.svc is None)
+        ):
             self._attach(hello.shm)  # only for a hello that is accepted
         acks = error is None and can_ack
         proof = None
@@ -312,6 +325,28 @@ class Receiver(asyncio.BufferedProtocol):
             return False
         self._proving = (hello, port, acks, proof[0] if proof is not None else b"")
         return self._proof() if proof is not None else self._open()
+
+    def _service(self, hello: Hello) -> tuple[InPortLike | None, str | None]:
+        """(the binding's stream, None) for a hello naming a provided service port of the
+        consumer's interface, else (None, the error)."""
+        service = self.server.resolve_service(hello.in_port)
+        if service is None:
+            return None, f"unknown service port {hello.in_port!r}"
+        if service.interface_id != hello.svc:
+            self.server.counters["refused_interface"] += 1
+            return None, (
+                f"interface mismatch: {hello.from_} requires {hello.svc}, "
+                f"{hello.in_port} provides {service.interface_id}"
+            )
+        self.reader.decoder.refs = request_frame  # requests are [call_id, method, arg]
+        counters = self.server.counters
+        return ServiceStream(service, self.send_back, counters, self.server.max_frame), None
+
+    def send_back(self, data: bytes) -> None:
+        """Write to the sender (a service reply), unless the socket is closing."""
+        transport = self.transport
+        if transport is not None and not transport.is_closing() and self._send is not None:
+            self._send(data)
 
     def _proof(self) -> bool:
         """The sender's proof, the first map after our reply; True once it holds."""

@@ -21,7 +21,8 @@ position consumed is written back as the sender's credit. A hello that asks for 
 written as ``[seq]`` on the same reverse direction as the credits. Such a connection outlives the
 sender's end of stream until everything it delivered is acknowledged (so a repointed sender hears
 the last of it); `close` sends what is due and closes gracefully, so a stopping instance tells its
-senders exactly what it never took.
+senders exactly what it never took. A hello with ``svc`` opens a service binding to a provided
+service port (`resolve_service`; sdrpeer.dataplane.service): requests in, replies back.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from collections.abc import Callable
 from sdrpeer.dataplane.address import format_tcp
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME
-from sdrpeer.dataplane.port_api import InPortLike
+from sdrpeer.dataplane.port_api import InPortLike, ServicePortLike
 from sdrpeer.dataplane.receiver import Receiver
 
 log = logging.getLogger("sdrpeer.dataplane")
@@ -58,8 +59,13 @@ class DataServer:
         hello_timeout: float = 10.0,
         shm: bool = True,
         auth: DataAuth | None = None,
+        resolve_service: Callable[[str], ServicePortLike | None] | None = None,
     ) -> None:
         self.resolve = resolve
+        self.resolve_service: Callable[[str], ServicePortLike | None] = (
+            resolve_service or _no_service
+        )
+        """The provided service port a service binding's hello names (sdrpeer.dataplane.service)."""
         self.tcp_host = tcp_host
         self.tcp_port = tcp_port
         self.unix_path = unix_path
@@ -151,3 +157,8 @@ class DataServer:
             self._last_log[reason] = now
             count = self.counters[reason]
             log.warning("data connection %s: %s (%s; %d so far)", conn, reason, detail, count)
+
+
+def _no_service(name: str) -> ServicePortLike | None:
+    """A server that provides no services."""
+    return None

@@ -2,7 +2,10 @@
 
 How it works: every placement on the robot becomes an `InstanceSpec` (cold standbys are placed
 but not launched). Only active instances send: each connection of the system whose sender's
-active instance is here becomes a `ConnectionSpec` to the receiver's active instance. A receiver
+active instance is here becomes a `ConnectionSpec` to the receiver's active instance. A service
+binding (a connection from a consumer's service port to a provider's) is one like the others:
+the consumer is its sender, the provider its receiver, so it is resolved, held pending and
+re-pointed the same way. A receiver
 on this robot is resolved by the reconciler from its host's hello; a receiver on another robot
 by the data address that robot gossips for it (`Remote.data`). Until that address is known the
 connection is `pending` (one already made stays as it is, to be re-pointed; none is made), and

@@ -9,7 +9,11 @@ heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `resto
 sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot), else
 None. It raises `CommandRefused` (our peer's mistake: a bad value, an unknown port or connection) or
 whatever the runner raised (an illegal transition, a failing callback); the caller turns either into
-`reply ok=false`. The data server's `resolve` is `in_port`.
+`reply ok=false`. The data server's `resolve` is `in_port`, its `resolve_service` `service`. A
+`connect` whose `out` is one of our consumer service ports makes a service binding
+(sdrpeer.dataplane.service's `ServiceClient`, bound to the port's `ServiceCaller`) instead of a
+data stream; `disconnect` and `repoint` treat both alike. Provided services answer only while
+the component is ACTIVE.
 """
 
 from __future__ import annotations
@@ -42,9 +46,18 @@ from sdrpeer.control.messages import (
 )
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.service import ServiceClient
 from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import handoff
-from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
+from sdrpeer.sdk import (
+    Component,
+    ComponentRunner,
+    ConnectorPolicy,
+    InPortRuntime,
+    OutPortRuntime,
+    ServiceCaller,
+    ServiceProviderRuntime,
+)
 from sdrpeer.vocabulary import LifecycleState
 
 log = logging.getLogger("sdrpeer.host")
@@ -91,7 +104,17 @@ class HostedInstance:
         self.in_ports = {n: component.inport(n) for n in names["in"]}
         self.out_ports = {n: component.outport(n) for n in names["out"]}
         self.connections: dict[str, tuple[Connection, OutPortRuntime]] = {}
+        services = type(component).service_ports()
+        self.providers = {
+            n: component.provider(n) for n, i in services.items() if i.role == "provides"
+        }
+        self.consumers = {
+            n: component.consumer(n) for n, i in services.items() if i.role == "requires"
+        }
+        self.bindings: dict[str, tuple[ServiceClient, ServiceCaller]] = {}
+        """Service bindings from our consumer ports, by connection id."""
         self.state = _state_name(runner.state)
+        self._serve(self.state)
 
     def watch(self) -> None:
         """Start reporting state changes and faults (after `hello` went out)."""
@@ -104,12 +127,19 @@ class HostedInstance:
         if name == self.state and error is None:
             return
         self.state = name
+        self._serve(name)
         if self.on_taking is not None:
             self.on_taking(name == LifecycleState.ACTIVE)
         text = None if error is None else (str(error) or type(error).__name__)
         log.info("state %s%s", name, f" ({text})" if text else "")
         fault = self.runner.fault if name == LifecycleState.ERROR else None
         self.report(State(name, self.clock(), text, fault))
+
+    def _serve(self, state: str) -> None:
+        """Provided services answer calls only while ACTIVE."""
+        for provider in self.providers.values():
+            provider.serving = state == LifecycleState.ACTIVE
+            provider.state = state
 
     def _on_fault(self, kind: str, detail: str) -> None:
         """The component reported a fault: pass it on."""
@@ -118,6 +148,14 @@ class HostedInstance:
     def ports(self) -> dict[str, list[str]]:
         """Port names by direction, for `hello`."""
         return type(self.component).port_names()
+
+    def services(self) -> dict[str, dict[str, Any]]:
+        """Service ports by name (role, interface id, methods), for `hello`."""
+        return {n: i.to_map() for n, i in type(self.component).service_ports().items()}
+
+    def service(self, name: str) -> ServiceProviderRuntime | None:
+        """The provided service port called `name` (the data server's `resolve_service`)."""
+        return self.providers.get(name)
 
     def params(self) -> dict[str, Any]:
         """Current parameter values, for `hello`."""
@@ -166,8 +204,11 @@ class HostedInstance:
         """Open a data stream from one of our OutPorts."""
         conn_id, out, to, in_port = conn.id, conn.out_port, conn.to, conn.in_port
         policy_map = conn.policy or {}
-        if conn_id in self.connections:
+        if conn_id in self.connections or conn_id in self.bindings:
             raise CommandRefused(f"connection {conn_id!r} already exists")
+        if out in self.consumers:
+            self._bind(conn)
+            return
         port = self.out_ports.get(out)
         if port is None:
             raise CommandRefused(f"no OutPort {out!r} (have: {', '.join(sorted(self.out_ports))})")
@@ -193,6 +234,37 @@ class HostedInstance:
         self.connections[conn_id] = (connection, port)
         log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
 
+    def _bind(self, conn: Conn) -> None:
+        """Bind one of our consumer ports to a provider (a service binding)."""
+        caller = self.consumers[conn.out_port]
+        if any(c is caller for _, c in self.bindings.values()):
+            raise CommandRefused(f"service port {conn.out_port!r} is bound already")
+        encrypt = (conn.policy or {}).get("encrypt", True)
+        if not isinstance(encrypt, bool):
+            raise CommandRefused("conn 'policy': 'encrypt' must be true or false")
+        try:
+            client = ServiceClient(
+                conn.id,
+                conn.to,
+                conn.in_port,
+                f"{self.name}.{conn.out_port}",
+                caller.interface.id,
+                auth=self.auth,
+                encrypt=encrypt,
+            )
+        except ValueError as exc:
+            raise CommandRefused(f"conn 'to': {exc}") from None
+        caller.bind(client)
+        self.bindings[conn.id] = (client, caller)
+        log.info(
+            "service binding %s: %s.%s -> %s %s",
+            conn.id,
+            self.name,
+            conn.out_port,
+            conn.to,
+            conn.in_port,
+        )
+
     def _lookup(self, conn_id: str) -> tuple[Connection, OutPortRuntime]:
         """The connection a command names."""
         if conn_id not in self.connections:
@@ -200,7 +272,13 @@ class HostedInstance:
         return self.connections[conn_id]
 
     async def _disconnect(self, conn_id: str) -> None:
-        """Close a data stream."""
+        """Close a data stream (or a service binding)."""
+        if conn_id in self.bindings:
+            client, caller = self.bindings.pop(conn_id)
+            caller.bind(None)
+            await client.close()
+            log.info("service binding %s closed", conn_id)
+            return
         connection, port = self._lookup(conn_id)
         del self.connections[conn_id]
         port.detach(connection)
@@ -208,7 +286,14 @@ class HostedInstance:
         log.info("connection %s closed", conn_id)
 
     def _repoint(self, conn_id: str, to: str) -> None:
-        """Send the next frames of a connection to a new address."""
+        """Send the next frames of a connection (or calls of a binding) to a new address."""
+        if conn_id in self.bindings:
+            try:
+                self.bindings[conn_id][0].repoint(to)
+            except ValueError as exc:
+                raise CommandRefused(f"'to': {exc}") from None
+            log.info("service binding %s repointed to %s", conn_id, to)
+            return
         connection, _port = self._lookup(conn_id)
         try:
             connection.repoint(to)
@@ -239,6 +324,12 @@ class HostedInstance:
                 log.exception("closing connection %s", conn_id)
 
         closing = []
+        for conn_id, (client, caller) in list(self.bindings.items()):
+            del self.bindings[conn_id]
+            caller.bind(None)
+            closing.append(client.close())
+        for provider in self.providers.values():
+            provider.cancel()
         for conn_id, (connection, port) in list(self.connections.items()):
             del self.connections[conn_id]
             port.detach(connection)

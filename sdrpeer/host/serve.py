@@ -75,6 +75,7 @@ class Host:
             tcp_host=self.config.data_host,
             unix_path=self._unix_path(),
             auth=auth,
+            resolve_service=self.inst.service,
         )
         self._server = server
         self.inst.on_taking = server.set_taking
@@ -89,6 +90,7 @@ class Host:
                     ports=self.inst.ports(),
                     params=self.inst.params(),
                     data=data,
+                    services=self.inst.services() or None,
                 )
             )
         else:

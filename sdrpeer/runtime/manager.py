@@ -406,6 +406,7 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
         "since": round(sup.since, 3),
         "connections": conns,
         "data": {} if sup.hello is None else dict(sup.hello.data),
+        "services": {} if sup.hello is None else dict(sup.hello.services or {}),
         "last_error": sup.last_error,
         "ports": sup.ports,
         "data_plane": sup.data_plane,

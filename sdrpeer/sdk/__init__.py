@@ -2,6 +2,8 @@
 
 How it works: subclass `Component`, declare `OutPort`/`InPort`/`Param` attributes and an
 execution context (`Periodic` or `OnInput`), override the `on_*` callbacks (sync or async).
+Service ports (`ServiceProvider`/`ServiceConsumer` of an `Interface`, sdrpeer.sdk.services) call
+named methods of another component, with timeouts and errors.
 A port may declare its message type (`OutPort(type=Pose)`, a `@message` dataclass: the standard
 robot types or your own, sdrpeer.sdk.typed); connecting two ports of different types is refused.
 The host (`python -m sdrpeer.host`) wraps the instance in a `ComponentRunner`, which drives the
@@ -30,6 +32,18 @@ from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.policy import ConnectorPolicy
 from sdrpeer.sdk.ports import FrameSink, InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
 from sdrpeer.sdk.runner import ComponentRunner
+from sdrpeer.sdk.services import (
+    Interface,
+    ServiceCaller,
+    ServiceCallError,
+    ServiceConsumer,
+    ServiceError,
+    ServiceInfo,
+    ServiceProvider,
+    ServiceProviderRuntime,
+    ServiceTimeout,
+    ServiceUnavailable,
+)
 from sdrpeer.sdk.typed import PortTypeError, message
 
 if TYPE_CHECKING:  # loaded on first use (`__getattr__`): a host whose component uses none of
@@ -63,6 +77,7 @@ __all__ = [
     "Image",
     "InPort",
     "InPortRuntime",
+    "Interface",
     "LifecycleError",
     "LifecycleState",
     "NoData",
@@ -79,6 +94,15 @@ __all__ = [
     "PortTypeError",
     "Pose",
     "RangeScan",
+    "ServiceCallError",
+    "ServiceCaller",
+    "ServiceConsumer",
+    "ServiceError",
+    "ServiceInfo",
+    "ServiceProvider",
+    "ServiceProviderRuntime",
+    "ServiceTimeout",
+    "ServiceUnavailable",
     "Stepped",
     "Velocity",
     "message",

@@ -1,13 +1,14 @@
 """The `Component` base class: declared ports and params, lifecycle callbacks, fault reports.
 
-How it works: a subclass declares `OutPort`/`InPort`/`Param` class attributes and an
-`execution` context; `__init_subclass__` collects them (in declaration order, inherited ones
-first) and checks the declaration, so a mistake fails at import with the class and attribute
-named. Each instance gets its own runtime ports and param values. The callbacks below are no-ops
-to override, each either a plain method or `async def`; `ComponentRunner` (sdrpeer.sdk.runner)
-calls them around the lifecycle transitions of sdrpeer.sdk.lifecycle. `report_fault` and its
-three shorthands hand a fault to the runner (sdrpeer.sdk.faults: which kinds also move to ERROR);
-`on_snapshot`/`on_restore` carry the working state to a new instance (sdrpeer.sdk.handoff).
+How it works: a subclass declares `OutPort`/`InPort`/`Param` class attributes, service ports
+(`ServiceProvider`/`ServiceConsumer`, sdrpeer.sdk.services) and an `execution` context;
+`__init_subclass__` collects them (in declaration order, inherited ones first) and checks the
+declaration, so a mistake fails at import with the class and attribute named. Each instance gets
+its own runtime ports and param values. The callbacks below are no-ops to override, each either
+a plain method or `async def`; `ComponentRunner` (sdrpeer.sdk.runner) calls them around the
+lifecycle transitions of sdrpeer.sdk.lifecycle. `report_fault` and its three shorthands hand a
+fault to the runner (sdrpeer.sdk.faults: which kinds also move to ERROR); `on_snapshot`/
+`on_restore` carry the working state to a new instance (sdrpeer.sdk.handoff).
 """
 
 from __future__ import annotations
@@ -21,6 +22,13 @@ from sdrpeer.sdk.execution import ExecutionContext, OnInput, Periodic, Stepped
 from sdrpeer.sdk.faults import FAULT_KINDS, FaultHook, check_kind
 from sdrpeer.sdk.params import Param, ParamInfo
 from sdrpeer.sdk.ports import InPort, InPortRuntime, OutPort, OutPortRuntime, PortInfo
+from sdrpeer.sdk.services import (
+    ServiceCaller,
+    ServiceConsumer,
+    ServiceInfo,
+    ServiceProvider,
+    ServiceProviderRuntime,
+)
 
 __all__ = ["FAULT_KINDS", "Component", "FaultHook"]
 
@@ -33,20 +41,26 @@ class Component:
     execution: ClassVar[ExecutionContext] = Periodic(hz=10.0)
     _sdk_ports: ClassVar[dict[str, InPort | OutPort]] = {}
     _sdk_params: ClassVar[dict[str, Param[Any]]] = {}
+    _sdk_services: ClassVar[dict[str, ServiceProvider | ServiceConsumer]] = {}
+    _sdk_handlers: ClassVar[dict[str, dict[str, str]]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         ports: dict[str, InPort | OutPort] = {}
         params: dict[str, Param[Any]] = {}
+        services: dict[str, ServiceProvider | ServiceConsumer] = {}
         for klass in reversed(cls.__mro__):
             for name, value in vars(klass).items():
                 ports.pop(name, None)
                 params.pop(name, None)
+                services.pop(name, None)
                 if isinstance(value, InPort | OutPort):
                     ports[name] = value
                 elif isinstance(value, Param):
                     params[name] = value
-        for name in (*ports, *params):
+                elif isinstance(value, ServiceProvider | ServiceConsumer):
+                    services[name] = value
+        for name in (*ports, *params, *services):
             if name.startswith("_") or name in vars(Component) or name in _INSTANCE_ATTRS:
                 raise ComponentError(f"{cls.__qualname__}.{name}: name reserved by Component")
         for name, p in params.items():
@@ -58,6 +72,10 @@ class Component:
                 )
         cls._sdk_ports = ports
         cls._sdk_params = params
+        cls._sdk_services = services
+        cls._sdk_handlers = {
+            n: s.handlers(cls) for n, s in services.items() if isinstance(s, ServiceProvider)
+        }
         cls._check_execution()
 
     @classmethod
@@ -91,6 +109,10 @@ class Component:
         self._ports: dict[str, InPortRuntime | OutPortRuntime] = {
             n: d.make() for n, d in cls._sdk_ports.items()
         }
+        self._services: dict[str, ServiceProviderRuntime | ServiceCaller] = {
+            n: d.make(self, cls._sdk_handlers[n]) if isinstance(d, ServiceProvider) else d.make()
+            for n, d in cls._sdk_services.items()
+        }
         self._fault_hook: FaultHook | None = None
         if params:
             self._param_values.update(self.convert_params(params))
@@ -115,6 +137,11 @@ class Component:
             "in": [n for n, d in ports if isinstance(d, InPort)],
             "out": [n for n, d in ports if isinstance(d, OutPort)],
         }
+
+    @classmethod
+    def service_ports(cls) -> dict[str, ServiceInfo]:
+        """The declared service ports by name (providers and consumers), in declaration order."""
+        return {n: d.info() for n, d in cls._sdk_services.items()}
 
     # -- instance state --------------------------------------------------------------------
 
@@ -150,9 +177,26 @@ class Component:
             )
         return port
 
+    def provider(self, name: str) -> ServiceProviderRuntime:
+        """The provided service called `name`; PortError if there is none."""
+        port = self._services.get(name)
+        if not isinstance(port, ServiceProviderRuntime):
+            raise PortError(f"{self.instance_name}: no provided service {name!r}")
+        return port
+
+    def consumer(self, name: str) -> ServiceCaller:
+        """The required service called `name`; PortError if there is none."""
+        port = self._services.get(name)
+        if not isinstance(port, ServiceCaller):
+            raise PortError(f"{self.instance_name}: no required service {name!r}")
+        return port
+
     def port_counters(self) -> dict[str, dict[str, int]]:
         """Port name -> counters, as sent in the control channel's `heartbeat`."""
-        return {n: p.counters() for n, p in self._ports.items()}
+        out = {n: p.counters() for n, p in self._ports.items()}
+        for n, service in self._services.items():
+            out[n] = service.counters()
+        return out
 
     # -- faults (sdrpeer.sdk.faults): callable from any callback or thread --------------------
 

@@ -2,12 +2,13 @@
 
 How it works: for the `python` launcher (`package.module:Class`) the class is imported the way a
 host imports it (sdrpeer.host.loader) and its declared in- and out-ports (with the message type
-of each typed port) and params are read from the class, without creating an instance. Other
-launchers (`script`, `exec`, plugins) run code we do not import at load time: `inspect_target`
-returns None for them and their ports and params are taken on trust (the host reports them when
-it starts). A class that cannot be imported is a `ValueError` naming the target and the reason.
-`check_params` converts each param with the class's own `Param.convert` (types, choices, min and
-max), so a bad value fails at load time rather than when the host starts.
+of each typed port), service ports (with their interface ids) and params are read from the
+class, without creating an instance. Other launchers (`script`, `exec`, plugins) run code we do
+not import at load time: `inspect_target` returns None for them and their ports and params are
+taken on trust (the host reports them when it starts). A class that cannot be imported is a
+`ValueError` naming the target and the reason. `check_params` converts each param with the
+class's own `Param.convert` (types, choices, min and max), so a bad value fails at load time
+rather than when the host starts.
 """
 
 from __future__ import annotations
@@ -29,23 +30,40 @@ class ClassInfo:
     out_ports: tuple[str, ...]
     types: tuple[tuple[str, str], ...] = ()
     """(port, message type id) of every typed port (sdrpeer.sdk.typed)."""
+    provides: tuple[tuple[str, str], ...] = ()
+    """(port, interface id) of every provided service port (sdrpeer.sdk.services)."""
+    requires: tuple[tuple[str, str], ...] = ()
+    """(port, interface id) of every required service port."""
+
+    def interface(self, port: str) -> str | None:
+        """The interface id of a service port, None for any other name."""
+        return dict(self.provides).get(port) or dict(self.requires).get(port)
 
     def port_type(self, port: str) -> str | None:
         """The port's message type id, None when it takes or sends any value."""
         return dict(self.types).get(port)
 
     def port_kind(self, port: str) -> str | None:
-        """'in', 'out', or None when the class declares no such port."""
+        """'in', 'out', 'provides', 'requires', or None when the class declares no such port."""
         if port in self.in_ports:
             return "in"
         if port in self.out_ports:
             return "out"
+        if port in dict(self.provides):
+            return "provides"
+        if port in dict(self.requires):
+            return "requires"
         return None
 
     def ports_text(self, kind: str) -> str:
         """The class's ports of one kind, for messages."""
-        names = self.in_ports if kind == "in" else self.out_ports
-        return ", ".join(names) or "none"
+        by_kind = {
+            "in": self.in_ports,
+            "out": self.out_ports,
+            "provides": tuple(n for n, _ in self.provides),
+            "requires": tuple(n for n, _ in self.requires),
+        }
+        return ", ".join(by_kind[kind]) or "none"
 
 
 def inspect_target(launcher: str, target: str | tuple[str, ...]) -> ClassInfo | None:
@@ -59,7 +77,10 @@ def inspect_target(launcher: str, target: str | tuple[str, ...]) -> ClassInfo | 
     names = cls.port_names()  # type: ignore[attr-defined]
     declared = cls._sdk_ports.items()  # type: ignore[attr-defined]
     types = tuple((n, d.type_id) for n, d in declared if getattr(d, "type_id", None) is not None)
-    return ClassInfo(cls, tuple(names["in"]), tuple(names["out"]), types)
+    services = cls.service_ports()  # type: ignore[attr-defined]
+    provides = tuple((n, i.interface) for n, i in services.items() if i.role == "provides")
+    requires = tuple((n, i.interface) for n, i in services.items() if i.role == "requires")
+    return ClassInfo(cls, tuple(names["in"]), tuple(names["out"]), types, provides, requires)
 
 
 def check_params(info: ClassInfo, params: dict[str, Any]) -> list[tuple[str, str]]:

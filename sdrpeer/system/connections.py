@@ -1,11 +1,14 @@
-"""The `connections:` section: data streams `from: Comp.port` -> `to: Comp.port`.
+"""The `connections:` section: data streams and service bindings, `from: Comp.port` -> `to:`.
 
 How it works: each end is split at its last dot into a component of the `components:` section and
 a port name. When the component's class was imported (python launcher), the `from` port must be
 one of its OutPorts and the `to` port one of its InPorts, and when both ports declare a message
 type the two must be the same (sdrpeer.sdk.typed; the receiving host refuses a mismatch too,
 when the sender connects); otherwise only the form of the name is checked (the host reports its
-ports when it starts). The policy is checked by the instance spec's
+ports when it starts). A service binding (sdrpeer.sdk.services) is a connection from a consumer's
+`ServiceConsumer` port to a provider's `ServiceProvider` port: both ends must be service ports of
+one interface id, the consumer at `from` (a binding the wrong way round says so), a consumer is
+bound once, and its policy may only set `encrypt`. The policy is checked by the instance spec's
 `validate_policy`, so every policy that loads can be sent to an agent. Traffic is `traffic:` when
 given, else the sender's profiled rate for that port, else unknown (None). The same stream given
 twice is an error.
@@ -26,6 +29,8 @@ from sdrpeer.system.values import parse_bandwidth
 
 CONNECTION_KEYS = ("from", "to", "policy", "traffic")
 _KIND = {"from": ("out", "OutPort"), "to": ("in", "InPort")}
+_SERVICE = {"from": "requires", "to": "provides"}
+"""The service-port kind each end may be instead (a binding: consumer -> provider)."""
 
 
 def read_connections(
@@ -36,6 +41,7 @@ def read_connections(
         return ()
     out: list[ConnectionDef] = []
     seen: dict[str, int] = {}
+    bound: dict[tuple[str, str], int] = {}  # consumer port -> line of its binding
     for i, item in enumerate(p.sequence(node, "connections")):
         where = f"connections[{i}]"
         before = len(p.items)  # a missing end is recorded by `mapping`: count it too
@@ -45,14 +51,21 @@ def read_connections(
         sender = _end(p, fields, "from", where, components)
         receiver = _end(p, fields, "to", where, components)
         _same_type(p, (item, where), components, sender, receiver)
+        service = _service(p, (item, where), components, sender, receiver)
         policy: Any = ()
         if "policy" in fields:
             policy = _policy(p, fields["policy"], f"{where}.policy")
+            if service and any(key != "encrypt" for key, _ in policy):
+                p.add(fields["policy"], f"{where}.policy", "a service binding sets only encrypt")
+        if service and sender in bound:
+            p.add(item, where, f"{'.'.join(sender)} is bound already (line {bound[sender]})")
+        elif service:
+            bound[sender] = item.start_mark.line + 1
         traffic: float | None = p.get(fields, "traffic", where, parse_bandwidth, None)
         if len(p.items) != before:
             continue
         entry = components[sender[0]].definition
-        if traffic is None and entry is not None:
+        if traffic is None and entry is not None and not service:
             traffic = entry.requires.port_rate(sender[1])
         conn = ConnectionDef(*sender, *receiver, policy=policy, traffic_bytes_per_s=traffic)
         if conn.id in seen:
@@ -91,7 +104,16 @@ def _end(
         return MISSING, MISSING
     info = components[comp].info
     kind, kind_name = _KIND[key]
-    if info is not None and info.port_kind(port) != kind:
+    if info is not None and info.port_kind(port) not in (kind, _SERVICE[key]):
+        if info.port_kind(port) == _SERVICE["to" if key == "from" else "from"]:
+            role = "provides" if key == "from" else "requires"
+            p.add(
+                node,
+                field,
+                f"{comp}.{port} {role} a service: a binding goes from: the consumer "
+                "(ServiceConsumer) to: the provider (ServiceProvider)",
+            )
+            return MISSING, MISSING
         cls = info.cls.__name__
         if info.port_kind(port) is None:
             message = f"{cls} has no port {port!r} ({kind_name}s: {info.ports_text(kind)})"
@@ -118,6 +140,39 @@ def _same_type(
     takes = None if in_info is None else in_info.port_type(receiver[1])
     if sends is not None and takes is not None and sends != takes:
         p.add(*at, f"{'.'.join(sender)} sends {sends} but {'.'.join(receiver)} takes {takes}")
+
+
+def _service(
+    p: Problems,
+    at: tuple[yaml.Node, str],
+    components: dict[str, ComponentEntry],
+    sender: tuple[str, str],
+    receiver: tuple[str, str],
+) -> bool:
+    """True for a service binding (either end a service port, when the classes are known);
+    a data port at the other end, or another interface, is recorded."""
+    if MISSING in (*sender, *receiver):
+        return False
+    out_info, in_info = components[sender[0]].info, components[receiver[0]].info
+    requires = None if out_info is None else out_info.interface(sender[1])
+    provides = None if in_info is None else in_info.interface(receiver[1])
+    if requires is None and provides is None:
+        return False
+    if requires is not None and provides is not None:
+        if requires != provides:
+            p.add(
+                *at,
+                f"{'.'.join(sender)} requires {requires} but {'.'.join(receiver)} provides "
+                f"{provides}",
+            )
+        return True
+    if out_info is not None and in_info is not None:  # one service port, one data port
+        service, data = (sender, receiver) if requires is not None else (receiver, sender)
+        p.add(
+            *at,
+            f"{'.'.join(service)} is a service port but {'.'.join(data)} is a data port",
+        )
+    return True
 
 
 def _policy(p: Problems, node: yaml.Node, where: str) -> tuple[tuple[str, Any], ...]:
