@@ -123,7 +123,8 @@ def test_plugins_from_entry_points(monkeypatch: pytest.MonkeyPatch) -> None:
         get_launcher("broken")
     with pytest.raises(LauncherError, match=r"launcher 'bogus' is a object, not a Launcher"):
         get_launcher("bogus")
-    with pytest.raises(LauncherError, match="known: bogus, broken, exec, nix, python, script"):
+    known = "known: bogus, broken, composite, exec, nix, python, script"
+    with pytest.raises(LauncherError, match=known):
         get_launcher("other")
 
 
