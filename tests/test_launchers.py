@@ -143,3 +143,12 @@ def test_host_env() -> None:
     }
     env = host_env(instance="C", control_fd=3, data_host="h", run_dir="/r", params={"b": 1})
     assert json.loads(env["SDRPEER_PARAMS"]) == {"b": 1}
+
+
+def test_composite_launcher() -> None:
+    target = "stepped;A=a.b:C;B=a.b:D"
+    argv = get_launcher("composite").command(target, {"B.on": True, "A.rate": 2.5}, python=PY)
+    assert argv[:5] == [PY, "-m", "sdrpeer.host", "--composite", target]
+    assert argv[5:] == ["--param", "A.rate=2.5", "--param", "B.on=true"]
+    with pytest.raises(LauncherError, match="at least one member"):
+        get_launcher("composite").command("periodic:5", {}, python=PY)
