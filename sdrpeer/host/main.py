@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     config = parse_args(sys.argv[1:] if argv is None else argv, dict(os.environ))
     if config.control_fd is not None:
         arm_parent_death_signal()
-    setup_logging(config.name or config.target)
+    setup_logging(config.name or ("composite" if config.composite else config.target))
     from sdrpeer.sdk import Component  # noqa: PLC0415 - after logging, so import errors show
 
     try:
