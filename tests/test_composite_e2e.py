@@ -51,6 +51,8 @@ def test_a_composite_is_placed_as_one_and_its_members_ports_carry_data(
     assert set(pipe["ports"]) == {"Src.out", "Dbl.inp", "Dbl.out"}
     assert pipe["ports"]["Dbl.inp"]["lost"] == 0
     assert list(rows(one)) == ["Pipe"]  # one host process for both members
+    members = [(m["name"], m["state"]) for m in pipe["members"]]
+    assert members == [("Src", "ACTIVE"), ("Dbl", "ACTIVE")]  # listed under it, in order
     assert pipe["pid"] > 0
     cluster.wait_until(  # and out of it: Dbl.out reaches Rec on the other robot
         lambda: rows(two).get("Rec", {}).get("ports", {}).get("inp", {}),
