@@ -165,6 +165,8 @@ async def test_ports_and_params_are_the_members_as_member_dot_name() -> None:
         await runner.set_params({"Dbl.nope": 1})
     with pytest.raises(ParamError, match="unknown param"):
         type(comp)(params={"Ghost.x": 1})
+    with pytest.raises(ParamError, match=r"param 'Dbl\.nope': unknown param \(known: Src\.step"):
+        type(comp)(params={"Dbl.nope": 1})
     await runner.finalize()
 
 
@@ -185,8 +187,8 @@ async def test_one_member_failing_puts_the_composite_in_error_naming_it(
     error = states[-1][1]
     assert error is not None
     assert "member Dbl: on_execute: ValueError: cannot double 2" in error
-    assert comp.member_states()["Dbl"] is not None
-    assert comp.member_states()["Src"] is None
+    assert comp.member_errors()["Dbl"] is not None
+    assert comp.member_errors()["Src"] is None
     assert journal == [
         "Source.on_execute",
         "Doubler.on_execute",
@@ -231,7 +233,7 @@ async def test_a_members_fault_is_the_composites_with_the_member_named() -> None
     await runner.finalize()
 
 
-async def test_snapshot_and_restore_carry_a_map_of_member_states() -> None:
+async def test_snapshot_and_restore_carry_a_map_of_member_errors() -> None:
     comp = pipeline()
     runner = ComponentRunner(comp)
     await runner.initialize()

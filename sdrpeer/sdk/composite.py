@@ -74,8 +74,8 @@ class Composite(Component):
         own = name or cls.__name__
         given: dict[str, dict[str, Any]] = {m: {} for m, _ in cls.members}
         for key, value in (params or {}).items():
-            member, dot, param = key.partition(".")
-            if not dot or member not in given:
+            member, _, param = key.partition(".")
+            if key not in cls._sdk_params:
                 known = ", ".join(cls._sdk_params) or "none"
                 raise ParamError(key, "Member.param", detail=f"unknown param (known: {known})")
             given[member][param] = value
@@ -97,7 +97,7 @@ class Composite(Component):
         """The current value of every member's param, as `Member.param` (a copy)."""
         return {f"{m}.{k}": v for m, c in self.parts.items() for k, v in c._param_values.items()}
 
-    def member_states(self) -> dict[str, str | None]:
+    def member_errors(self) -> dict[str, str | None]:
         """Each member's last error (None: none), in execution order."""
         return {m: c.last_error for m, c in self.parts.items()}
 
