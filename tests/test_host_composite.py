@@ -93,3 +93,19 @@ def test_a_composite_host_that_cannot_load_a_member_says_which(hosts: HostPool) 
     assert host.wait_exit(10.0) == 2
     assert "member Ghost" in host.log_text()
     assert "NoSuchClass" in host.log_text()
+
+
+def test_a_stepped_composite_host_runs_its_members_on_the_step_command(hosts: HostPool) -> None:
+    stepped = f"stepped;Src={CF}:Source;Dbl={CF}:Doubler"
+    pipe, hello = hosts.ready("--composite", stepped, name="Steps")
+    loop = {"id": "loop", "out": "Src.out", "to": to(hello), "in": "Dbl.inp", "policy": {}}
+    assert pipe.command("connect", conn=loop)["ok"] is True
+    assert pipe.command("activate")["ok"] is True
+    assert pipe.command("step", n=4)["ok"] is True
+    beat = pipe.wait_for(
+        lambda m: m["t"] == "heartbeat" and m["ports"]["Src.out"]["frames_out"] >= 4,
+        what="4 frames out of Src",
+    )
+    assert beat["ports"]["Src.out"]["frames_out"] == 4  # four steps, four writes, no clock
+    assert pipe.command("exit")["ok"] is True
+    assert pipe.wait_exit() == 0
