@@ -3,6 +3,7 @@ source, a doubler that passes values on, a sink, and one that fails on demand.""
 
 from __future__ import annotations
 
+import os
 from typing import Any, ClassVar
 
 from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Stepped
@@ -117,3 +118,15 @@ class Alarm(Journaled):
 
     def on_execute(self) -> None:
         self.emergency_stop("bumper pressed")
+
+
+class Tripwire(Component):
+    """Raises in `on_execute` once the file `trigger` exists, removing it (so only one instance
+    trips: its successor runs on)."""
+
+    trigger = Param(str, "", "a file whose appearance trips this member")
+
+    def on_execute(self) -> None:
+        if self.trigger and os.path.exists(self.trigger):
+            os.remove(self.trigger)
+            raise RuntimeError("tripped")
