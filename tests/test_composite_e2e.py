@@ -103,7 +103,7 @@ def test_a_members_failure_is_the_composites_and_its_standby_takes_over_whole(
 
     def replaced(d: dict[str, Any]) -> bool:
         pipe = next(c for c in d["components"] if c["component"] == "Pipe")
-        return pipe["instance"] == "Pipe-s1" and pipe["state"] == "active"
+        return bool(pipe["instance"] == "Pipe-s1" and pipe["state"] == "active")
 
     cluster.wait_until(lambda: status(one), replaced, "the standby composite active")
     decisions = [e for e in one.events() if e["kind"] == "recovery.decision"]
