@@ -107,5 +107,12 @@ def test_a_stepped_composite_host_runs_its_members_on_the_step_command(hosts: Ho
         what="4 frames out of Src",
     )
     assert beat["ports"]["Src.out"]["frames_out"] == 4  # four steps, four writes, no clock
+    # the link to our own address is in process: each value Src writes is in Dbl's queue
+    # before Dbl runs in the same step, so Dbl has passed on all four
+    assert beat["ports"]["Src.out"]["frames_sent"] == 4
+    assert beat["ports"]["Dbl.inp"]["frames_in"] == 4
+    assert beat["ports"]["Dbl.out"]["frames_out"] == 4
+    assert pipe.command("repoint", conn_id="loop", to="tcp://127.0.0.1:9")["ok"] is False
+    assert beat.get("data", {}).get("accepted", 0) == 0  # nothing went through the data server
     assert pipe.command("exit")["ok"] is True
     assert pipe.wait_exit() == 0

@@ -7,9 +7,11 @@ reports every lifecycle change and fault through the `report` callback the momen
 announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for a
 heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `restore` are
 sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot), else
-None. It raises `CommandRefused` (our peer's mistake: a bad value, an unknown port or connection) or
-whatever the runner raised (an illegal transition, a failing callback); the caller turns either into
-`reply ok=false`. The data server's `resolve` is `in_port`.
+None. A connection to the host's own data address is a `LocalLink` (sdrpeer.host.local_link: a
+composite's members feeding each other in process). It raises `CommandRefused` (our peer's
+mistake: a bad value, an unknown port or connection) or whatever the runner raised (an illegal
+transition, a failing callback); the caller turns either into `reply ok=false`. The data
+server's `resolve` is `in_port`.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import handoff
+from sdrpeer.host.local_link import LocalLink
 from sdrpeer.sdk import Component, ComponentRunner, ConnectorPolicy, InPortRuntime, OutPortRuntime
 from sdrpeer.vocabulary import LifecycleState
 
@@ -90,7 +93,10 @@ class HostedInstance:
         names = type(component).port_names()
         self.in_ports = {n: component.inport(n) for n in names["in"]}
         self.out_ports = {n: component.outport(n) for n in names["out"]}
-        self.connections: dict[str, tuple[Connection, OutPortRuntime]] = {}
+        self.connections: dict[str, tuple[Connection | LocalLink, OutPortRuntime]] = {}
+        self.own_addresses: frozenset[str] = frozenset()
+        """This host's data addresses (`tcp://...`, `unix://...`): a connection to one of them
+        is a `LocalLink` (set by the host once its data server listens)."""
         self.state = _state_name(runner.state)
 
     def watch(self) -> None:
@@ -175,6 +181,17 @@ class HostedInstance:
             policy = ConnectorPolicy.from_map(policy_map)
         except (ValueError, TypeError, SdrpeerError) as exc:
             raise CommandRefused(f"conn 'policy': {exc}") from None
+        local = self.in_ports.get(in_port) if to in self.own_addresses else None
+        if local is not None:
+            if port.type_id is not None and local.type_id not in (None, port.type_id):
+                raise CommandRefused(
+                    f"conn 'in': {in_port} takes {local.type_id}, {out} sends {port.type_id}"
+                )
+            link = LocalLink(conn_id, local, dict(policy_map))
+            port.attach(link)
+            self.connections[conn_id] = (link, port)
+            log.info("connection %s: %s.%s -> %s (in process)", conn_id, self.name, out, in_port)
+            return
         try:
             connection = Connection(
                 conn_id,
@@ -193,7 +210,7 @@ class HostedInstance:
         self.connections[conn_id] = (connection, port)
         log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
 
-    def _lookup(self, conn_id: str) -> tuple[Connection, OutPortRuntime]:
+    def _lookup(self, conn_id: str) -> tuple[Connection | LocalLink, OutPortRuntime]:
         """The connection a command names."""
         if conn_id not in self.connections:
             raise CommandRefused(f"no connection {conn_id!r}")
@@ -210,6 +227,8 @@ class HostedInstance:
     def _repoint(self, conn_id: str, to: str) -> None:
         """Send the next frames of a connection to a new address."""
         connection, _port = self._lookup(conn_id)
+        if isinstance(connection, LocalLink):
+            raise CommandRefused(f"connection {conn_id!r} is in process: it has no address")
         try:
             connection.repoint(to)
         except ValueError as exc:
@@ -232,7 +251,7 @@ class HostedInstance:
     async def close_connections(self) -> None:
         """Detach and close every outgoing connection (all at once: each may linger)."""
 
-        async def close(conn_id: str, connection: Connection) -> None:
+        async def close(conn_id: str, connection: Connection | LocalLink) -> None:
             try:
                 await maybe_await(connection.close())
             except Exception:
