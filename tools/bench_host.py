@@ -1,7 +1,7 @@
 """Component host footprint: spawn to INACTIVE and idle RSS, through the agent's own supervisor.
 
 Usage: python tools/bench_host.py [--runs 10] [--json out.json] [--target pkg.mod:Class]
-       python tools/bench_host.py --composite 5 [--runs 3] [--json out.json] [--target ...]
+       python tools/bench_host.py --composite 5 [--runs 3] [--json out.json] [--target T ...]
 
 Each run starts one host exactly as an agent does (`sdrpeer.runtime.supervisor.Supervisor`: a
 launcher, a control socket pair, a per-instance log), records the supervisor's own spawn-to-
@@ -9,10 +9,11 @@ INACTIVE latency, waits one second idle, and measures the host's RSS with psutil
 components issue): spawn to INACTIVE <= 150 ms, idle host <= 25 MB (10^6 bytes) RSS. Medians are
 quoted.
 
-`--composite N` measures side by side, in one run, N instances of the target as N separate hosts
-and as N members of one composite host (launcher `composite`, sdrpeer.launch.composite): all
-started through Supervisors, then idle, then the sum of the real processes' RSS (psutil) each
-way, and the ratio composite / separate. Target (issue 17): ratio <= 40 % for N = 5.
+`--composite N` measures side by side, in one run, N components (the `--target`s in turn, default
+five cameras) as N separate hosts and as N members of one composite host (launcher `composite`,
+sdrpeer.launch.composite): all started through Supervisors, then idle, then the sum of the real
+processes' RSS (psutil) each way, and the ratio composite / separate. Target (issue 17): ratio
+<= 40 % for N = 5.
 """
 
 from __future__ import annotations
@@ -105,13 +106,15 @@ async def rss_of(specs: list[InstanceSpec], data_dir: Path, idle: float) -> int:
         await asyncio.gather(*(s.stop() for s in sups))
 
 
-async def compare(target: str, members: int, runs: int, idle: float) -> dict[str, Any]:
-    """N separate hosts vs one composite of N members, `runs` times each, alternating."""
+async def compare(targets: list[str], members: int, runs: int, idle: float) -> dict[str, Any]:
+    """N separate hosts vs one composite of N members (the targets in turn), `runs` times each,
+    alternating."""
+    chosen = [targets[i % len(targets)] for i in range(members)]
     separate = [
-        InstanceSpec.from_json({"name": f"sep{i}", "target": target, "desired": "inactive"})
-        for i in range(members)
+        InstanceSpec.from_json({"name": f"sep{i}", "target": t, "desired": "inactive"})
+        for i, t in enumerate(chosen)
     ]
-    text = ";".join(["periodic:10", *(f"M{i}={target}" for i in range(members))])
+    text = ";".join(["periodic:10", *(f"M{i}={t}" for i, t in enumerate(chosen))])
     composite = [
         InstanceSpec.from_json(
             {"name": "comp", "launcher": "composite", "target": text, "desired": "inactive"}
@@ -125,7 +128,7 @@ async def compare(target: str, members: int, runs: int, idle: float) -> dict[str
             comp_rss.append(await rss_of(composite, Path(tmp) / f"comp{i}", idle))
     sep, comp = statistics.median(sep_rss), statistics.median(comp_rss)
     return {
-        "target": target,
+        "targets": chosen,
         "members": members,
         "runs": runs,
         "separate_rss_bytes": sep_rss,
@@ -144,7 +147,8 @@ def report_compare(r: dict[str, Any]) -> str:
     sep, comp = r["separate_rss_bytes"], r["composite_rss_bytes"]
     return "\n".join(
         [
-            f"{n} x {r['target']}, {r['runs']} runs each way (through the agent's Supervisor)",
+            f"{n} components ({', '.join(sorted(set(r['targets'])))}), {r['runs']} runs each way"
+            " (through the agent's Supervisor)",
             f"{'idle RSS, all processes (MB)':<34}{'median':>10}{'min':>10}{'max':>10}",
             f"{f'{n} separate hosts':<34}{r['separate_median_mb']:>10.1f}"
             f"{min(sep) / 1e6:>10.1f}{max(sep) / 1e6:>10.1f}",
@@ -182,7 +186,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--idle", type=float, default=1.0)
-    parser.add_argument("--target", default=DEFAULT_TARGET)
+    parser.add_argument(
+        "--target",
+        action="append",
+        help=f"pkg.mod:Class (default {DEFAULT_TARGET}); with --composite, repeat it to mix "
+        "components (taken in turn)",
+    )
     parser.add_argument("--json", type=Path)
     parser.add_argument(
         "--composite",
@@ -192,11 +201,12 @@ def main(argv: list[str] | None = None) -> int:
         help="compare N separate hosts with one composite host of N members",
     )
     args = parser.parse_args(argv)
+    targets = args.target or [DEFAULT_TARGET]
     if args.composite > 0:
-        result = asyncio.run(compare(args.target, args.composite, args.runs, args.idle))
+        result = asyncio.run(compare(targets, args.composite, args.runs, args.idle))
         print(report_compare(result))
     else:
-        result = asyncio.run(measure(args.target, args.runs, args.idle))
+        result = asyncio.run(measure(targets[0], args.runs, args.idle))
         print(report(result))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
