@@ -171,7 +171,7 @@ def test_missing_file(tmp_path: Path) -> None:
         ({"metrics_interval": 0.0}, "--metrics-interval: metrics-interval: must be > 0 seconds"),
         (
             {"allow_launchers": ["exec", "rsh"]},
-            "--allow-launchers: allow-launchers: unknown launcher 'rsh' (known: exec, python,",
+            "--allow-launchers: allow-launchers: unknown launcher 'rsh' (known: composite, exec,",
         ),
         ({"allow_targets": [" "]}, "--allow-targets: allow-targets: a pattern must not be empty"),
         ({"robot_file": Path("/no/such.yaml")}, "--robot-file: robot-file: /no/such.yaml does"),

@@ -11,6 +11,7 @@ import pytest
 from sdrpeer.errors import LauncherError
 from sdrpeer.launch import launchers
 from sdrpeer.launch.launchers import Launcher, get_launcher, host_env, known_launchers, param_arg
+from sdrpeer.launch.policy import LaunchPolicy
 
 PY = "/usr/bin/python3"
 
@@ -123,7 +124,8 @@ def test_plugins_from_entry_points(monkeypatch: pytest.MonkeyPatch) -> None:
         get_launcher("broken")
     with pytest.raises(LauncherError, match=r"launcher 'bogus' is a object, not a Launcher"):
         get_launcher("bogus")
-    with pytest.raises(LauncherError, match="known: bogus, broken, exec, nix, python, script"):
+    known = "known: bogus, broken, composite, exec, nix, python, script"
+    with pytest.raises(LauncherError, match=known):
         get_launcher("other")
 
 
@@ -142,3 +144,24 @@ def test_host_env() -> None:
     }
     env = host_env(instance="C", control_fd=3, data_host="h", run_dir="/r", params={"b": 1})
     assert json.loads(env["SDRPEER_PARAMS"]) == {"b": 1}
+
+
+def test_composite_launcher() -> None:
+    target = "stepped;A=a.b:C;B=a.b:D"
+    argv = get_launcher("composite").command(target, {"B.on": True, "A.rate": 2.5}, python=PY)
+    assert argv[:5] == [PY, "-m", "sdrpeer.host", "--composite", target]
+    assert argv[5:] == ["--param", "A.rate=2.5", "--param", "B.on=true"]
+    with pytest.raises(LauncherError, match="at least one member"):
+        get_launcher("composite").command("periodic:5", {}, python=PY)
+
+
+def test_a_composite_runs_where_python_does_each_member_held_to_allow_targets() -> None:
+    target = "stepped;Cam=components.camera:Camera;Spy=evil.mod:Spy"
+    assert LaunchPolicy().refusal("composite", target) is None  # python, any module
+    narrow = LaunchPolicy(targets=("components.*",))
+    why = narrow.refusal("composite", target)
+    assert why is not None
+    assert why.startswith("composite member Spy: python target 'evil.mod:Spy'")
+    assert narrow.refusal("composite", "stepped;Cam=components.camera:Camera") is None
+    no_python = LaunchPolicy(launchers=("exec",))
+    assert "launcher 'composite' is off" in (no_python.refusal("composite", target) or "")

@@ -98,3 +98,65 @@ def test_errors_name_the_field(change, field):
 def test_not_an_object():
     with pytest.raises(SpecError, match="instances\\[2\\]"):
         InstanceSpec.from_json([1], "instances[2]")
+
+
+COMPOSITE = "periodic:20;Cam=components.camera:Camera;Det=components.anomaly:Detector"
+
+
+def test_a_composite_spec_and_its_member_ports() -> None:
+    doc = {
+        "name": "Vision",
+        "launcher": "composite",
+        "target": COMPOSITE,
+        "params": {"Cam.fps": 5},
+        "connections": [{"out": "Det.alarm", "to": "Ctl", "in": "alarm"}],
+    }
+    spec = InstanceSpec.from_json(doc)
+    assert spec.component == "Vision"  # not the member class's name
+    assert spec.connections[0].out_port == "Det.alarm"
+    assert spec.connections[0].id == "Vision.Det.alarm->Ctl.alarm"
+    assert InstanceSpec.from_json(spec.to_json()) == spec
+    # a receiver may be a composite: `in` may name a member's port
+    plain = {
+        "name": "Ctl",
+        "target": "a.b:C",
+        "connections": [{"out": "o", "to": "V", "in": "M.i"}],
+    }
+    assert InstanceSpec.from_json(plain).connections[0].in_port == "M.i"
+
+
+@pytest.mark.parametrize(
+    ("doc", "field", "message"),
+    [
+        (
+            {"name": "A", "target": "a.b:C", "connections": [{"out": "M.o", "to": "B", "in": "i"}]},
+            "instance.connections[0].out",
+            "an identifier",
+        ),
+        (
+            {"name": "V", "launcher": "composite", "target": "periodic:0;Cam=a.b:C"},
+            "instance.target",
+            "periodic:HZ",
+        ),
+        (
+            {"name": "V", "launcher": "composite", "target": "stepped"},
+            "instance.target",
+            "at least one member",
+        ),
+        (
+            {"name": "V", "launcher": "composite", "target": "stepped;A=a.b:C;A=a.b:D"},
+            "instance.target",
+            "given twice",
+        ),
+        (
+            {"name": "V", "launcher": "composite", "target": "stepped;A=file.py"},
+            "instance.target",
+            "package.module:Class",
+        ),
+    ],
+)
+def test_composite_spec_errors(doc: dict[str, Any], field: str, message: str) -> None:
+    with pytest.raises(SpecError) as info:
+        InstanceSpec.from_json(doc)
+    assert info.value.field == field
+    assert message in str(info.value)

@@ -20,6 +20,14 @@ def test_check_summarises_the_paper_system(capsys: pytest.CaptureFixture[str]) -
     assert "mem_free_above_bytes" in out
 
 
+def test_check_shows_a_composites_context_and_members(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["system", "check", str(REPO / "examples/paper/system-composite.yaml")]) == 0
+    out = capsys.readouterr().out
+    members = "OmnidirectionalCameraRTC, CameraRTC, AnomalyDetectionRTC"
+    assert f"composite, periodic 10 Hz: {members}" in out
+    assert "VisionRTC.AnomalyDetectionRTC.alarm->REDControllerRTC.alarm" in out
+
+
 def test_check_json_round_trips(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["system", "check", "--json", str(REPO / "examples/paper/system.yaml")]) == 0
     doc = json.loads(capsys.readouterr().out)

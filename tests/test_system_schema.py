@@ -10,6 +10,7 @@ import pytest
 import yaml
 
 from sdrpeer.system.components import COMPONENT_KEYS, REQUIRES_KEYS, STANDBY_KEYS
+from sdrpeer.system.composites import COMPOSITE_KEYS, MEMBER_KEYS
 from sdrpeer.system.connections import CONNECTION_KEYS
 from sdrpeer.system.loader import TOP_KEYS, load_system, schema_path
 from sdrpeer.system.model import STANDBY_MODES
@@ -42,6 +43,8 @@ def test_schema_keys_match_the_loader() -> None:
     assert keys(s) == set(TOP_KEYS)
     assert keys(d["component"]) == set(COMPONENT_KEYS)
     assert keys(d["requires"]) == set(REQUIRES_KEYS)
+    assert keys(d["composite"]) == set(COMPOSITE_KEYS)
+    assert keys(d["member"]) == set(MEMBER_KEYS)
     assert keys(d["standby"]) == set(STANDBY_KEYS)
     assert keys(d["connection"]) == set(CONNECTION_KEYS)
     assert keys(d["allocation"]) == set(ALLOCATION_KEYS)
@@ -51,7 +54,8 @@ def test_schema_keys_match_the_loader() -> None:
     assert d["rule"]["properties"]["cause"]["enum"] == list(CAUSES)
     assert d["rule"]["properties"]["actions"]["items"]["enum"] == list(ACTIONS)
     assert d["standby"]["properties"]["mode"]["enum"] == list(STANDBY_MODES)
-    for name in ("component", "requires", "standby", "connection", "allocation", "rule"):
+    objects = ("component", "composite", "member", "requires", "standby", "connection")
+    for name in (*objects, "allocation", "rule"):
         assert d[name]["additionalProperties"] is False
 
 

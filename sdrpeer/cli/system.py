@@ -36,6 +36,7 @@ def add_system_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 def cmd_check(args: argparse.Namespace) -> int:
     """Load and summarise a system file."""
+    from sdrpeer.launch.composite import parse_composite  # noqa: PLC0415 - with the loader
     from sdrpeer.system.loader import load_system  # noqa: PLC0415 - imports plugins
 
     system = load_system(args.file)
@@ -54,6 +55,11 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(
             f"  {c.name:<28} cpu {r.cpu_pct:5.1f}%  memory {format_size(r.mem_bytes):>8}{standby}"
         )
+        if c.launcher == "composite" and isinstance(c.target, str):
+            target = parse_composite(c.target)
+            context = "stepped" if target.hz is None else f"periodic {target.hz:g} Hz"
+            members = ", ".join(m for m, _ in target.members)
+            print(f"  {'':<28} composite, {context}: {members}")
     for conn in system.connections:
         rate = conn.traffic_bytes_per_s
         traffic = "?" if rate is None else f"{format_size(int(rate))}/s"

@@ -20,7 +20,10 @@ class HostConfig:
     """Everything a host needs to start, from its command line and environment."""
 
     target: str
-    """`pkg.mod:Class` or `path/to/file.py[:Class]`."""
+    """`pkg.mod:Class` or `path/to/file.py[:Class]`, or with `composite` a composite's target."""
+    composite: bool = False
+    """`--composite`: the target is `CONTEXT;Member=pkg.mod:Class;...`
+    (sdrpeer.launch.composite)."""
     params: dict[str, str] = field(default_factory=dict)
     """Initial parameter values as given on the command line."""
     name: str = ""
@@ -43,6 +46,11 @@ def parse_args(argv: list[str], env: dict[str, str]) -> HostConfig:
     parser.add_argument("target", help="pkg.module:Class or path/to/file.py[:Class]")
     parser.add_argument("--param", action="append", default=[], metavar="K=V")
     parser.add_argument("--name", default="")
+    parser.add_argument(
+        "--composite",
+        action="store_true",
+        help="the target is a composite: 'periodic:HZ|stepped;Member=pkg.mod:Class;...'",
+    )
     args = parser.parse_args(argv)
     params: dict[str, str] = {}
     for item in args.param:
@@ -64,6 +72,7 @@ def parse_args(argv: list[str], env: dict[str, str]) -> HostConfig:
     return HostConfig(
         data_keys=data_keys,
         target=args.target,
+        composite=args.composite,
         params=params,
         name=args.name or env.get("SDRPEER_INSTANCE", ""),
         control_fd=control_fd,

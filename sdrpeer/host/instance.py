@@ -7,13 +7,14 @@ reports every lifecycle change and fault through the `report` callback the momen
 announces it, so an exception in `on_execute` becomes a `state ERROR` report without waiting for a
 heartbeat (an ERROR a fault caused says the fault's kind). `snapshot` and `restore` are
 sdrpeer.host.handoff's; `execute` returns the bytes a command sends back in `part`s (snapshot), else
-None. It raises `CommandRefused` (our peer's mistake: a bad value, an unknown port or connection) or
-whatever the runner raised (an illegal transition, a failing callback); the caller turns either into
-`reply ok=false`. The data server's `resolve` is `in_port`, its `resolve_service` `service`. A
-`connect` whose `out` is one of our consumer service ports makes a service binding
-(sdrpeer.dataplane.service's `ServiceClient`, bound to the port's `ServiceCaller`) instead of a
-data stream; `disconnect` and `repoint` treat both alike. Provided services answer only while
-the component is ACTIVE.
+None. A connection to the host's own data address is a `LocalLink` (sdrpeer.host.local_link: a
+composite's members feeding each other in process). It raises `CommandRefused` (our peer's
+mistake: a bad value, an unknown port or connection) or whatever the runner raised (an illegal
+transition, a failing callback); the caller turns either into `reply ok=false`. The data
+server's `resolve` is `in_port`, its `resolve_service` `service`. A `connect` whose `out` is one
+of our consumer service ports makes a service binding (sdrpeer.dataplane.service's
+`ServiceClient`, bound to the port's `ServiceCaller`) instead of a data stream; `disconnect` and
+`repoint` treat both alike. Provided services answer only while the component is ACTIVE.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.service import ServiceClient
 from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import handoff
+from sdrpeer.host.local_link import LocalLink
 from sdrpeer.sdk import (
     Component,
     ComponentRunner,
@@ -103,7 +105,10 @@ class HostedInstance:
         names = type(component).port_names()
         self.in_ports = {n: component.inport(n) for n in names["in"]}
         self.out_ports = {n: component.outport(n) for n in names["out"]}
-        self.connections: dict[str, tuple[Connection, OutPortRuntime]] = {}
+        self.connections: dict[str, tuple[Connection | LocalLink, OutPortRuntime]] = {}
+        self.own_addresses: frozenset[str] = frozenset()
+        """This host's data addresses (`tcp://...`, `unix://...`): a connection to one of them
+        is a `LocalLink` (set by the host once its data server listens)."""
         services = type(component).service_ports()
         self.providers = {
             n: component.provider(n) for n, i in services.items() if i.role == "provides"
@@ -216,6 +221,17 @@ class HostedInstance:
             policy = ConnectorPolicy.from_map(policy_map)
         except (ValueError, TypeError, SdrpeerError) as exc:
             raise CommandRefused(f"conn 'policy': {exc}") from None
+        local = self.in_ports.get(in_port) if to in self.own_addresses else None
+        if local is not None:
+            if port.type_id is not None and local.type_id not in (None, port.type_id):
+                raise CommandRefused(
+                    f"conn 'in': {in_port} takes {local.type_id}, {out} sends {port.type_id}"
+                )
+            link = LocalLink(conn_id, local, dict(policy_map))
+            port.attach(link)
+            self.connections[conn_id] = (link, port)
+            log.info("connection %s: %s.%s -> %s (in process)", conn_id, self.name, out, in_port)
+            return
         try:
             connection = Connection(
                 conn_id,
@@ -265,7 +281,7 @@ class HostedInstance:
             conn.in_port,
         )
 
-    def _lookup(self, conn_id: str) -> tuple[Connection, OutPortRuntime]:
+    def _lookup(self, conn_id: str) -> tuple[Connection | LocalLink, OutPortRuntime]:
         """The connection a command names."""
         if conn_id not in self.connections:
             raise CommandRefused(f"no connection {conn_id!r}")
@@ -295,6 +311,8 @@ class HostedInstance:
             log.info("service binding %s repointed to %s", conn_id, to)
             return
         connection, _port = self._lookup(conn_id)
+        if isinstance(connection, LocalLink):
+            raise CommandRefused(f"connection {conn_id!r} is in process: it has no address")
         try:
             connection.repoint(to)
         except ValueError as exc:
@@ -317,7 +335,7 @@ class HostedInstance:
     async def close_connections(self) -> None:
         """Detach and close every outgoing connection (all at once: each may linger)."""
 
-        async def close(conn_id: str, connection: Connection) -> None:
+        async def close(conn_id: str, connection: Connection | LocalLink) -> None:
             try:
                 await maybe_await(connection.close())
             except Exception:

@@ -5,8 +5,10 @@ colon is an identifier). A target naming a file (it ends in `.py` or contains a 
 a fresh module named after the file, with the file's directory first on `sys.path` as
 `python file.py` would do; anything else is imported as a module. The class is then looked up by
 name or, without a name, is the single subclass of `base` defined in that module (not merely
-imported into it). Every failure is a `LoadError` whose message names the target and what was wrong;
-when user code raised, the exception is chained so the caller can show its traceback.
+imported into it). `load_composite_class` reads a composite's target (sdrpeer.launch.composite),
+loads each member's class that way and builds the composite (sdrpeer.sdk.composite). Every
+failure is a `LoadError` whose message names the target and what was wrong; when user code
+raised, the exception is chained so the caller can show its traceback.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ import os
 import sys
 from types import ModuleType
 
-from sdrpeer.errors import LoadError
+from sdrpeer.errors import LoadError, SdrpeerError
+from sdrpeer.launch.composite import parse_composite
 
 
 def split_target(target: str) -> tuple[str, str | None]:
@@ -46,6 +49,30 @@ def load_component_class(target: str, base: type) -> type:
     if not (inspect.isclass(cls) and issubclass(cls, base)) or cls is base:
         raise LoadError(f"{target}: {name} is not a subclass of {base.__name__}")
     return cls
+
+
+def load_composite_class(name: str, target: str) -> type:
+    """The composite class called `name` that a composite target describes (LoadError if a
+    member cannot be loaded or the members do not fit together)."""
+    from sdrpeer.sdk import Component  # noqa: PLC0415 - only hosts need the SDK
+    from sdrpeer.sdk.composite import composite_class  # noqa: PLC0415
+    from sdrpeer.sdk.execution import Periodic, Stepped  # noqa: PLC0415
+
+    try:
+        parsed = parse_composite(target)
+    except ValueError as exc:
+        raise LoadError(f"{target}: {exc}") from None
+    members = []
+    for member, member_target in parsed.members:
+        try:
+            members.append((member, load_component_class(member_target, Component)))
+        except LoadError as exc:
+            raise LoadError(f"member {member}: {exc}") from exc.__cause__
+    context = Stepped() if parsed.hz is None else Periodic(hz=parsed.hz)
+    try:
+        return composite_class(name, members, context)
+    except SdrpeerError as exc:
+        raise LoadError(f"{target}: {exc}") from None
 
 
 def _load_module(target: str, where: str) -> ModuleType:

@@ -7,6 +7,8 @@ directory). Under an agent (`SDRPEER_CONTROL_FD` set) the host sends `hello`, in
 (-> `state INACTIVE`) and serves commands one at a time, in order, until `exit`, SIGTERM, or the
 end of the control channel (the agent died); then it finalizes and exits. Standalone it activates
 at once, logs state changes and, once a second, the port counters, and exits on SIGINT/SIGTERM.
+With `--composite` the target is a composite's (sdrpeer.launch.composite): every member class is
+loaded and the host runs them as one component (sdrpeer.sdk.composite), params `Member.param`.
 Exit codes: 0 after a clean finalize, 1 if finalizing failed or timed out, 2 if the target could
 not be loaded or the command line is wrong. Everything is logged to stderr.
 """
@@ -22,7 +24,7 @@ import sys
 from sdrpeer.control.host_side import arm_parent_death_signal
 from sdrpeer.errors import LoadError, SdrpeerError
 from sdrpeer.host.config import parse_args
-from sdrpeer.host.loader import load_component_class
+from sdrpeer.host.loader import load_component_class, load_composite_class
 
 log = logging.getLogger("sdrpeer.host")
 
@@ -43,11 +45,14 @@ def main(argv: list[str] | None = None) -> int:
     config = parse_args(sys.argv[1:] if argv is None else argv, dict(os.environ))
     if config.control_fd is not None:
         arm_parent_death_signal()
-    setup_logging(config.name or config.target)
+    setup_logging(config.name or ("composite" if config.composite else config.target))
     from sdrpeer.sdk import Component  # noqa: PLC0415 - after logging, so import errors show
 
     try:
-        cls = load_component_class(config.target, Component)
+        if config.composite:
+            cls = load_composite_class(config.name or "Composite", config.target)
+        else:
+            cls = load_component_class(config.target, Component)
     except LoadError as exc:
         print(f"sdrpeer.host: cannot load {exc}", file=sys.stderr)
         if exc.__cause__ is not None:

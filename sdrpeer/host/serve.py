@@ -82,6 +82,7 @@ class Host:
         server.set_taking(self.inst.state == LifecycleState.ACTIVE)
         await maybe_await(server.start())
         data = dict(server.addresses)
+        self.inst.own_addresses = frozenset(f"{kind}://{where}" for kind, where in data.items())
         if self.channel is not None:
             self.channel.send(
                 Hello(

@@ -1,10 +1,11 @@
 """Launchers: how an agent turns an instance spec into the command that starts its host.
 
 How it works: a launcher is any object with a `name` and `command(target, params, *, python)`
-returning an argv (docs/protocol.md, section 3). Three are built in: `python` (`pkg.mod:Class`)
+returning an argv (docs/protocol.md, section 3). Four are built in: `python` (`pkg.mod:Class`)
 and `script` (`path/to/file.py[:Class]`), both `python -m sdrpeer.host TARGET --param k=v ...`,
-and `exec` (an argv list run as is; it must speak the control channel itself, and gets its
-params as `SDRPEER_PARAMS`, a JSON map, in its environment). Plugins come from the entry point group
+`composite` (several member classes in one host, sdrpeer.launch.composite) and `exec` (an argv
+list run as is; it must speak the control channel itself, and gets its params as
+`SDRPEER_PARAMS`, a JSON map, in its environment). Plugins come from the entry point group
 `sdrpeer.launchers`; each entry point loads a launcher class (instantiated with no
 arguments) or instance (`LAUNCHERS`, a `sdrpeer.plugins.registry.Registry`). `get_launcher(name)`
 looks in the built-ins first, then the plugins, and fails with the list of known names. `host_env`
@@ -19,6 +20,7 @@ from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 from sdrpeer.errors import LauncherError
+from sdrpeer.launch.composite import parse_composite
 from sdrpeer.plugins.registry import Registry
 
 log = logging.getLogger("sdrpeer.launch.launchers")
@@ -93,6 +95,22 @@ class ScriptLauncher:
         return [python, "-m", "sdrpeer.host", text, *param_args(params)]
 
 
+class CompositeLauncher:
+    """`python -m sdrpeer.host --composite 'CONTEXT;Member=pkg.mod:Class;...'`
+    (sdrpeer.launch.composite)."""
+
+    name = "composite"
+
+    def command(self, target: str | list[str], params: dict[str, Any], *, python: str) -> list[str]:
+        """The host command for a composite target; params are `Member.param`."""
+        text = _str_target(self.name, target, "'CONTEXT;Member=pkg.mod:Class;...'")
+        try:
+            parse_composite(text)
+        except ValueError as exc:
+            raise LauncherError(f"launcher 'composite': target {text!r}: {exc}") from None
+        return [python, "-m", "sdrpeer.host", "--composite", text, *param_args(params)]
+
+
 class ExecLauncher:
     """The executable itself; it speaks the control channel on its own."""
 
@@ -116,7 +134,7 @@ LAUNCHERS: Registry[Launcher] = Registry(
 )
 """Every launcher by name: the built-ins (registered, so they win over a plugin of their name)
 and the plugins of the entry point group."""
-for _builtin in (PythonLauncher, ScriptLauncher, ExecLauncher):
+for _builtin in (PythonLauncher, ScriptLauncher, ExecLauncher, CompositeLauncher):
     LAUNCHERS.register(_builtin.name, _builtin)
 
 

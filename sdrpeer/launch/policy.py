@@ -8,7 +8,8 @@ unless the agent's configuration names them (`allow_launchers`, `--allow-launche
 allowed besides `python`), as Nomad ships `raw_exec` disabled. `allow_targets` narrows the
 `python` launcher to module patterns (shell-style, matched against `package.module:Class`;
 default `*`, any installed module; an empty list turns `python` off). Plugin launchers (entry
-points) run only when named too.
+points) run only when named too. A `composite` (sdrpeer.launch.composite) runs Python classes
+in one host: it runs wherever `python` does, each member's target held to `allow_targets`.
 
 `LaunchPolicy.refusal(launcher, target)` is None when the policy lets the spec run, else the
 reason, naming the setting to change. The agent checks it where a spec comes in (the API answers
@@ -22,6 +23,8 @@ from __future__ import annotations
 import fnmatch
 from collections.abc import Sequence
 from dataclasses import dataclass
+
+from sdrpeer.launch.composite import parse_composite
 
 DEFAULT_LAUNCHERS: tuple[str, ...] = ("python",)
 DEFAULT_TARGETS: tuple[str, ...] = ("*",)
@@ -42,6 +45,8 @@ class LaunchPolicy:
 
     def refusal(self, launcher: str, target: str | Sequence[str]) -> str | None:
         """None if a host of `launcher` running `target` may start here, else why not."""
+        if launcher == "composite" and isinstance(target, str) and "python" in self.launchers:
+            return self._members_refusal(target)
         if launcher not in self.launchers:
             allowed = ", ".join(self.launchers) or "none"
             extra = [n for n in self.launchers if n != "python"]
@@ -50,16 +55,30 @@ class LaunchPolicy:
                 f"enable it in the agent's configuration: allow_launchers: "
                 f"[{', '.join((*extra, launcher))}] (or --allow-launcher {launcher})"
             )
-        if (
-            launcher == "python"
-            and isinstance(target, str)
-            and not any(fnmatch.fnmatchcase(target, p) for p in self.targets)
-        ):
-            return (
-                f"python target {target!r} matches none of this robot's allow_targets "
-                f"({', '.join(self.targets) or 'none'}); add a pattern to allow_targets in "
-                f"the agent's configuration (or --allow-target PATTERN)"
-            )
+        if launcher == "python" and isinstance(target, str):
+            return self._target_refusal(target)
+        return None
+
+    def _target_refusal(self, target: str) -> str | None:
+        """None if the python target matches one of `targets`, else why not."""
+        if any(fnmatch.fnmatchcase(target, p) for p in self.targets):
+            return None
+        return (
+            f"python target {target!r} matches none of this robot's allow_targets "
+            f"({', '.join(self.targets) or 'none'}); add a pattern to allow_targets in "
+            f"the agent's configuration (or --allow-target PATTERN)"
+        )
+
+    def _members_refusal(self, target: str) -> str | None:
+        """A composite runs python classes: each member's target is held to `targets`."""
+        try:
+            members = parse_composite(target).members
+        except ValueError as exc:
+            return f"composite target {target!r}: {exc}"
+        for member, member_target in members:
+            why = self._target_refusal(member_target)
+            if why is not None:
+                return f"composite member {member}: {why}"
         return None
 
 

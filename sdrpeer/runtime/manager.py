@@ -41,6 +41,7 @@ from sdrpeer.control.messages import (
     Step,
 )
 from sdrpeer.errors import CommandError, LaunchRefused
+from sdrpeer.launch.composite import parse_composite
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.runtime.config import SupervisorConfig
@@ -414,4 +415,23 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
         "protocol_errors": sup.protocol_errors,
         "faults": [f.to_json() for f in sup.faults],
         "log": str(sup.log_file()),
+        **composite_members(sup.spec, sup.state, sup.last_error),
     }
+
+
+def composite_members(
+    spec: InstanceSpec, state: InstanceState, error: str | None
+) -> dict[str, Any]:
+    """A composite's `members` for its status (name, target, state: they share the
+    composite's; `failed`: the member an ERROR's text names); nothing for another instance."""
+    if spec.launcher != "composite" or not isinstance(spec.target, str):
+        return {}
+    try:
+        members = parse_composite(spec.target).members
+    except ValueError:
+        return {}
+    rows = []
+    for name, target in members:
+        failed = state == LifecycleState.ERROR and f"member {name}: " in (error or "")
+        rows.append({"name": name, "target": target, "state": state, "failed": failed})
+    return {"members": rows}

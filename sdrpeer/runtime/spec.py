@@ -5,7 +5,8 @@ naming the dotted field (`instances[1].connections[0].policy.buffer`); the datac
 and hashable, so the reconciler can compare a running instance's spec with the desired one.
 `to_json` is the inverse (`from_json(to_json(s)) == s`). A connection goes from one of this
 instance's OutPorts to `to_instance.in_port`; the agent resolves its address from the receiving
-host's `hello.data` (local instances) unless `to_addr` gives it explicitly.
+host's `hello.data` (local instances) unless `to_addr` gives it explicitly. A composite
+(launcher `composite`, sdrpeer.launch.composite) names its members' ports `Member.port`.
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ from pathlib import PurePath
 from typing import Any
 
 from sdrpeer.errors import SpecError
+from sdrpeer.launch.composite import parse_composite
 from sdrpeer.launch.launchers import known_launchers
 from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
-LAUNCHERS = ("python", "script", "exec")
+LAUNCHERS = ("python", "script", "exec", "composite")
 _DESIRED_JSON = {LifecycleState.ACTIVE: "active", LifecycleState.INACTIVE: "inactive"}
 """A spec's `desired` as spec files and the API spell it."""
 DESIRED = tuple(_DESIRED_JSON.values())
@@ -29,6 +31,8 @@ POLICY_PUSH = ("all", "fifo", "skip", "new")
 POLICY_FULL = ("overwrite", "drop", "block")
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}$")
 _PORT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")
+_MEMBER_PORT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}\.[A-Za-z_][A-Za-z0-9_]{0,63}$")
+"""A composite's port: `Member.port` (sdrpeer.sdk.composite)."""
 _PY_TARGET = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 _ADDR = re.compile(r"^(tcp://[^/\s:]+:\d{1,5}|unix:///\S+)$")
 _INSTANCE_KEYS = frozenset(
@@ -127,17 +131,18 @@ class InstanceSpec:
         name = _name(doc.get("name"), f"{where}.name")
         launcher = _launcher(doc.get("launcher", "python"), f"{where}.launcher")
         target = _target(launcher, doc.get("target"), f"{where}.target")
-        component = _name(
-            doc.get("component", _default_component(name, target)), f"{where}.component"
-        )
+        default = name if launcher == "composite" else _default_component(name, target)
+        component = _name(doc.get("component", default), f"{where}.component")
         params = doc.get("params", {})
         if not isinstance(params, Mapping) or not all(isinstance(k, str) for k in params):
             raise SpecError(f"{where}.params", "expected an object with string keys")
         conns = doc.get("connections", [])
         if not isinstance(conns, list):
             raise SpecError(f"{where}.connections", "expected a list")
+        composite = launcher == "composite"
         connections = tuple(
-            _connection(name, c, f"{where}.connections[{i}]") for i, c in enumerate(conns)
+            _connection(name, c, f"{where}.connections[{i}]", composite=composite)
+            for i, c in enumerate(conns)
         )
         ids = [c.id for c in connections]
         for i, cid in enumerate(ids):
@@ -219,13 +224,15 @@ def validate_policy(policy: Any, where: str) -> tuple[tuple[str, Any], ...]:
     return tuple(sorted(policy.items()))
 
 
-def _connection(sender: str, doc: Any, where: str) -> ConnectionSpec:
+def _connection(sender: str, doc: Any, where: str, *, composite: bool = False) -> ConnectionSpec:
+    """A connection leaving `sender`; its `out` may be `Member.port` only when the sender is a
+    composite, its `in` may be (the receiver may be one; its host refuses a port it lacks)."""
     if not isinstance(doc, Mapping):
         raise SpecError(where, "expected an object")
     _no_unknown(doc, _CONN_KEYS, where)
-    out_port = _port(doc.get("out"), f"{where}.out")
+    out_port = _port(doc.get("out"), f"{where}.out", member=composite)
     to_instance = _name(doc.get("to"), f"{where}.to")
-    in_port = _port(doc.get("in"), f"{where}.in")
+    in_port = _port(doc.get("in"), f"{where}.in", member=True)
     cid = doc.get("id", default_conn_id(sender, out_port, to_instance, in_port))
     if not isinstance(cid, str) or not 0 < len(cid) <= 255:
         raise SpecError(f"{where}.id", f"expected a non-empty string, got {cid!r}")
@@ -258,10 +265,12 @@ def _name(value: Any, where: str) -> str:
     return value
 
 
-def _port(value: Any, where: str) -> str:
-    if not isinstance(value, str) or not _PORT.match(value):
-        raise SpecError(where, f"expected a port name (an identifier), got {value!r}")
-    return value
+def _port(value: Any, where: str, *, member: bool = False) -> str:
+    """A port name: an identifier, or with `member` also a composite's `Member.port`."""
+    if isinstance(value, str) and (_PORT.match(value) or (member and _MEMBER_PORT.match(value))):
+        return value
+    form = "an identifier, or Member.port on a composite" if member else "an identifier"
+    raise SpecError(where, f"expected a port name ({form}), got {value!r}")
 
 
 def _launcher(value: Any, where: str) -> str:
@@ -302,4 +311,9 @@ def _target(launcher: str, value: Any, where: str) -> str | tuple[str, ...]:
         raise SpecError(where, f"expected a string, got {value!r}")
     if launcher == "python" and not _PY_TARGET.match(value):
         raise SpecError(where, f"expected package.module:Class, got {value!r}")
+    if launcher == "composite":
+        try:
+            parse_composite(value)
+        except ValueError as exc:
+            raise SpecError(where, str(exc)) from None
     return value

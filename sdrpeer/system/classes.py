@@ -74,10 +74,15 @@ def inspect_target(launcher: str, target: str | tuple[str, ...]) -> ClassInfo | 
         cls = load_component_class(target, Component)
     except SdrpeerError as e:
         raise ValueError(f"cannot import the component class: {e}") from None
-    names = cls.port_names()  # type: ignore[attr-defined]
-    declared = cls._sdk_ports.items()  # type: ignore[attr-defined]
-    types = tuple((n, d.type_id) for n, d in declared if getattr(d, "type_id", None) is not None)
-    services = cls.service_ports()  # type: ignore[attr-defined]
+    return class_info(cls)
+
+
+def class_info(cls: type[Component]) -> ClassInfo:
+    """The declarations of a class already at hand (a member's, or a composite's)."""
+    names = cls.port_names()
+    declared = cls._sdk_ports.items()
+    types = tuple((n, t) for n, d in declared if (t := d.type_id) is not None)
+    services = cls.service_ports()
     provides = tuple((n, i.interface) for n, i in services.items() if i.role == "provides")
     requires = tuple((n, i.interface) for n, i in services.items() if i.role == "requires")
     return ClassInfo(cls, tuple(names["in"]), tuple(names["out"]), types, provides, requires)

@@ -87,7 +87,7 @@ def read_components(p: Problems, node: yaml.Node, base_dir: Path) -> dict[str, C
         fields = p.mapping(item, where, COMPONENT_KEYS, ("name", "target"))
         if fields is None:
             continue
-        name, entry = _component(p, fields, item, where, base_dir)
+        name, entry = read_component(p, fields, item, where, base_dir)
         if not name:
             continue
         if name in out:
@@ -98,9 +98,10 @@ def read_components(p: Problems, node: yaml.Node, base_dir: Path) -> dict[str, C
     return out
 
 
-def _component(
+def read_component(
     p: Problems, fields: dict[str, yaml.Node], node: yaml.Node, where: str, base_dir: Path
 ) -> tuple[str, ComponentEntry]:
+    """One component's fields (already checked for unknown keys) -> its name and entry."""
     errors_before = len(p.items)
     name = _spec_field(p, fields, "name", where, _name)
     launcher = _spec_field(p, fields, "launcher", where, _launcher, default="python")

@@ -11,11 +11,13 @@ one interface id, the consumer at `from` (a binding the wrong way round says so)
 bound once, and its policy may only set `encrypt`. The policy is checked by the instance spec's
 `validate_policy`, so every policy that loads can be sent to an agent. Traffic is `traffic:` when
 given, else the sender's profiled rate for that port, else unknown (None). The same stream given
-twice is an error.
+twice is an error. An end naming a member of a composite (`Cam.image`, sdrpeer.system.composites)
+is checked against the member's class and becomes its composite's port (`Vision`, `Cam.image`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import yaml
@@ -23,6 +25,7 @@ import yaml
 from sdrpeer.errors import SpecError
 from sdrpeer.runtime.spec import _port, validate_policy
 from sdrpeer.system.components import ComponentEntry
+from sdrpeer.system.composites import Member
 from sdrpeer.system.model import ConnectionDef
 from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.values import parse_bandwidth
@@ -34,9 +37,14 @@ _SERVICE = {"from": "requires", "to": "provides"}
 
 
 def read_connections(
-    p: Problems, node: yaml.Node | None, components: dict[str, ComponentEntry]
+    p: Problems,
+    node: yaml.Node | None,
+    components: dict[str, ComponentEntry],
+    members: Mapping[str, Member] | None = None,
 ) -> tuple[ConnectionDef, ...]:
-    """Every connection (problems recorded in `p`)."""
+    """Every connection (problems recorded in `p`); `components` includes the composites, and
+    an end naming a member (`Cam.image`) is its composite's port (`Vision`, `Cam.image`)."""
+    members = members or {}
     if node is None:
         return ()
     out: list[ConnectionDef] = []
@@ -48,8 +56,8 @@ def read_connections(
         fields = p.mapping(item, where, CONNECTION_KEYS, ("from", "to"))
         if fields is None:
             continue
-        sender = _end(p, fields, "from", where, components)
-        receiver = _end(p, fields, "to", where, components)
+        sender = _end(p, fields, "from", where, components, members=members)
+        receiver = _end(p, fields, "to", where, components, members=members)
         _same_type(p, (item, where), components, sender, receiver)
         service = _service(p, (item, where), components, sender, receiver)
         policy: Any = ()
@@ -82,6 +90,8 @@ def _end(
     key: str,
     where: str,
     components: dict[str, ComponentEntry],
+    *,
+    members: Mapping[str, Member],
 ) -> tuple[str, str]:
     """(component, port) of one end; MISSING pair when it is wrong (already recorded)."""
     node = fields.get(key)
@@ -93,8 +103,9 @@ def _end(
     if not dot or not comp or not port:
         p.add(node, field, f"expected Component.port, got {value!r}")
         return MISSING, MISSING
-    if comp not in components:
-        known = ", ".join(components) or "none"
+    member = members.get(comp)
+    if comp not in components and member is None:
+        known = ", ".join([*components, *members]) or "none"
         p.add(node, field, f"no component {comp!r} (known: {known})")
         return MISSING, MISSING
     try:
@@ -102,7 +113,7 @@ def _end(
     except SpecError as e:
         p.add(node, field, str(e).split("': ", 1)[-1])
         return MISSING, MISSING
-    info = components[comp].info
+    info = components[comp].info if member is None else member.entry.info
     kind, kind_name = _KIND[key]
     if info is not None and info.port_kind(port) not in (kind, _SERVICE[key]):
         if info.port_kind(port) == _SERVICE["to" if key == "from" else "from"]:
@@ -122,6 +133,8 @@ def _end(
             message += f"{info.ports_text(kind)})"
         p.add(node, field, message)
         return MISSING, MISSING
+    if member is not None:
+        return member.composite, f"{comp}.{port}"
     return comp, port
 
 

@@ -2,7 +2,8 @@
 
 How it works: the text is composed with `YamlFile` (every node keeps its line) and walked once
 through a `Problems` collector: the top level here, then `components:` (sdrpeer.system.components),
-`connections:` (sdrpeer.system.connections, which needs the components' classes and profiles),
+`composites:` (sdrpeer.system.composites: each becomes one component), `connections:`
+(sdrpeer.system.connections, which needs the components' classes and profiles),
 `allocation:` and `recovery:` (sdrpeer.system.sections). A wrong field is recorded and the walk
 goes on, so one `SystemFileError` lists every problem, sorted by line, each as
 `file:line: field 'components[2].requires.memory': message`. Nothing is returned unless the
@@ -30,6 +31,7 @@ import yaml
 from sdrpeer.errors import SpecError, SystemFileError
 from sdrpeer.runtime.spec import _name
 from sdrpeer.system.components import read_components
+from sdrpeer.system.composites import read_composites
 from sdrpeer.system.connections import read_connections
 from sdrpeer.system.model import SystemDef
 from sdrpeer.system.problems import MISSING, Problems
@@ -38,7 +40,16 @@ from sdrpeer.yamlfile import YamlFile
 
 __all__ = ["SystemFileError", "load_system", "parse_system", "schema_path"]
 
-TOP_KEYS = ("version", "name", "components", "connections", "allocation", "recovery", "streams")
+TOP_KEYS = (
+    "version",
+    "name",
+    "components",
+    "composites",
+    "connections",
+    "allocation",
+    "recovery",
+    "streams",
+)
 VERSIONS = (1,)
 _LINE = re.compile(r"^.*?:(\d+):")
 
@@ -66,7 +77,9 @@ def _build(f: YamlFile, base_dir: Path) -> SystemDef:
     p.get(top, "version", "", _version, 1)
     name = _system_name(p, top)
     components = read_components(p, top["components"], base_dir) if "components" in top else {}
-    connections = read_connections(p, top.get("connections"), components)
+    composites, members = read_composites(p, top.get("composites"), base_dir, components)
+    components.update(composites)
+    connections = read_connections(p, top.get("connections"), components, members)
     allocation = read_allocation(p, top.get("allocation"))
     recovery = read_recovery(p, top.get("recovery"))
     streams = read_streams(p, top.get("streams"))
