@@ -62,6 +62,7 @@ from sdrpeer.monitor.publish import (
 )
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
+from sdrpeer.ports.routes import ROUTES as PORT_ROUTES
 from sdrpeer.record.robot import (
     InstanceInfo,
     LinkBounds,
@@ -352,7 +353,7 @@ class Agent:
             token,
             host,
             port,
-            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES],
+            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES, *PORT_ROUTES],
             peer_tokens=self.peer_tokens,
         )
         self.api_url = self.api_site.name

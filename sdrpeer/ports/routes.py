@@ -1,0 +1,347 @@
+"""HTTP routes of the port tools (`sdrpeer port ...`): list, connect, disconnect, tap, inject, feed.
+
+How it works: the agent does the work, the CLI only talks HTTP (it never holds a data key).
+- `GET /v1/ports`: every port of every instance this agent hosts (sdrpeer.ports.catalog).
+- `POST /v1/ports/connect {"from": "A.out", "to": "B.in", "policy": {...}, "id": ...}`: a
+  run-time connection (rtcon), kept beside the plan's by the instance manager
+  (sdrpeer.runtime.adhoc); refused for an unknown port, a port of the wrong direction, or two
+  typed ports of different types. `POST /v1/ports/disconnect {"id": ...}` (or from/to) undoes it.
+- `POST /v1/ports/tap {"ports": [...], "count": N, "duration": S, "decode": bool, "policy":
+  {...}}`: the agent starts a tap (sdrpeer.ports.tap), connects each OutPort to it (policy
+  `push: new` unless given) and streams what arrives as chunked msgpack: a header map
+  `{"ports": [{ref, direction, type, fields, robot}], "t0": ns}`, then one
+  `[index, received_ns, seq, value]` per frame (`decode`: typed values as maps of their
+  fields), then `{"end": reason, "frames": n, "dropped": k}`. The tap's connections go when the
+  stream ends, whatever ends it (count, duration, the client leaving).
+- `POST /v1/ports/inject {"port": "B.in", "value": ..., "rate": HZ, "count": N}`: the agent
+  sends the value (a typed port's as a map of its fields, checked: sdrpeer.ports.values) `count`
+  times at `rate` through a connection of its own (sdrpeer.ports.inject).
+- `POST /v1/ports/feed?port=B.in&port=...` with a chunked msgpack body of `[index, value]`:
+  each value goes as it is (already in its wire form) to the port at `index`, in order, as it
+  arrives (replay paces itself). A port named may be an OutPort: the values then go to every
+  InPort its connections reach, as if it had sent them.
+Every route but the list is a POST and so needs the token (a tap shows the robot's data, the
+others change what flows).
+An instance on another robot is answered 404 naming that robot and its API.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+from typing import TYPE_CHECKING, Any, cast
+
+import msgpack
+from aiohttp import web
+
+from sdrpeer.api.app import Route, instances_of, json_error, json_object, view_of
+from sdrpeer.errors import PortToolError, SpecError
+from sdrpeer.runtime.spec import ConnectionSpec, default_conn_id, validate_policy
+
+if TYPE_CHECKING:  # loaded on a port tool's first use, not at the agent's start
+    from sdrpeer.ports.catalog import Catalog, PortFacts
+    from sdrpeer.ports.inject import Injector, Target
+    from sdrpeer.runtime.manager import InstanceManager
+
+TAP_POLICY = {"push": "new"}
+"""A tap's default policy: only the newest value waits, so a slow reader never blocks a robot."""
+MAX_TAP_S = 24 * 3600.0
+MAX_COUNT = 10**9
+MAX_RATE = 10_000.0
+TAP_BUFFER = 4096
+"""Frames a tap keeps for a reader that lags (the oldest go first; counted as dropped)."""
+TAP_INSTANCE = "sdrpeer-tap"
+"""The `to` of a tap's connections (its address is explicit: `to_addr`)."""
+_POLL = 0.5
+"""How often a waiting tap checks that its client is still there."""
+
+
+def _catalog(request: web.Request) -> Catalog:
+    from sdrpeer.ports.catalog import Catalog  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    view = view_of(request)
+    manager = cast("InstanceManager", instances_of(request))
+
+    def elsewhere(name: str) -> tuple[str, str | None] | None:
+        for member in view.members_view():
+            if member.get("name") == view.name:
+                continue
+            if any(i.get("name") == name for i in member.get("instances") or []):
+                return str(member["name"]), member.get("api")
+        return None
+
+    return Catalog(manager, view.name, elsewhere)
+
+
+def _fail(exc: PortToolError) -> web.Response:
+    return json_error(exc.status, str(exc))
+
+
+def _number(body: dict[str, Any], key: str, default: float | None, high: float) -> float | None:
+    value = body.get(key, default)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value <= high:
+        raise PortToolError(f"field {key!r}: expected a number in (0, {high:g}], got {value!r}")
+    return float(value)
+
+
+def _policy(body: dict[str, Any], default: dict[str, Any]) -> tuple[tuple[str, Any], ...]:
+    try:
+        return validate_policy(body.get("policy", default), "policy")
+    except SpecError as exc:
+        raise PortToolError(str(exc)) from None
+
+
+async def get_ports(request: web.Request) -> web.Response:
+    """GET /v1/ports: every port of every instance hosted here."""
+    return web.json_response(_catalog(request).listing())
+
+
+async def post_connect(request: web.Request) -> web.Response:
+    """POST /v1/ports/connect: a run-time connection from an OutPort to an InPort."""
+    body = await json_object(request, '{"from": "A.out", "to": "B.in"}')
+    catalog = _catalog(request)
+    try:
+        out = catalog.port(str(body.get("from", "")), "out", "from")
+        into = catalog.port(str(body.get("to", "")), "in", "to")
+        if out.type_id is not None and into.type_id is not None and out.type_id != into.type_id:
+            raise PortToolError(
+                f"type mismatch: {out.ref} sends {out.type_id}, {into.ref} takes {into.type_id}",
+                409,
+            )
+        cid = body.get("id") or default_conn_id(out.instance, out.port, into.instance, into.port)
+        if not isinstance(cid, str) or len(cid) > 255:
+            raise PortToolError(f"field 'id': expected a string, got {cid!r}")
+        conn = ConnectionSpec(cid, out.port, into.instance, into.port, _policy(body, {}))
+        try:
+            catalog.manager.add_connection(out.instance, conn)
+        except ValueError as exc:
+            raise PortToolError(str(exc), 409) from None
+    except PortToolError as exc:
+        return _fail(exc)
+    return web.json_response({"id": cid, "from": out.ref, "to": into.ref})
+
+
+async def post_disconnect(request: web.Request) -> web.Response:
+    """POST /v1/ports/disconnect {"id": ...} or {"from": "A.out", "to": "B.in"}."""
+    body = await json_object(request, '{"id": "A.out->B.in"}')
+    manager = cast("InstanceManager", instances_of(request))
+    cid = body.get("id")
+    if cid is None and "from" in body and "to" in body:
+        frm, to = str(body["from"]), str(body["to"])
+        cid = next(
+            (
+                c.id
+                for sender, c in manager.adhoc_connections()
+                if f"{sender}.{c.out_port}" == frm and f"{c.to_instance}.{c.in_port}" == to
+            ),
+            None,
+        )
+    if not isinstance(cid, str) or not manager.remove_connection(cid):
+        made = ", ".join(c.id for _, c in manager.adhoc_connections()) or "none"
+        return json_error(404, f"no run-time connection {cid!r} here (run-time ones: {made})")
+    return web.json_response({"removed": cid})
+
+
+def _header(facts: list[PortFacts], robot: str) -> dict[str, Any]:
+    from sdrpeer.ports.values import schema_fields  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    return {
+        "ports": [
+            {
+                "ref": f.ref,
+                "direction": f.direction,
+                "type": f.type_id,
+                "fields": schema_fields(f.message),
+                "robot": robot,
+            }
+            for f in facts
+        ],
+        "t0": time.time_ns(),
+    }
+
+
+async def post_tap(request: web.Request) -> web.StreamResponse:
+    """POST /v1/ports/tap: stream what OutPorts send (print, record)."""
+    from sdrpeer.ports.tap import Tap  # noqa: PLC0415 - see TYPE_CHECKING above
+    from sdrpeer.ports.values import to_fields  # noqa: PLC0415
+
+    body = await json_object(request, '{"ports": ["Cam.image"], "count": 10}')
+    catalog = _catalog(request)
+    refs = body.get("ports")
+    try:
+        if not isinstance(refs, list) or not refs:
+            raise PortToolError("field 'ports': expected a list of \"Instance.port\"")
+        facts = [catalog.port(str(r), "out", f"ports[{i}]") for i, r in enumerate(refs)]
+        count = _number(body, "count", None, MAX_COUNT)
+        duration = _number(body, "duration", None, MAX_TAP_S)
+        policy = _policy(body, TAP_POLICY)
+    except PortToolError as exc:
+        return _fail(exc)
+    decode = bool(body.get("decode", False))
+    manager = catalog.manager
+    tap = Tap(len(facts), manager.data_keys, limit=TAP_BUFFER)
+    await tap.start()
+    session = os.urandom(4).hex()
+    ids: list[str] = []
+    response = web.StreamResponse(headers={"Content-Type": "application/x-msgpack"})
+    response.enable_chunked_encoding()
+    sent, reason = 0, "duration"
+    try:
+        for i, f in enumerate(facts):
+            cid = f"tap-{session}-{i}"
+            spec = ConnectionSpec(
+                cid, f.port, TAP_INSTANCE, tap.in_port(i), policy, to_addr=tap.address
+            )
+            manager.add_connection(f.instance, spec)
+            ids.append(cid)
+        await response.prepare(request)
+        await response.write(msgpack.packb(_header(facts, catalog.robot)))
+        loop = asyncio.get_running_loop()
+        deadline = None if duration is None else loop.time() + duration
+        while True:
+            if count is not None and sent >= count:
+                reason = "count"
+                break
+            transport = request.transport
+            if transport is None or transport.is_closing():
+                reason = "client left"
+                break
+            wait = _POLL if deadline is None else min(_POLL, deadline - loop.time())
+            if wait <= 0:
+                break
+            frame = await tap.next(wait)
+            if frame is None:
+                continue
+            index, received, seq, value = frame
+            message = facts[index].message
+            if decode and message is not None:
+                value = to_fields(message, value)
+            await response.write(msgpack.packb([index, received, seq, value]))
+            sent += 1
+        end = {"end": reason, "frames": sent, "dropped": tap.dropped}
+        await response.write(msgpack.packb(end))
+        await response.write_eof()
+    except (ConnectionResetError, ConnectionError):
+        pass
+    finally:
+        for cid in ids:
+            manager.remove_connection(cid)
+        await tap.close()
+    return response
+
+
+async def post_inject(request: web.Request) -> web.Response:
+    """POST /v1/ports/inject: send a value to an InPort `count` times at `rate`."""
+    from sdrpeer.ports.inject import Injector  # noqa: PLC0415 - see TYPE_CHECKING above
+    from sdrpeer.ports.values import to_wire  # noqa: PLC0415
+
+    body = await json_object(request, '{"port": "B.in", "value": 1}')
+    catalog = _catalog(request)
+    try:
+        facts = catalog.port(str(body.get("port", "")), "in")
+        if "value" not in body:
+            raise PortToolError("field 'value': missing")
+        value = body["value"]
+        if facts.message is not None:
+            value = to_wire(facts.message, value)
+        count = int(_number(body, "count", 1, MAX_COUNT) or 1)
+        rate = _number(body, "rate", None, MAX_RATE)
+        injector = Injector(_targets(catalog, facts), catalog.manager.data_keys)
+        await injector.start()
+    except PortToolError as exc:
+        return _fail(exc)
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    try:
+        for n in range(count):
+            if rate is not None:
+                delay = start + n / rate - loop.time()
+                if delay > 0:
+                    await asyncio.sleep(delay)  # the pace asked for
+            for i in range(len(injector.targets)):
+                await injector.send(i, value)
+    finally:
+        await injector.close()
+    return web.json_response({"port": facts.ref, "sent": sum(injector.sent)})
+
+
+def _targets(catalog: Catalog, facts: PortFacts) -> list[Target]:
+    """Where values for `facts` go: the InPort itself, or every InPort an OutPort reaches."""
+    from sdrpeer.ports.inject import Target  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    manager = catalog.manager
+    if facts.direction == "in":
+        addr = manager.data_address(facts.instance)
+        if addr is None:
+            raise PortToolError(f"{facts.instance} is not running (no data address yet)", 409)
+        return [Target(facts.ref, addr, facts.port, facts.type_id)]
+    targets = [
+        Target(f"{conn.to_instance}.{conn.in_port}", addr, conn.in_port, facts.type_id)
+        for conn, addr in manager.made_connections(facts.instance).values()
+        if conn.out_port == facts.port and conn.to_instance != TAP_INSTANCE
+    ]
+    if not targets:
+        raise PortToolError(f"{facts.ref} is connected to no InPort: nothing to feed", 409)
+    return targets
+
+
+async def post_feed(request: web.Request) -> web.Response:
+    """POST /v1/ports/feed?port=...: values in their wire form, streamed, to ports (replay)."""
+    from sdrpeer.ports.inject import Injector  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    catalog = _catalog(request)
+    refs = request.query.getall("port", [])
+    try:
+        if not refs:
+            raise PortToolError("query 'port': name at least one Instance.port")
+        targets_of = [
+            _targets(catalog, catalog.port(r, None, f"port[{i}]")) for i, r in enumerate(refs)
+        ]
+        flat = [t for ts in targets_of for t in ts]
+        injector = Injector(flat, catalog.manager.data_keys)
+        await injector.start()
+    except PortToolError as exc:
+        return _fail(exc)
+    first = [sum(len(ts) for ts in targets_of[:i]) for i in range(len(targets_of))]  # conn index
+    unpacker = msgpack.Unpacker(raw=False, max_buffer_size=64 * 1024 * 1024)
+    frames = 0
+    try:
+        async for chunk in request.content.iter_any():
+            unpacker.feed(chunk)
+            for item in unpacker:
+                if not isinstance(item, list) or len(item) != 2 or not isinstance(item[0], int):
+                    raise PortToolError(f"frame {frames + 1}: expected [index, value]")
+                index, value = item
+                if not 0 <= index < len(refs):
+                    raise PortToolError(f"frame {frames + 1}: no port at index {index}")
+                for k in range(len(targets_of[index])):
+                    await injector.send(first[index] + k, value)
+                frames += 1
+    except PortToolError as exc:
+        await injector.close()
+        return _fail(exc)
+    except msgpack.UnpackException as exc:
+        await injector.close()
+        return json_error(400, f"frame {frames + 1}: not msgpack: {exc}")
+    await injector.close()
+    sent = _per_ref(injector, first, targets_of)
+    return web.json_response({"frames": frames, "sent": dict(zip(refs, sent, strict=True))})
+
+
+def _per_ref(injector: Injector, first: list[int], targets_of: list[list[Target]]) -> list[int]:
+    return [
+        sum(injector.sent[first[i] + k] for k in range(len(ts))) for i, ts in enumerate(targets_of)
+    ]
+
+
+ROUTES: list[Route] = [
+    Route("GET", "/v1/ports", get_ports),
+    Route("POST", "/v1/ports/connect", post_connect),
+    Route("POST", "/v1/ports/disconnect", post_disconnect),
+    Route("POST", "/v1/ports/tap", post_tap),
+    Route("POST", "/v1/ports/inject", post_inject),
+    Route("POST", "/v1/ports/feed", post_feed),
+]

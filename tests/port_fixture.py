@@ -1,0 +1,49 @@
+"""Components the port tool tests feed: they keep what they take and hand it over as their
+state (`on_snapshot`), so a test reads exactly what arrived, in order."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sdrpeer.sdk import Component, InPort, OnInput, Pose
+
+
+class Keeper(Component):
+    """Keeps every value arriving on `inp`, in order."""
+
+    execution = OnInput("inp")
+    inp = InPort("anything", {"buffer": 4096})
+
+    def on_initialize(self) -> None:
+        """Nothing yet."""
+        self.values: list[Any] = []
+
+    def on_execute(self) -> None:
+        """Take every value waiting."""
+        while self.inp.qsize():
+            self.values.append(self.inp.get_nowait())
+
+    def on_snapshot(self) -> list[Any]:
+        """Everything taken so far."""
+        return self.values
+
+
+class PoseKeeper(Component):
+    """Keeps (frame, x, y) of every Pose arriving on `pose`."""
+
+    execution = OnInput("pose")
+    pose = InPort("poses", {"buffer": 1024}, type=Pose)
+
+    def on_initialize(self) -> None:
+        """Nothing yet."""
+        self.poses: list[list[Any]] = []
+
+    def on_execute(self) -> None:
+        """Take every pose waiting."""
+        while self.pose.qsize():
+            p = self.pose.get_nowait()
+            self.poses.append([p.frame, p.x, p.y])
+
+    def on_snapshot(self) -> list[list[Any]]:
+        """Everything taken so far."""
+        return self.poses

@@ -1,0 +1,305 @@
+"""The port tools (sdrpeer.ports, `sdrpeer port ...`) over a real instance manager running real
+hosts, with data keys (every stream the agent opens is authenticated): list, run-time connect and
+disconnect, print (a tap), inject (typed values checked), record a camera to MCAP and replay it
+frame-exact; refusals (unknown port or instance, type mismatch, wrong direction, no token)."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import os
+import time
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import pytest
+from aiohttp.test_utils import TestClient, TestServer
+from mcap.reader import make_reader
+
+from sdrpeer.api.app import build_app
+from sdrpeer.cli.main import main as cli_main
+from sdrpeer.ports.routes import ROUTES
+from sdrpeer.runtime.config import fast_test as supervisor_fast
+from sdrpeer.runtime.manager import InstanceManager
+from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.sdk.robot_types import Pose
+from sdrpeer.sdk.typed import type_id_of
+from tests.wait import until_answer, until_async
+
+TOKEN = "tok"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+POSE = type_id_of(Pose)
+
+
+class View:
+    """Just enough of an agent: a name, an instance manager, one other robot's record."""
+
+    def __init__(self, manager: InstanceManager) -> None:
+        self.instances = manager
+        self.name = "robot-1"
+
+    def members_view(self) -> list[dict[str, Any]]:
+        return [
+            {"name": "robot-1", "instances": []},
+            {"name": "robot-2", "api": "http://127.0.0.2:9", "instances": [{"name": "Far"}]},
+        ]
+
+    def agent_view(self) -> dict[str, Any]:
+        return {}
+
+    def events_view(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
+        return []
+
+    def set_virtual(self, changes: dict[str, Any]) -> dict[str, Any]:
+        return {}
+
+
+def spec(name: str, target: str, **params: Any) -> InstanceSpec:
+    return InstanceSpec.from_json({"name": name, "target": target, "params": params})
+
+
+CAM = spec("Cam", "components.camera:Camera", rate=50.0, width=32, height=24)
+COUNTER = spec("Pub", "tests.components_fixture:Counter", rate=200.0)
+KEEPER = spec("Keep", "tests.port_fixture:Keeper")
+POSES = spec("Poses", "tests.typed_fixture:PosePub", rate=100.0)
+POSE_KEEPER = spec("PoseKeep", "tests.port_fixture:PoseKeeper")
+IMAGES = spec("Images", "tests.typed_fixture:ImageRec")
+
+
+@pytest.fixture
+async def agent(tmp_path: Path) -> AsyncIterator[tuple[TestClient[Any, Any], InstanceManager]]:
+    manager = InstanceManager(tmp_path, supervisor_fast(), interval=0.1)
+    manager.data_keys = (os.urandom(32),)
+    await manager.start()
+    client = TestClient(TestServer(build_app(View(manager), token=TOKEN, extra_routes=ROUTES)))
+    await client.start_server()
+    try:
+        yield client, manager
+    finally:
+        await client.close()
+        async with asyncio.timeout(15):
+            await manager.stop()
+
+
+async def run(manager: InstanceManager, *specs: InstanceSpec) -> None:
+    manager.set_desired(specs)
+    names = {s.name for s in specs}
+    await until_async(
+        f"{sorted(names)} ACTIVE",
+        lambda: {s["name"]: s["state"] for s in manager.status() if s["name"] in names},
+        lambda states: set(states.values()) == {"ACTIVE"} and len(states) == len(names),
+        within=20,
+    )
+
+
+def counter(manager: InstanceManager, name: str, port: str, key: str) -> int:
+    return int(manager.port_counters().get(name, {}).get(port, {}).get(key, 0))
+
+
+async def post(client: TestClient[Any, Any], path: str, body: Any) -> tuple[int, Any]:
+    resp = await client.post(path, json=body, headers=AUTH)
+    return resp.status, await resp.json()
+
+
+async def test_list_shows_directions_types_and_connections(agent):
+    client, manager = agent
+    keeper = InstanceSpec.from_json(
+        {**COUNTER.to_json(), "connections": [{"out": "out", "to": "Keep", "in": "inp"}]}
+    )
+    await run(manager, keeper, KEEPER, POSES)
+    await until_async("Pub connected", lambda: manager.made_connections("Pub"))
+    resp = await client.get("/v1/ports")
+    assert resp.status == 200
+    rows = {f"{r['instance']}.{r['port']}": r for r in await resp.json()}
+    assert set(rows) == {"Pub.out", "Keep.inp", "Poses.pose"}
+    assert rows["Pub.out"]["direction"] == "out"
+    assert rows["Pub.out"]["type"] is None
+    assert [c["to"] for c in rows["Pub.out"]["connections"]] == ["Keep.inp"]
+    assert [c["from"] for c in rows["Keep.inp"]["connections"]] == ["Pub.out"]
+    assert rows["Keep.inp"]["direction"] == "in"
+    assert rows["Poses.pose"]["type"] == POSE
+
+
+async def test_connect_carries_data_survives_a_new_spec_and_disconnect_stops_it(agent):
+    client, manager = agent
+    await run(manager, COUNTER, KEEPER)
+    status, body = await post(client, "/v1/ports/connect", {"from": "Pub.out", "to": "Keep.inp"})
+    assert status == 200, body
+    cid = body["id"]
+    first = await until_async(
+        "frames at Keep", lambda: counter(manager, "Keep", "inp", "frames_in"), lambda n: n > 0
+    )
+    manager.set_desired([COUNTER])  # a new plan for the sender: the run-time connection stays
+    await until_async(
+        "more frames at Keep",
+        lambda: counter(manager, "Keep", "inp", "frames_in"),
+        lambda n: n > first + 20,
+    )
+    assert cid in manager.made_connections("Pub")
+    status, body = await post(client, "/v1/ports/disconnect", {"id": cid})
+    assert (status, body) == (200, {"removed": cid})
+    await until_async("connection gone", lambda: cid not in manager.made_connections("Pub"))
+    # counters come with heartbeats (0.5 s apart): the flow has stopped once Keep's count
+    # holds while Pub writes 300 more frames (1.5 s: Keep beats at least twice); a few tries
+    # allow for frames still on their way
+    held = False
+    for _ in range(5):
+        before = counter(manager, "Keep", "inp", "frames_in")
+        sent = counter(manager, "Pub", "out", "frames_out")
+        await until_async(
+            "Pub writes 300 more",
+            lambda sent=sent: counter(manager, "Pub", "out", "frames_out"),
+            lambda n, sent=sent: n > sent + 300,
+        )
+        if counter(manager, "Keep", "inp", "frames_in") == before:
+            held = True
+            break
+    assert held, "frames still reach Keep after the disconnect"
+    status, _ = await post(client, "/v1/ports/disconnect", {"id": cid})
+    assert status == 404
+
+
+async def test_a_run_time_connection_goes_when_its_receiver_stops(agent):
+    client, manager = agent
+    await run(manager, COUNTER, KEEPER)
+    status, _ = await post(client, "/v1/ports/connect", {"from": "Pub.out", "to": "Keep.inp"})
+    assert status == 200
+    await until_async("connected", lambda: manager.made_connections("Pub"))
+    manager.remove("Keep")
+    assert manager.adhoc_connections() == []
+    await until_async("disconnected", lambda: not manager.made_connections("Pub"))
+
+
+async def test_refusals(agent):
+    client, manager = agent
+    await run(manager, POSES, IMAGES, KEEPER)
+    resp = await client.post("/v1/ports/connect", json={"from": "Poses.pose", "to": "Keep.inp"})
+    assert resp.status == 401
+    resp = await client.post("/v1/ports/tap", json={"ports": ["Poses.pose"], "count": 1})
+    assert resp.status == 401
+    resp = await client.post("/v1/ports/inject", json={"port": "Keep.inp", "value": 1})
+    assert resp.status == 401
+    cases = [
+        ({"from": "Poses.pose", "to": "Images.image"}, 409, "type mismatch"),
+        ({"from": "Poses.nope", "to": "Keep.inp"}, 404, "no port 'nope'"),
+        ({"from": "Ghost.out", "to": "Keep.inp"}, 404, "no instance 'Ghost'"),
+        ({"from": "Far.out", "to": "Keep.inp"}, 404, "Far runs on robot-2"),
+        ({"from": "Keep.inp", "to": "Images.image"}, 409, "not an out-port"),
+        ({"from": "Poses.pose", "to": "Poses.pose"}, 409, "not an in-port"),
+        ({"from": "Poses", "to": "Keep.inp"}, 400, "expected Instance.port"),
+    ]
+    for body, code, text in cases:
+        status, answer = await post(client, "/v1/ports/connect", body)
+        assert (status, text in answer["error"]) == (code, True), (body, answer)
+    assert manager.adhoc_connections() == []
+
+
+async def test_print_streams_n_typed_frames_as_field_maps(agent):
+    client, manager = agent
+    await run(manager, POSES)
+    resp = await client.post(
+        "/v1/ports/tap", json={"ports": ["Poses.pose"], "count": 5, "decode": True}, headers=AUTH
+    )
+    assert resp.status == 200
+    items = list(msgpack.Unpacker(io.BytesIO(await resp.read()), raw=False))
+    header, frames, end = items[0], items[1:-1], items[-1]
+    assert header["ports"][0]["type"] == POSE
+    assert header["ports"][0]["fields"][:3] == [
+        ["stamp", "float"],
+        ["frame", "str"],
+        ["x", "float"],
+    ]
+    assert len(frames) == 5
+    xs = [value["x"] for _, _, _, value in frames]
+    assert all(value["frame"] == "map" for _, _, _, value in frames)
+    assert xs == sorted(xs)
+    assert len(set(xs)) == 5
+    assert (end["end"], end["frames"]) == ("count", 5)
+    await until_async("the tap's connection removed", lambda: not manager.adhoc_connections())
+    await until_async("and unmade", lambda: not manager.made_connections("Poses"))
+
+
+async def test_inject_checks_a_typed_value_and_the_port_takes_it(agent):
+    client, manager = agent
+    await run(manager, POSE_KEEPER)
+    value = {"stamp": 1.5, "frame": "odom", "x": 3, "y": -1.25}
+    status, body = await post(
+        client, "/v1/ports/inject", {"port": "PoseKeep.pose", "value": value, "count": 3}
+    )
+    assert (status, body) == (200, {"port": "PoseKeep.pose", "sent": 3})
+    poses = await until_answer(
+        "3 poses taken", lambda: manager.snapshot("PoseKeep"), lambda p: len(p) >= 3
+    )
+    assert poses == [["odom", 3.0, -1.25]] * 3
+    bad = [
+        ({**value, "x": "a"}, "value.x: expected a float, got 'a'"),
+        ({**value, "z2": 1}, "value.z2: sdrpeer/Pose#"),
+        ({"x": 1.0}, "value.stamp: missing"),
+        ([1, 2], "is a map of its fields"),
+    ]
+    for given, text in bad:
+        status, body = await post(
+            client, "/v1/ports/inject", {"port": "PoseKeep.pose", "value": given}
+        )
+        assert (status, text in body["error"]) == (400, True), body
+    assert len(await manager.snapshot("PoseKeep")) == 3
+
+
+async def test_a_camera_recorded_to_mcap_replays_frame_exact(agent, tmp_path):
+    client, manager = agent
+    await run(manager, CAM, KEEPER)
+    api = ["--api", str(client.make_url("")).rstrip("/"), "--token", TOKEN]
+    out = tmp_path / "cam.mcap"
+    rc = await asyncio.to_thread(
+        cli_main, ["port", "record", "Cam.image", "-o", str(out), "--count", "20", *api]
+    )
+    assert rc == 0
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        [channel] = summary.channels.values()
+        schema = summary.schemas[channel.schema_id]
+        messages = [
+            (m.log_time, m.publish_time, m.sequence, m.data)
+            for _, _, m in reader.iter_messages(log_time_order=False)
+        ]
+    assert (channel.topic, channel.message_encoding) == ("Cam.image", "msgpack")
+    assert (channel.metadata["instance"], channel.metadata["port"]) == ("Cam", "image")
+    assert (schema.name, schema.encoding) == ("sdrpeer/any", "jsonschema")
+    assert len(messages) == 20
+    frames = [msgpack.unpackb(data, raw=False) for *_, data in messages]
+    assert [f["seq"] for f in frames] == list(range(frames[0]["seq"], frames[0]["seq"] + 20))
+    assert all(len(f["pixels"]) == 32 * 24 and isinstance(f["pixels"], bytes) for f in frames)
+    published = [pub for _, pub, _, _ in messages]
+    assert published == [int(f["ts"] * 1e9) for f in frames]  # the frame's own time
+    logs = [log for log, *_ in messages]
+    assert logs == sorted(logs)
+
+    start = time.monotonic()
+    rc = await asyncio.to_thread(
+        cli_main, ["port", "replay", str(out), "--map", "Cam.image=Keep.inp", "--speed", "4", *api]
+    )
+    took = time.monotonic() - start
+    assert rc == 0
+    assert took >= (logs[-1] - logs[0]) / 1e9 / 4 * 0.9  # paced, not all at once
+    kept = await until_answer(
+        "20 frames replayed", lambda: manager.snapshot("Keep"), lambda v: len(v) >= 20
+    )
+    assert [msgpack.packb(v) for v in kept] == [data for *_, data in messages]
+
+
+async def test_replay_refuses_a_port_it_does_not_know(agent, tmp_path, capsys):
+    client, manager = agent
+    await run(manager, POSES)
+    api = ["--api", str(client.make_url("")).rstrip("/"), "--token", TOKEN]
+    out = tmp_path / "poses.mcap"
+    rc = await asyncio.to_thread(
+        cli_main, ["port", "record", "Poses.pose", "-o", str(out), "--count", "3", *api]
+    )
+    assert rc == 0
+    rc = await asyncio.to_thread(cli_main, ["port", "replay", str(out), *api])
+    assert rc == 1
+    assert "connected to no InPort" in capsys.readouterr().err
