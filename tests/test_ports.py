@@ -141,18 +141,18 @@ async def test_connect_carries_data_survives_a_new_spec_and_disconnect_stops_it(
     status, body = await post(client, "/v1/ports/disconnect", {"id": cid})
     assert (status, body) == (200, {"removed": cid})
     await until_async("connection gone", lambda: cid not in manager.made_connections("Pub"))
+
     # counters come with heartbeats (0.5 s apart): the flow has stopped once Keep's count
     # holds while Pub writes 300 more frames (1.5 s: Keep beats at least twice); a few tries
     # allow for frames still on their way
+    def pub_out() -> int:
+        return counter(manager, "Pub", "out", "frames_out")
+
     held = False
     for _ in range(5):
         before = counter(manager, "Keep", "inp", "frames_in")
-        sent = counter(manager, "Pub", "out", "frames_out")
-        await until_async(
-            "Pub writes 300 more",
-            lambda sent=sent: counter(manager, "Pub", "out", "frames_out"),
-            lambda n, sent=sent: n > sent + 300,
-        )
+        target = pub_out() + 300
+        await until_async("Pub writes 300 more", pub_out, lambda n: n > target)  # noqa: B023
         if counter(manager, "Keep", "inp", "frames_in") == before:
             held = True
             break
