@@ -162,39 +162,63 @@ def cmd_inject(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_record(args: argparse.Namespace) -> int:
-    """Record OutPorts to an MCAP file (rtlog, `ros2 bag record`)."""
+def record(
+    client: AgentClient, ports: list[str], path: Path, body: dict[str, Any]
+) -> dict[str, Any]:
+    """Tap `ports` (the tap's `body`: count, duration, policy) and write what comes to an MCAP
+    file at `path`; what was recorded: frames, bytes, seconds, the first and last log times,
+    the end map (why it ended, dropped)."""
     from sdrpeer.ports.mcapfile import RecordingWriter, publish_ns  # noqa: PLC0415 - loads mcap
 
-    policy = _policy(args.policy) if args.policy else RECORD_POLICY
-    stream = _tap(args, args.ports, {"policy": policy})
+    stream = client.stream("/v1/ports/tap", {"ports": ports, **body})
     header = next(stream, None)
     if not isinstance(header, dict):
         raise SdrpeerError("the agent's tap sent no header")
-    ports = header["ports"]
+    tapped = header["ports"]
     pack = msgpack.Packer().pack
-    end: dict[str, Any] = {}
+    end: dict[str, Any] = {"end": "stream ended"}
+    first = last = 0
     started = time.monotonic()
-    with args.output.open("wb") as f:
+    with path.open("wb") as f:
         writer = RecordingWriter(f)
-        channels = [writer.add_port(p["ref"], p["type"], p["fields"], p["robot"]) for p in ports]
+        channels = [writer.add_port(p["ref"], p["type"], p["fields"], p["robot"]) for p in tapped]
         try:
             for item in stream:
                 if isinstance(item, dict):
                     end = item
                     break
                 index, received, seq, value = item
-                published = publish_ns(value, ports[index]["fields"], received)
+                published = publish_ns(value, tapped[index]["fields"], received)
                 writer.write(channels[index], received, published, seq, pack(value))
+                first, last = first or received, received
         except KeyboardInterrupt:
             end = {"end": "interrupted"}
         finally:
             writer.finish()
-    took = time.monotonic() - started
+    return {
+        "frames": writer.messages,
+        "bytes": writer.bytes,
+        "ports": len(tapped),
+        "seconds": time.monotonic() - started,
+        "first_ns": first,
+        "last_ns": last,
+        "end": end,
+    }
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    """Record OutPorts to an MCAP file (rtlog, `ros2 bag record`)."""
+    body: dict[str, Any] = {"policy": _policy(args.policy) if args.policy else RECORD_POLICY}
+    if args.count is not None:
+        body["count"] = args.count
+    if args.duration is not None:
+        body["duration"] = args.duration
+    done = record(client_for(args), args.ports, args.output, body)
+    end = done["end"]
     print(
-        f"recorded {writer.messages} frames ({writer.bytes / 1e6:.1f} MB) of "
-        f"{len(ports)} port(s) in {took:.1f} s to {args.output}"
-        f" ({end.get('end', 'stream ended')}; dropped {end.get('dropped', 0)})"
+        f"recorded {done['frames']} frames ({done['bytes'] / 1e6:.1f} MB) of "
+        f"{done['ports']} port(s) in {done['seconds']:.1f} s to {args.output}"
+        f" ({end.get('end')}; dropped {end.get('dropped', 0)})"
     )
     return 0
 
@@ -234,33 +258,48 @@ def replay_chunks(
             return
 
 
-def cmd_replay(args: argparse.Namespace) -> int:
-    """Feed a recording back into ports, at its recorded pace scaled by --speed."""
+def replay(
+    client: AgentClient, path: Path, mapping: dict[str, str], speed: float, loop: bool = False
+) -> dict[str, Any]:
+    """Feed the recording at `path` into ports (a channel into the port of its name, or the one
+    `mapping` gives) at its recorded pace scaled by `speed` (0: at once); frames per channel,
+    the agent's answer and the seconds it took."""
     from sdrpeer.ports.mcapfile import read_recording  # noqa: PLC0415 - loads mcap
 
-    if args.speed < 0:
-        raise ConfigError(f"--speed: expected 0 (as fast as possible) or more, got {args.speed}")
-    mapping = _mapping(args.map)
+    if speed < 0:
+        raise ConfigError(f"--speed: expected 0 (as fast as possible) or more, got {speed}")
     try:
-        topics = sorted({m.topic for m in read_recording(args.file)})
+        topics = sorted({m.topic for m in read_recording(path)})
     except (OSError, ValueError) as e:
-        raise SdrpeerError(f"{args.file}: cannot read the recording: {e}") from None
+        raise SdrpeerError(f"{path}: cannot read the recording: {e}") from None
     unknown = sorted(set(mapping) - set(topics))
     if unknown:
-        raise ConfigError(
-            f"--map: {', '.join(unknown)} not in {args.file} (has {', '.join(topics)})"
-        )
+        has = ", ".join(topics)
+        raise ConfigError(f"--map: {', '.join(unknown)} not in {path} (it has {has})")
     targets = [mapping.get(t, t) for t in topics]
     index = {t: i for i, t in enumerate(topics)}
     query = urllib.parse.urlencode([("port", t) for t in targets])
     counts: dict[str, int] = {}
     started = time.monotonic()
-    chunks = replay_chunks(args.file, index, args.speed, args.loop, counts)
-    answer = client_for(args).upload(f"/v1/ports/feed?{query}", chunks)
-    took = time.monotonic() - started
-    for topic, target in zip(topics, targets, strict=True):
-        print(f"{topic} -> {target}: {counts.get(topic, 0)} frames")
-    print(f"replayed {answer['frames']} frames in {took:.2f} s")
+    answer = client.upload(
+        f"/v1/ports/feed?{query}", replay_chunks(path, index, speed, loop, counts)
+    )
+    return {
+        "channels": [
+            {"topic": t, "to": to, "frames": counts.get(t, 0)}
+            for t, to in zip(topics, targets, strict=True)
+        ],
+        "answer": answer,
+        "seconds": time.monotonic() - started,
+    }
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Feed a recording back into ports, at its recorded pace scaled by --speed."""
+    done = replay(client_for(args), args.file, _mapping(args.map), args.speed, args.loop)
+    for channel in done["channels"]:
+        print(f"{channel['topic']} -> {channel['to']}: {channel['frames']} frames")
+    print(f"replayed {done['answer']['frames']} frames in {done['seconds']:.2f} s")
     return 0
 
 
