@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import io
+import json
 import os
 import time
 from collections.abc import AsyncIterator
@@ -181,6 +182,8 @@ async def test_refusals(agent):
     assert resp.status == 401
     resp = await client.post("/v1/ports/inject", json={"port": "Keep.inp", "value": 1})
     assert resp.status == 401
+    resp = await client.post("/v1/ports/feed?port=Keep.inp", data=msgpack.packb([0, 1]))
+    assert resp.status == 401
     cases = [
         ({"from": "Poses.pose", "to": "Images.image"}, 409, "type mismatch"),
         ({"from": "Poses.nope", "to": "Keep.inp"}, 404, "no port 'nope'"),
@@ -291,15 +294,67 @@ async def test_a_camera_recorded_to_mcap_replays_frame_exact(agent, tmp_path):
     assert [msgpack.packb(v) for v in kept] == [data for *_, data in messages]
 
 
-async def test_replay_refuses_a_port_it_does_not_know(agent, tmp_path, capsys):
+async def test_replay_refuses_a_port_it_cannot_feed(agent, tmp_path, capsys):
     client, manager = agent
-    await run(manager, POSES)
+    await run(manager, POSES, IMAGES)
     api = ["--api", str(client.make_url("")).rstrip("/"), "--token", TOKEN]
     out = tmp_path / "poses.mcap"
     rc = await asyncio.to_thread(
         cli_main, ["port", "record", "Poses.pose", "-o", str(out), "--count", "3", *api]
     )
     assert rc == 0
+    capsys.readouterr()
     rc = await asyncio.to_thread(cli_main, ["port", "replay", str(out), *api])
-    assert rc == 1
-    assert "connected to no InPort" in capsys.readouterr().err
+    assert (rc, "connected to no InPort" in capsys.readouterr().err) == (1, True)
+    mapped = ["--map", "Poses.pose=Images.image"]
+    rc = await asyncio.to_thread(cli_main, ["port", "replay", str(out), *mapped, *api])
+    err = capsys.readouterr().err
+    assert (rc, f"are {POSE}, it takes sdrpeer/Image#" in err) == (1, True), err
+    rc = await asyncio.to_thread(cli_main, ["port", "replay", str(out), "--map", "X.y=Z.w", *api])
+    assert (rc, "X.y not in" in capsys.readouterr().err) == (2, True)
+
+
+async def test_a_tap_whose_client_leaves_takes_its_connection_away(agent):
+    client, manager = agent
+    await run(manager, COUNTER)
+    resp = await client.post("/v1/ports/tap", json={"ports": ["Pub.out"]}, headers=AUTH)
+    assert resp.status == 200
+    assert await resp.content.readany()  # the header, at least
+    await until_async("the tap connected", lambda: manager.made_connections("Pub"))
+    resp.close()
+    await until_async("the tap's connection removed", lambda: not manager.adhoc_connections())
+    await until_async("and unmade", lambda: not manager.made_connections("Pub"))
+
+
+async def test_the_cli_connects_lists_prints_injects_and_disconnects(agent, capsys):
+    client, manager = agent
+    await run(manager, COUNTER, KEEPER, POSES, POSE_KEEPER)
+    api = ["--api", str(client.make_url("")).rstrip("/"), "--token", TOKEN]
+
+    async def cli(*argv: str) -> int:
+        return await asyncio.to_thread(cli_main, [*argv, *api])
+
+    assert await cli("port", "connect", "Pub.out", "Keep.inp", "--policy", "buffer=64") == 0
+    await until_async("frames at Keep", lambda: counter(manager, "Keep", "inp", "frames_in"))
+    await until_async("Pub's rates", lambda: manager.port_rates().get("Pub", {}).get("out"))
+    capsys.readouterr()
+    assert await cli("port", "list", "--here") == 0
+    rows = {line.split()[1]: line.split() for line in capsys.readouterr().out.splitlines()[1:-1]}
+    assert rows["Pub.out"][2:4] == ["out", "-"]
+    assert rows["Pub.out"][-1] == "+Keep.inp"  # a run-time connection
+    assert float(rows["Pub.out"][5]) > 0  # frames/s
+    assert rows["Keep.inp"][-1] == "+Pub.out"
+    assert rows["Poses.pose"][3] == POSE
+    assert await cli("port", "print", "Poses.pose", "--count", "3") == 0
+    printed = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [p["value"]["frame"] for p in printed] == ["map"] * 3
+    value = "{stamp: 2, frame: base, x: 1, y: 2}"
+    assert await cli("port", "inject", "PoseKeep.pose", value, "--count", "2", "--rate", "50") == 0
+    poses = await until_answer(
+        "2 poses taken", lambda: manager.snapshot("PoseKeep"), lambda p: len(p) >= 2
+    )
+    assert poses == [["base", 1.0, 2.0]] * 2
+    assert await cli("port", "inject", "PoseKeep.pose", "{stamp: 2, frame: b, x: a, y: 2}") == 1
+    assert "value.x: expected a float" in capsys.readouterr().err
+    assert await cli("port", "disconnect", "Pub.out", "Keep.inp") == 0
+    assert manager.adhoc_connections() == []

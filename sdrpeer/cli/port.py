@@ -63,12 +63,13 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def format_ports(rows: list[dict[str, Any]]) -> str:
-    """The port table: robot, instance.port, direction, type, connections, frames."""
-    header = ("ROBOT", "PORT", "DIR", "TYPE", "FRAMES", "CONNECTIONS")
+    """The port table: robot, instance.port, direction, type, frames, frames/s, connections."""
+    header = ("ROBOT", "PORT", "DIR", "TYPE", "FRAMES", "HZ", "CONNECTIONS")
     lines = [header]
     for r in rows:
-        counters = r.get("counters") or {}
-        frames = counters.get("frames_out" if r["direction"] == "out" else "frames_in", 0)
+        key = "frames_out" if r["direction"] == "out" else "frames_in"
+        frames = (r.get("counters") or {}).get(key, 0)
+        rate = (r.get("rates") or {}).get(f"{key}_per_s")
         ends = [
             ("+" if c.get("adhoc") else "") + str(c.get("to") or c.get("from"))
             for c in r.get("connections", [])
@@ -80,6 +81,7 @@ def format_ports(rows: list[dict[str, Any]]) -> str:
                 r["direction"],
                 r.get("type") or "-",
                 str(frames),
+                "-" if rate is None else f"{rate:g}",
                 ", ".join(ends) or "-",
             )
         )
@@ -264,21 +266,23 @@ def replay(
     """Feed the recording at `path` into ports (a channel into the port of its name, or the one
     `mapping` gives) at its recorded pace scaled by `speed` (0: at once); frames per channel,
     the agent's answer and the seconds it took."""
-    from sdrpeer.ports.mcapfile import read_recording  # noqa: PLC0415 - loads mcap
+    from sdrpeer.ports.mcapfile import UNTYPED, read_recording  # noqa: PLC0415 - loads mcap
 
     if speed < 0:
         raise ConfigError(f"--speed: expected 0 (as fast as possible) or more, got {speed}")
     try:
-        topics = sorted({m.topic for m in read_recording(path)})
+        schemas = {m.topic: m.schema for m in read_recording(path)}
     except (OSError, ValueError) as e:
         raise SdrpeerError(f"{path}: cannot read the recording: {e}") from None
+    topics = sorted(schemas)
     unknown = sorted(set(mapping) - set(topics))
     if unknown:
         has = ", ".join(topics)
         raise ConfigError(f"--map: {', '.join(unknown)} not in {path} (it has {has})")
     targets = [mapping.get(t, t) for t in topics]
     index = {t: i for i, t in enumerate(topics)}
-    query = urllib.parse.urlencode([("port", t) for t in targets])
+    types = ["" if schemas[t] == UNTYPED else schemas[t] for t in topics]
+    query = urllib.parse.urlencode([*(("port", t) for t in targets), *(("type", t) for t in types)])
     counts: dict[str, int] = {}
     started = time.monotonic()
     answer = client.upload(

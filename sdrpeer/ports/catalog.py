@@ -130,9 +130,10 @@ class Catalog:
 
     def listing(self) -> list[dict[str, Any]]:
         """Every port of every hosted instance: instance, port, direction, type, connections
-        (`id`, the other end, run-time or not), the host's counters for it."""
+        (`id`, the other end, run-time or not), the host's counters for it and their rates."""
         manager = self.manager
         counters = manager.port_counters()
+        rates = manager.port_rates()
         adhoc = {conn.id for _, conn in manager.adhoc_connections()}
         desired = manager.desired()
         rows: list[dict[str, Any]] = []
@@ -147,6 +148,7 @@ class Catalog:
                         "type": facts.type_id,
                         "connections": list(self._connections(facts, desired, made, adhoc)),
                         "counters": counters.get(name, {}).get(facts.port, {}),
+                        "rates": rates.get(name, {}).get(facts.port, {}),
                         "robot": self.robot,
                     }
                 )

@@ -24,6 +24,8 @@ from sdrpeer.sdk.policy import ConnectorPolicy
 
 SOURCE = "sdrpeer-port.inject"
 """What the hello's `from` says (the receiving host logs it)."""
+SEND_WITHIN = 30.0
+"""Seconds `send` waits for room before it gives up on a receiver that takes nothing."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,11 +80,18 @@ class Injector:
             await self.close()
             raise PortToolError("cannot connect to " + "; ".join(failed), 502)
 
-    async def send(self, index: int, value: Any) -> None:
-        """Queue one value for target `index`, waiting while its queue is full."""
+    async def send(self, index: int, value: Any, within: float = SEND_WITHIN) -> None:
+        """Queue one value for target `index`, waiting while its queue is full; PortToolError
+        (504) when it stays full for `within` s (the receiver takes nothing)."""
         conn = self.conns[index]
-        while not conn.offer(value):
-            await conn.drain()
+        if not conn.offer(value):
+            try:
+                async with asyncio.timeout(within):
+                    while not conn.offer(value):
+                        await conn.drain()
+            except TimeoutError:
+                label = self.targets[index].label
+                raise PortToolError(f"{label} took nothing for {within:g} s", 504) from None
         self.sent[index] += 1
 
     async def close(self, linger: float = 5.0) -> None:

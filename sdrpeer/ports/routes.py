@@ -15,11 +15,14 @@ How it works: the agent does the work, the CLI only talks HTTP (it never holds a
   stream ends, whatever ends it (count, duration, the client leaving).
 - `POST /v1/ports/inject {"port": "B.in", "value": ..., "rate": HZ, "count": N}`: the agent
   sends the value (a typed port's as a map of its fields, checked: sdrpeer.ports.values) `count`
-  times at `rate` through a connection of its own (sdrpeer.ports.inject).
-- `POST /v1/ports/feed?port=B.in&port=...` with a chunked msgpack body of `[index, value]`:
-  each value goes as it is (already in its wire form) to the port at `index`, in order, as it
-  arrives (replay paces itself). A port named may be an OutPort: the values then go to every
-  InPort its connections reach, as if it had sent them.
+  times at `rate` through a connection of its own (sdrpeer.ports.inject), until the client
+  leaves.
+- `POST /v1/ports/feed?port=B.in&port=...[&type=ID&type=...]` with a chunked msgpack body of
+  `[index, value]`: each value goes as it is (already in its wire form) to the port at `index`,
+  in order, as it arrives (replay paces itself). `type` (one per port, empty for untyped) says
+  what the values are (a recording's schema): a typed port of another type is refused. A port
+  named may be an OutPort: the values then go to every InPort its connections reach, as if it
+  had sent them.
 Every route but the list is a POST and so needs the token (a tap shows the robot's data, the
 others change what flows).
 An instance on another robot is answered 404 naming that robot and its API.
@@ -30,6 +33,7 @@ from __future__ import annotations
 import asyncio
 import os
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, cast
 
 import msgpack
@@ -261,8 +265,13 @@ async def post_inject(request: web.Request) -> web.Response:
                 delay = start + n / rate - loop.time()
                 if delay > 0:
                     await asyncio.sleep(delay)  # the pace asked for
+            transport = request.transport
+            if transport is None or transport.is_closing():
+                break  # the client left (Ctrl-C): stop sending
             for i in range(len(injector.targets)):
                 await injector.send(i, value)
+    except PortToolError as exc:
+        return _fail(exc)
     finally:
         await injector.close()
     return web.json_response({"port": facts.ref, "sent": sum(injector.sent)})
@@ -294,12 +303,22 @@ async def post_feed(request: web.Request) -> web.Response:
 
     catalog = _catalog(request)
     refs = request.query.getall("port", [])
+    types = request.query.getall("type", [])
     try:
         if not refs:
             raise PortToolError("query 'port': name at least one Instance.port")
-        targets_of = [
-            _targets(catalog, catalog.port(r, None, f"port[{i}]")) for i, r in enumerate(refs)
-        ]
+        if types and len(types) != len(refs):
+            raise PortToolError(f"query 'type': one per port ({len(refs)}), got {len(types)}")
+        targets_of = []
+        for i, ref in enumerate(refs):
+            facts = catalog.port(ref, None, f"port[{i}]")
+            given = (types[i] or None) if types else facts.type_id
+            if given is not None and facts.type_id is not None and given != facts.type_id:
+                raise PortToolError(
+                    f"type mismatch: the values for {ref} are {given}, it takes {facts.type_id}",
+                    409,
+                )
+            targets_of.append([replace(t, type_id=given) for t in _targets(catalog, facts)])
         flat = [t for ts in targets_of for t in ts]
         injector = Injector(flat, catalog.manager.data_keys)
         await injector.start()

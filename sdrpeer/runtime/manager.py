@@ -405,6 +405,10 @@ class InstanceManager:
         """Instance -> port -> counters, from each running host's last heartbeat."""
         return {name: sup.ports for name, sup in self._sups.items() if sup.ports}
 
+    def port_rates(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Instance -> port -> frames and bytes per second between its last two heartbeats."""
+        return {name: sup.port_rates for name, sup in self._sups.items() if sup.port_rates}
+
     def infos(self) -> tuple[InstanceInfo, ...]:
         """What the robot's gossip record says about its instances."""
         return tuple(
