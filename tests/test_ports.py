@@ -188,7 +188,7 @@ async def test_refusals(agent):
         ({"from": "Poses.pose", "to": "Images.image"}, 409, "type mismatch"),
         ({"from": "Poses.nope", "to": "Keep.inp"}, 404, "no port 'nope'"),
         ({"from": "Ghost.out", "to": "Keep.inp"}, 404, "no instance 'Ghost'"),
-        ({"from": "Far.out", "to": "Keep.inp"}, 404, "Far runs on robot-2"),
+        ({"from": "Far.out", "to": "Keep.inp"}, 404, "are on robot-2, not robot-1: ask it"),
         ({"from": "Keep.inp", "to": "Images.image"}, 409, "not an out-port"),
         ({"from": "Poses.pose", "to": "Poses.pose"}, 409, "not an in-port"),
         ({"from": "Poses", "to": "Keep.inp"}, 400, "expected Instance.port"),

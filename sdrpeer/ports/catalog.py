@@ -118,6 +118,26 @@ class Catalog:
             raise PortToolError(f"{where}: {ref} is an {facts.direction}-port, not {want}", 409)
         return facts
 
+    def owner(self, refs: list[str]) -> tuple[str, str | None] | None:
+        """None when every port's instance is hosted here; (robot, API URL) when all are on one
+        other robot; PortToolError when one is unknown or they are on several robots."""
+        owners: dict[str, str | None] = {}
+        desired = self.manager.desired()
+        for i, ref in enumerate(refs):
+            instance, _ = parse_ref(ref, f"ports[{i}]")
+            if instance in desired:
+                owners[self.robot] = None
+                continue
+            found = self.elsewhere(instance)
+            if found is None:
+                raise self._not_here(instance)
+            owners[found[0]] = found[1]
+        if len(owners) > 1:
+            robots = " and ".join(sorted(owners))
+            raise PortToolError(f"the ports are on {robots}: ask each robot for its own", 409)
+        [(robot, api)] = owners.items()
+        return None if robot == self.robot else (robot, api)
+
     def _not_here(self, instance: str) -> PortToolError:
         found = self.elsewhere(instance)
         if found is None:

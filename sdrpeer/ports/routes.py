@@ -24,8 +24,9 @@ How it works: the agent does the work, the CLI only talks HTTP (it never holds a
   named may be an OutPort: the values then go to every InPort its connections reach, as if it
   had sent them.
 Every route but the list is a POST and so needs the token (a tap shows the robot's data, the
-others change what flows).
-An instance on another robot is answered 404 naming that robot and its API.
+others change what flows). A request naming an instance of another robot is passed on to that
+robot's agent with the peer token (sdrpeer.ports.forward), once; an agent that cannot (no peer
+token: insecure, or its deployment stack not loaded) answers 404 naming the robot and its API.
 """
 
 from __future__ import annotations
@@ -78,6 +79,28 @@ def _catalog(request: web.Request) -> Catalog:
     return Catalog(manager, view.name, elsewhere)
 
 
+def _peer_token(request: web.Request) -> str | None:
+    coordinator = getattr(view_of(request), "coordinator", None)
+    token = getattr(coordinator, "token", None)
+    return token if isinstance(token, str) and token else None
+
+
+def _relay_to(request: web.Request, catalog: Catalog, refs: list[str]) -> tuple[str, str] | None:
+    """(API, peer token) of the robot to pass the request on to, None to serve it here;
+    PortToolError when it can be neither (unknown, spread, already passed on, no token)."""
+    from sdrpeer.ports.forward import forwarded  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    owner = catalog.owner(refs)
+    if owner is None:
+        return None
+    robot, api = owner
+    token = _peer_token(request)
+    if api is None or token is None or forwarded(request):
+        where = f" (API {api})" if api else ""
+        raise PortToolError(f"the ports are on {robot}, not {catalog.robot}: ask it{where}", 404)
+    return api, token
+
+
 def _fail(exc: PortToolError) -> web.Response:
     return json_error(exc.status, str(exc))
 
@@ -108,6 +131,9 @@ async def post_connect(request: web.Request) -> web.Response:
     body = await json_object(request, '{"from": "A.out", "to": "B.in"}')
     catalog = _catalog(request)
     try:
+        relay = _relay_to(request, catalog, [str(body.get("from", ""))])
+        if relay is not None:
+            return await _relay_json(request, relay, body)
         out = catalog.port(str(body.get("from", "")), "out", "from")
         into = catalog.port(str(body.get("to", "")), "in", "to")
         if out.type_id is not None and into.type_id is not None and out.type_id != into.type_id:
@@ -133,6 +159,13 @@ async def post_disconnect(request: web.Request) -> web.Response:
     body = await json_object(request, '{"id": "A.out->B.in"}')
     manager = cast("InstanceManager", instances_of(request))
     cid = body.get("id")
+    if cid is None and "from" in body:
+        try:
+            relay = _relay_to(request, _catalog(request), [str(body["from"])])
+        except PortToolError as exc:
+            return _fail(exc)
+        if relay is not None:  # the sender's robot holds the connection
+            return await _relay_json(request, relay, body)
     if cid is None and "from" in body and "to" in body:
         frm, to = str(body["from"]), str(body["to"])
         cid = next(
@@ -147,6 +180,14 @@ async def post_disconnect(request: web.Request) -> web.Response:
         made = ", ".join(c.id for _, c in manager.adhoc_connections()) or "none"
         return json_error(404, f"no run-time connection {cid!r} here (run-time ones: {made})")
     return web.json_response({"removed": cid})
+
+
+async def _relay_json(
+    request: web.Request, relay: tuple[str, str], body: dict[str, Any]
+) -> web.Response:
+    from sdrpeer.ports.forward import relay_json  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    return await relay_json(relay[0], request.path, relay[1], body)
 
 
 def _header(facts: list[PortFacts], robot: str) -> dict[str, Any]:
@@ -178,6 +219,11 @@ async def post_tap(request: web.Request) -> web.StreamResponse:
     try:
         if not isinstance(refs, list) or not refs:
             raise PortToolError("field 'ports': expected a list of \"Instance.port\"")
+        relay = _relay_to(request, catalog, [str(r) for r in refs])
+        if relay is not None:
+            from sdrpeer.ports.forward import relay_stream  # noqa: PLC0415
+
+            return await relay_stream(request, relay[0], request.path, relay[1], body)
         facts = [catalog.port(str(r), "out", f"ports[{i}]") for i, r in enumerate(refs)]
         count = _number(body, "count", None, MAX_COUNT)
         duration = _number(body, "duration", None, MAX_TAP_S)
@@ -245,6 +291,9 @@ async def post_inject(request: web.Request) -> web.Response:
     body = await json_object(request, '{"port": "B.in", "value": 1}')
     catalog = _catalog(request)
     try:
+        relay = _relay_to(request, catalog, [str(body.get("port", ""))])
+        if relay is not None:
+            return await _relay_json(request, relay, body)
         facts = catalog.port(str(body.get("port", "")), "in")
         if "value" not in body:
             raise PortToolError("field 'value': missing")
@@ -309,6 +358,11 @@ async def post_feed(request: web.Request) -> web.Response:
             raise PortToolError("query 'port': name at least one Instance.port")
         if types and len(types) != len(refs):
             raise PortToolError(f"query 'type': one per port ({len(refs)}), got {len(types)}")
+        relay = _relay_to(request, catalog, refs)
+        if relay is not None:
+            from sdrpeer.ports.forward import relay_body  # noqa: PLC0415
+
+            return await relay_body(request, relay[0], request.path_qs, relay[1])
         targets_of = []
         for i, ref in enumerate(refs):
             facts = catalog.port(ref, None, f"port[{i}]")
