@@ -1,7 +1,9 @@
 """End to end on two real agents: the camera and a consumer run on robot-2; the command line talks
 only to robot-1, which passes every port request on to robot-2 (peer token). The camera is
 recorded to MCAP, the file read with `mcap.reader`, replayed into the consumer, and the consumer's
-bytes equal the recording's, in order."""
+bytes equal the recording's, in order. Then a counter on robot-1 is connected at run time to
+the consumer on robot-2 (robot-1 asks robot-2 what the port is, and sends to the data address
+robot-2's record gives), and disconnected."""
 
 from __future__ import annotations
 
@@ -71,3 +73,28 @@ def test_a_camera_on_another_robot_is_recorded_and_replayed_through_my_agent(
     # robot-2's own token is not needed, robot-1's is: without it nothing is passed on
     status, _ = http("POST", one.api + "/v1/ports/inject", {"port": "Sink.inp", "value": 1}, None)
     assert status == 401
+
+    pub = {"name": "Pub", "target": "tests.components_fixture:Counter", "params": {"rate": 100}}
+    status, body = http("POST", one.api + "/v1/instances", {"instances": [pub]}, one.token)
+    assert status == 200, body
+    cluster.wait_until(
+        lambda: {i["name"]: i["state"] for i in one.get("/v1/instances")},
+        lambda states: states == {"Pub": "ACTIVE"},
+        "Pub ACTIVE on robot-1",
+    )
+    assert cli_main(["port", "connect", "Pub.out", "Sink.nope", *api]) == 1
+    assert "Sink on robot-2 has no port 'nope'" in capsys.readouterr().err
+    assert cli_main(["port", "connect", "Pub.out", "Sink.inp", *api]) == 0
+    counts = cluster.wait_until(
+        lambda: [msgpack.unpackb(d) for d in read_frames(str(sink_dir))[15:]],
+        lambda values: len(values) >= 10,
+        "Pub's numbers at Sink on robot-2",
+    )
+    assert all(isinstance(n, int) for n in counts)
+    assert counts == sorted(counts)
+    [made] = one.get("/v1/instances")[0]["connections"]
+    assert made["addr"].startswith("tcp://")
+    assert cli_main(["port", "disconnect", "Pub.out", "Sink.inp", *api]) == 0
+    cluster.wait_until(
+        lambda: one.get("/v1/instances")[0]["connections"], lambda c: c == [], "disconnected"
+    )

@@ -5,7 +5,9 @@ How it works: the agent does the work, the CLI only talks HTTP (it never holds a
 - `POST /v1/ports/connect {"from": "A.out", "to": "B.in", "policy": {...}, "id": ...}`: a
   run-time connection (rtcon), kept beside the plan's by the instance manager
   (sdrpeer.runtime.adhoc); refused for an unknown port, a port of the wrong direction, or two
-  typed ports of different types. `POST /v1/ports/disconnect {"id": ...}` (or from/to) undoes it.
+  typed ports of different types. A receiver on another robot is checked by asking its agent's
+  `GET /v1/ports`, and reached at the data address its record gives.
+  `POST /v1/ports/disconnect {"id": ...}` (or from/to) undoes it.
 - `POST /v1/ports/tap {"ports": [...], "count": N, "duration": S, "decode": bool, "policy":
   {...}}`: the agent starts a tap (sdrpeer.ports.tap), connects each OutPort to it (policy
   `push: new` unless given) and streams what arrives as chunked msgpack: a header map
@@ -41,7 +43,7 @@ import msgpack
 from aiohttp import web
 
 from sdrpeer.api.app import Route, instances_of, json_error, json_object, view_of
-from sdrpeer.errors import PortToolError, SpecError
+from sdrpeer.errors import ApiError, PortToolError, SpecError
 from sdrpeer.runtime.spec import ConnectionSpec, default_conn_id, validate_policy
 
 if TYPE_CHECKING:  # loaded on a port tool's first use, not at the agent's start
@@ -127,7 +129,10 @@ async def get_ports(request: web.Request) -> web.Response:
 
 
 async def post_connect(request: web.Request) -> web.Response:
-    """POST /v1/ports/connect: a run-time connection from an OutPort to an InPort."""
+    """POST /v1/ports/connect: a run-time connection from an OutPort to an InPort (on this
+    robot, or on another: its agent is asked what the port is)."""
+    from sdrpeer.ports.catalog import parse_ref  # noqa: PLC0415 - see TYPE_CHECKING above
+
     body = await json_object(request, '{"from": "A.out", "to": "B.in"}')
     catalog = _catalog(request)
     try:
@@ -135,23 +140,62 @@ async def post_connect(request: web.Request) -> web.Response:
         if relay is not None:
             return await _relay_json(request, relay, body)
         out = catalog.port(str(body.get("from", "")), "out", "from")
-        into = catalog.port(str(body.get("to", "")), "in", "to")
-        if out.type_id is not None and into.type_id is not None and out.type_id != into.type_id:
+        to = str(body.get("to", ""))
+        remote = catalog.owner([to])
+        if remote is None:
+            into = catalog.port(to, "in", "to")
+            into_ref, into_instance, into_port, into_type = (
+                into.ref,
+                into.instance,
+                into.port,
+                into.type_id,
+            )
+        else:
+            into_ref, into_instance, into_port = to, *parse_ref(to, "to")
+            into_type = await _remote_in_port(request, remote, into_instance, into_port)
+        if out.type_id is not None and into_type is not None and out.type_id != into_type:
             raise PortToolError(
-                f"type mismatch: {out.ref} sends {out.type_id}, {into.ref} takes {into.type_id}",
+                f"type mismatch: {out.ref} sends {out.type_id}, {into_ref} takes {into_type}",
                 409,
             )
-        cid = body.get("id") or default_conn_id(out.instance, out.port, into.instance, into.port)
+        cid = body.get("id") or default_conn_id(out.instance, out.port, into_instance, into_port)
         if not isinstance(cid, str) or len(cid) > 255:
             raise PortToolError(f"field 'id': expected a string, got {cid!r}")
-        conn = ConnectionSpec(cid, out.port, into.instance, into.port, _policy(body, {}))
+        conn = ConnectionSpec(cid, out.port, into_instance, into_port, _policy(body, {}))
         try:
-            catalog.manager.add_connection(out.instance, conn)
+            catalog.manager.add_connection(out.instance, conn, remote=remote is not None)
         except ValueError as exc:
             raise PortToolError(str(exc), 409) from None
     except PortToolError as exc:
         return _fail(exc)
-    return web.json_response({"id": cid, "from": out.ref, "to": into.ref})
+    return web.json_response({"id": cid, "from": out.ref, "to": into_ref})
+
+
+async def _remote_in_port(
+    request: web.Request, owner: tuple[str, str | None], instance: str, port: str
+) -> str | None:
+    """The type id of an InPort on another robot, as its agent lists it; PortToolError when it
+    has no such in-port or cannot be asked."""
+    from sdrpeer.api.peer_client import call  # noqa: PLC0415 - see TYPE_CHECKING above
+
+    robot, api = owner
+    token = _peer_token(request)
+    if api is None or token is None:
+        raise PortToolError(f"{instance} is on {robot}, whose ports cannot be asked", 404)
+    try:
+        status, rows = await call(api, "GET", "/v1/ports", token)
+    except ApiError as exc:
+        raise PortToolError(f"{robot} cannot be asked for its ports: {exc}", 502) from None
+    if status != 200 or not isinstance(rows, list):
+        raise PortToolError(f"{robot} answered {status} for its ports", 502)
+    for row in rows:
+        if row.get("instance") == instance and row.get("port") == port:
+            if row.get("direction") != "in":
+                raise PortToolError(f"to: {instance}.{port} is not an in-port", 409)
+            type_id = row.get("type")
+            return type_id if isinstance(type_id, str) else None
+    known = ", ".join(str(r.get("port")) for r in rows if r.get("instance") == instance)
+    raise PortToolError(f"to: {instance} on {robot} has no port {port!r} (ports: {known})", 404)
 
 
 async def post_disconnect(request: web.Request) -> web.Response:

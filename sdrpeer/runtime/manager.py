@@ -98,6 +98,9 @@ class InstanceManager:
         self.reconciler = Reconciler()
         self._desired: dict[str, InstanceSpec] = {}
         self._adhoc = AdHoc()
+        self.remote_address: Callable[[str], str | None] = lambda instance: None
+        """The data address another robot's record gives for an instance (the agent sets it),
+        for run-time connections to receivers there."""
         self._sups: dict[str, Supervisor] = {}
         self._wake = asyncio.Event()
         self._loop_task: asyncio.Task[None] | None = None
@@ -132,15 +135,16 @@ class InstanceManager:
         return found
 
     # ----------------------------------------------------------------- run-time connections
-    def add_connection(self, sender: str, conn: ConnectionSpec) -> None:
+    def add_connection(self, sender: str, conn: ConnectionSpec, *, remote: bool = False) -> None:
         """Connect one of `sender`'s OutPorts at run time, beside the plan's connections
-        (KeyError: `sender` is not desired; ValueError: the id is taken, by the plan or another)."""
+        (`remote`: to a receiver on another robot, addressed by `remote_address`; KeyError:
+        `sender` is not desired; ValueError: the id is taken, by the plan or another)."""
         spec = self._desired.get(sender)
         if spec is None:
             raise KeyError(sender)
         if any(c.id == conn.id for c in spec.connections):
             raise ValueError(f"connection {conn.id!r} exists already (the plan's)")
-        self._adhoc.add(sender, conn)
+        self._adhoc.add(sender, conn, remote=remote)
         self.wake()
 
     def remove_connection(self, conn_id: str) -> bool:
@@ -245,7 +249,7 @@ class InstanceManager:
 
     def reconcile_once(self) -> list[Action]:
         """One reconcile pass: plan and launch the actions."""
-        desired = self._adhoc.merged(self._desired)
+        desired = self._adhoc.merged(self._desired, self.remote_address)
         for name, sup in list(self._sups.items()):
             spec = desired.get(name)
             if spec is None and sup.state == ProcessState.STOPPED and not sup.running:
