@@ -4,13 +4,16 @@ How it works: a port is named `Instance.port` (`parse_ref`; the instance name ma
 dots, the port is what follows the last one). What a port is comes from the instance's class
 when its launcher is `python` (imported once per target, the way `sdrpeer system check` does:
 sdrpeer.system.classes; that gives the message type of typed ports), else from the ports its
-running host declared in its hello (direction only: such a port is taken as untyped). `Catalog`
+running host declared in its hello (direction only: such a port is taken as untyped). A class is
+imported in a worker thread (`warm`, before a request uses the catalog), so a slow import does not
+hold up the agent's event loop; the launch policy already let the target run here. `Catalog`
 answers for the instances in the agent's desired set; an instance it does not host is a
 `PortToolError` (404) that names the robot whose gossip record lists it, when one does.
 """
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -86,6 +89,12 @@ class Catalog:
         """This robot's name."""
         self.elsewhere = elsewhere
         """Instance -> (robot, API URL) of the robot whose record lists it, None if none does."""
+
+    async def warm(self) -> None:
+        """Import, in a worker thread, the classes of hosted instances not inspected yet."""
+        for spec in self.manager.desired().values():
+            if (spec.launcher, str(spec.target)) not in _CLASS_PORTS:
+                await asyncio.to_thread(_class_ports, spec.launcher, spec.target)
 
     def ports_of(self, instance: str) -> dict[str, PortFacts]:
         """Every port of a hosted instance (PortToolError 404 when it is not hosted here)."""

@@ -64,7 +64,8 @@ _POLL = 0.5
 """How often a waiting tap checks that its client is still there."""
 
 
-def _catalog(request: web.Request) -> Catalog:
+async def _catalog(request: web.Request) -> Catalog:
+    """The ports hosted here (their classes imported, off the event loop)."""
     from sdrpeer.ports.catalog import Catalog  # noqa: PLC0415 - see TYPE_CHECKING above
 
     view = view_of(request)
@@ -78,7 +79,9 @@ def _catalog(request: web.Request) -> Catalog:
                 return str(member["name"]), member.get("api")
         return None
 
-    return Catalog(manager, view.name, elsewhere)
+    catalog = Catalog(manager, view.name, elsewhere)
+    await catalog.warm()
+    return catalog
 
 
 def _peer_token(request: web.Request) -> str | None:
@@ -125,7 +128,7 @@ def _policy(body: dict[str, Any], default: dict[str, Any]) -> tuple[tuple[str, A
 
 async def get_ports(request: web.Request) -> web.Response:
     """GET /v1/ports: every port of every instance hosted here."""
-    return web.json_response(_catalog(request).listing())
+    return web.json_response((await _catalog(request)).listing())
 
 
 async def post_connect(request: web.Request) -> web.Response:
@@ -134,7 +137,7 @@ async def post_connect(request: web.Request) -> web.Response:
     from sdrpeer.ports.catalog import parse_ref  # noqa: PLC0415 - see TYPE_CHECKING above
 
     body = await json_object(request, '{"from": "A.out", "to": "B.in"}')
-    catalog = _catalog(request)
+    catalog = await _catalog(request)
     try:
         relay = _relay_to(request, catalog, [str(body.get("from", ""))])
         if relay is not None:
@@ -205,7 +208,7 @@ async def post_disconnect(request: web.Request) -> web.Response:
     cid = body.get("id")
     if cid is None and "from" in body:
         try:
-            relay = _relay_to(request, _catalog(request), [str(body["from"])])
+            relay = _relay_to(request, await _catalog(request), [str(body["from"])])
         except PortToolError as exc:
             return _fail(exc)
         if relay is not None:  # the sender's robot holds the connection
@@ -258,7 +261,7 @@ async def post_tap(request: web.Request) -> web.StreamResponse:
     from sdrpeer.ports.values import to_fields  # noqa: PLC0415
 
     body = await json_object(request, '{"ports": ["Cam.image"], "count": 10}')
-    catalog = _catalog(request)
+    catalog = await _catalog(request)
     refs = body.get("ports")
     try:
         if not isinstance(refs, list) or not refs:
@@ -333,7 +336,7 @@ async def post_inject(request: web.Request) -> web.Response:
     from sdrpeer.ports.values import to_wire  # noqa: PLC0415
 
     body = await json_object(request, '{"port": "B.in", "value": 1}')
-    catalog = _catalog(request)
+    catalog = await _catalog(request)
     try:
         relay = _relay_to(request, catalog, [str(body.get("port", ""))])
         if relay is not None:
@@ -394,7 +397,7 @@ async def post_feed(request: web.Request) -> web.Response:
     """POST /v1/ports/feed?port=...: values in their wire form, streamed, to ports (replay)."""
     from sdrpeer.ports.inject import Injector  # noqa: PLC0415 - see TYPE_CHECKING above
 
-    catalog = _catalog(request)
+    catalog = await _catalog(request)
     refs = request.query.getall("port", [])
     types = request.query.getall("type", [])
     try:
