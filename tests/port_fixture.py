@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sdrpeer.sdk import Component, InPort, OnInput, Pose
+from sdrpeer.sdk import Component, InPort, OnInput, Periodic, Pose
 
 
 class Keeper(Component):
@@ -47,3 +47,24 @@ class PoseKeeper(Component):
     def on_snapshot(self) -> list[list[Any]]:
         """Everything taken so far."""
         return self.poses
+
+
+class SlowKeeper(Component):
+    """Takes one value from `inp` per period (100 Hz) with the default policy (a buffer of 8
+    that overwrites): a consumer slower than what is fed to it."""
+
+    execution = Periodic(hz=100.0)
+    inp = InPort("anything")
+
+    def on_initialize(self) -> None:
+        """Nothing yet."""
+        self.values: list[Any] = []
+
+    def on_execute(self) -> None:
+        """Take the oldest value waiting, if any."""
+        if self.inp.qsize():
+            self.values.append(self.inp.get_nowait())
+
+    def on_snapshot(self) -> list[Any]:
+        """Everything taken so far."""
+        return self.values

@@ -67,6 +67,7 @@ KEEPER = spec("Keep", "tests.port_fixture:Keeper")
 POSES = spec("Poses", "tests.typed_fixture:PosePub", rate=100.0)
 POSE_KEEPER = spec("PoseKeep", "tests.port_fixture:PoseKeeper")
 IMAGES = spec("Images", "tests.typed_fixture:ImageRec")
+SLOW = spec("Slow", "tests.port_fixture:SlowKeeper")
 
 
 @pytest.fixture
@@ -358,3 +359,25 @@ async def test_the_cli_connects_lists_prints_injects_and_disconnects(agent, caps
     assert "value.x: expected a float" in capsys.readouterr().err
     assert await cli("port", "disconnect", "Pub.out", "Keep.inp") == 0
     assert manager.adhoc_connections() == []
+
+
+async def test_a_feed_into_a_slow_consumer_loses_nothing_and_keeps_the_order(agent):
+    client, manager = agent
+    await run(manager, SLOW)
+    body = b"".join(msgpack.packb([0, n]) for n in range(60))
+    resp = await client.post("/v1/ports/feed?port=Slow.inp", data=body, headers=AUTH)
+    assert (resp.status, await resp.json()) == (200, {"frames": 60, "sent": {"Slow.inp": 60}})
+    taken = await until_answer(
+        "60 values taken", lambda: manager.snapshot("Slow"), lambda v: len(v) >= 60
+    )
+    assert taken == list(range(60))  # its own buffer of 8 overwrites; the feed's blocks instead
+    bad = [
+        (b"\x93\x01", "frame 1: the body ends inside it"),
+        (msgpack.packb(7), "frame 1: expected [index, value]"),
+        (msgpack.packb([0, 1]) + msgpack.packb([3, 1]), "frame 2: no port at index 3"),
+        (b"\xc1", "frame 1: not msgpack"),
+    ]
+    for data, text in bad:
+        resp = await client.post("/v1/ports/feed?port=Slow.inp", data=data, headers=AUTH)
+        answer = await resp.json()
+        assert (resp.status, text in answer.get("error", "")) == (400, True), (data, answer)

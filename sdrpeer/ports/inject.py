@@ -4,8 +4,10 @@ How it works: each `Target` is an InPort's data server address and name. `Inject
 `Connection` (sdrpeer.dataplane) per target with the agent's data keys, so the receiving host
 authenticates it like any other sender, and the port's message type id in its hello, so a typed
 InPort of another type refuses it (the refusal comes back as the error). Its policy is
-`push: fifo, full: block`: nothing injected is dropped, and `send` waits while the queue is full
-(the receiver's pace). `start` waits (bounded) until every connection is up and says which could
+`push: fifo, full: block`, and the hello asks the receiving InPort for `full: block` too (an
+acknowledged stream: bounded by the sender's window): nothing injected or replayed is dropped
+at either end, whatever the port's own policy, and `send` waits while the queue is full (the
+receiver's pace). `start` waits (bounded) until every connection is up and says which could
 not connect and why; `close` hands over what is pending before it closes.
 """
 
@@ -59,6 +61,7 @@ class Injector:
                 auth=auth,
                 type_id=t.type_id,
                 backoff=(0.05, 0.5),
+                given={"push": "fifo", "full": "block"},
             )
             for i, t in enumerate(targets)
         ]

@@ -292,7 +292,10 @@ async def post_tap(request: web.Request) -> web.StreamResponse:
             spec = ConnectionSpec(
                 cid, f.port, TAP_INSTANCE, tap.in_port(i), policy, to_addr=tap.address
             )
-            manager.add_connection(f.instance, spec)
+            try:
+                manager.add_connection(f.instance, spec)
+            except KeyError:
+                return json_error(404, f"{f.instance} is no longer hosted here")
             ids.append(cid)
         await response.prepare(request)
         await response.write(msgpack.packb(_header(facts, catalog.robot)))
@@ -427,12 +430,14 @@ async def post_feed(request: web.Request) -> web.Response:
         return _fail(exc)
     first = [sum(len(ts) for ts in targets_of[:i]) for i in range(len(targets_of))]  # conn index
     unpacker = msgpack.Unpacker(raw=False, max_buffer_size=64 * 1024 * 1024)
-    frames = 0
+    frames = received = whole = 0  # whole: bytes up to the end of the last complete item
     try:
         async for chunk in request.content.iter_any():
+            received += len(chunk)
             unpacker.feed(chunk)
             for item in unpacker:
-                if not isinstance(item, list) or len(item) != 2 or not isinstance(item[0], int):
+                whole = unpacker.tell()
+                if not isinstance(item, list) or len(item) != 2 or type(item[0]) is not int:
                     raise PortToolError(f"frame {frames + 1}: expected [index, value]")
                 index, value = item
                 if not 0 <= index < len(refs):
@@ -440,10 +445,12 @@ async def post_feed(request: web.Request) -> web.Response:
                 for k in range(len(targets_of[index])):
                     await injector.send(first[index] + k, value)
                 frames += 1
+        if whole != received:
+            raise PortToolError(f"frame {frames + 1}: the body ends inside it")
     except PortToolError as exc:
         await injector.close()
         return _fail(exc)
-    except msgpack.UnpackException as exc:
+    except (msgpack.UnpackException, ValueError) as exc:
         await injector.close()
         return json_error(400, f"frame {frames + 1}: not msgpack: {exc}")
     await injector.close()
