@@ -304,6 +304,16 @@ async def test_replay_refuses_a_port_it_cannot_feed(agent, tmp_path, capsys):
         cli_main, ["port", "record", "Poses.pose", "-o", str(out), "--count", "3", *api]
     )
     assert rc == 0
+    with out.open("rb") as f:  # a typed port's channel: its type and fields in the schema
+        [(schema, channel, message), *_] = make_reader(f).iter_messages()
+    assert schema is not None
+    assert (schema.name, schema.encoding, channel.metadata["type"]) == (POSE, "jsonschema", POSE)
+    doc = json.loads(schema.data)
+    assert doc["x-sdrpeer-fields"][:3] == [["stamp", "float"], ["frame", "str"], ["x", "float"]]
+    assert [i["title"] for i in doc["prefixItems"]][:3] == ["stamp", "frame", "x"]
+    wire = msgpack.unpackb(message.data)
+    assert (len(wire), wire[1]) == (9, "map")  # the array of its fields, as on the wire
+    assert message.publish_time == int(wire[0] * 1e9)  # its stamp
     capsys.readouterr()
     rc = await asyncio.to_thread(cli_main, ["port", "replay", str(out), *api])
     assert (rc, "connected to no InPort" in capsys.readouterr().err) == (1, True)
