@@ -391,3 +391,27 @@ async def test_a_feed_into_a_slow_consumer_loses_nothing_and_keeps_the_order(age
         resp = await client.post("/v1/ports/feed?port=Slow.inp", data=data, headers=AUTH)
         answer = await resp.json()
         assert (resp.status, text in answer.get("error", "")) == (400, True), (data, answer)
+
+
+async def test_two_ports_recorded_together_get_a_channel_each_and_a_duration_ends_it(
+    agent, tmp_path
+):
+    client, manager = agent
+    await run(manager, POSES, COUNTER)
+    api = ["--api", str(client.make_url("")).rstrip("/"), "--token", TOKEN]
+    out = tmp_path / "two.mcap"
+    argv = ["port", "record", "Poses.pose", "Pub.out", "-o", str(out), "--duration", "1", *api]
+    assert await asyncio.to_thread(cli_main, argv) == 0
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        messages = [(c.topic, m.data) for _, c, m in reader.iter_messages(log_time_order=False)]
+    topics = [topic for topic, _ in messages]
+    assert schemas == {"Poses.pose": POSE, "Pub.out": "sdrpeer/any"}
+    assert topics.count("Poses.pose") > 10  # 100 Hz for about a second
+    assert topics.count("Pub.out") > 10  # 200 Hz
+    numbers = [msgpack.unpackb(data) for topic, data in messages if topic == "Pub.out"]
+    assert numbers == list(range(numbers[0], numbers[0] + len(numbers)))  # none missing
+    await until_async("the tap's connections removed", lambda: not manager.adhoc_connections())
