@@ -266,14 +266,16 @@ def replay(
     """Feed the recording at `path` into ports (a channel into the port of its name, or the one
     `mapping` gives) at its recorded pace scaled by `speed` (0: at once); frames per channel,
     the agent's answer and the seconds it took."""
-    from sdrpeer.ports.mcapfile import UNTYPED, read_recording  # noqa: PLC0415 - loads mcap
+    from sdrpeer.ports.mcapfile import UNTYPED, recorded_channels  # noqa: PLC0415 - loads mcap
 
     if speed < 0:
         raise ConfigError(f"--speed: expected 0 (as fast as possible) or more, got {speed}")
     try:
-        schemas = {m.topic: m.schema for m in read_recording(path)}
-    except (OSError, ValueError) as e:
-        raise SdrpeerError(f"{path}: cannot read the recording: {e}") from None
+        schemas = recorded_channels(path)
+    except ValueError as e:  # its message names the file
+        raise SdrpeerError(str(e)) from None
+    except OSError as e:
+        raise SdrpeerError(f"{path}: cannot read the recording: {e.strerror}") from None
     topics = sorted(schemas)
     unknown = sorted(set(mapping) - set(topics))
     if unknown:

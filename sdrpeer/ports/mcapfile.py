@@ -18,12 +18,14 @@ in the same order.
 from __future__ import annotations
 
 import json
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from mcap.reader import make_reader
+from mcap.exceptions import EndOfFile, McapError
+from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import Writer
 
 from sdrpeer import __version__
@@ -80,8 +82,8 @@ def publish_ns(value: Any, fields: list[list[str]], received: int) -> int:
 class RecordingWriter:
     """Writes one MCAP recording."""
 
-    def __init__(self, out: IO[bytes]) -> None:
-        self._writer = Writer(out)
+    def __init__(self, out: IO[bytes], chunk_size: int = 1024 * 1024) -> None:
+        self._writer = Writer(out, chunk_size=chunk_size)
         self._writer.start(profile="", library=f"sdrpeer {__version__}")
         self._schemas: dict[str, int] = {}
         self.messages = 0
@@ -125,21 +127,45 @@ class Recorded:
     """The value's msgpack encoding."""
 
 
+def recorded_channels(path: Path) -> dict[str, str]:
+    """Topic -> schema name of every channel of a recording, from its summary (a file cut
+    short, without one, is read through); ValueError naming the file when it is not MCAP."""
+    try:
+        with path.open("rb") as f:
+            summary = make_reader(f).get_summary()
+    except (McapError, struct.error):
+        summary = None  # cut short (no footer): read through, which says what is wrong
+    if summary is None:
+        return {m.topic: m.schema for m in read_recording(path)}
+    return {
+        c.topic: summary.schemas[c.schema_id].name if c.schema_id in summary.schemas else UNTYPED
+        for c in summary.channels.values()
+    }
+
+
 def read_recording(path: Path) -> Iterator[Recorded]:
-    """Every message of a recording, in file order (the order they were recorded)."""
+    """Every message of a recording, in file order (the order they were recorded); a file cut
+    short (a recording killed before it finished) gives the messages of its complete chunks.
+    ValueError naming the file when it is not MCAP or a message is damaged."""
     with path.open("rb") as f:
-        reader = make_reader(f)
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            encoding = channel.message_encoding
-            if encoding != MESSAGE_ENCODING:
-                raise ValueError(
-                    f"{path}: channel {channel.topic!r} is {encoding!r}, not {MESSAGE_ENCODING!r}"
+        try:
+            messages = NonSeekingReader(f).iter_messages(log_time_order=False)
+            for schema, channel, message in messages:
+                encoding = channel.message_encoding
+                if encoding != MESSAGE_ENCODING:
+                    raise ValueError(
+                        f"{path}: channel {channel.topic!r} is {encoding!r}, "
+                        f"not {MESSAGE_ENCODING!r}"
+                    )
+                yield Recorded(
+                    channel.topic,
+                    schema.name if schema is not None else UNTYPED,
+                    message.log_time,
+                    message.publish_time,
+                    message.sequence,
+                    message.data,
                 )
-            yield Recorded(
-                channel.topic,
-                schema.name if schema is not None else UNTYPED,
-                message.log_time,
-                message.publish_time,
-                message.sequence,
-                message.data,
-            )
+        except (EndOfFile, struct.error):
+            return  # cut short: what was written before is all there is
+        except McapError as e:
+            raise ValueError(f"{path}: not a readable MCAP recording: {e}") from None
