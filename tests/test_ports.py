@@ -21,6 +21,7 @@ from mcap.reader import make_reader
 
 from sdrpeer.api.app import build_app
 from sdrpeer.cli.main import main as cli_main
+from sdrpeer.ports.mcapfile import read_recording
 from sdrpeer.ports.routes import ROUTES
 from sdrpeer.runtime.config import fast_test as supervisor_fast
 from sdrpeer.runtime.manager import InstanceManager
@@ -68,6 +69,8 @@ POSES = spec("Poses", "tests.typed_fixture:PosePub", rate=100.0)
 POSE_KEEPER = spec("PoseKeep", "tests.port_fixture:PoseKeeper")
 IMAGES = spec("Images", "tests.typed_fixture:ImageRec")
 SLOW = spec("Slow", "tests.port_fixture:SlowKeeper")
+MONO = spec("Mono", "tests.port_fixture:MonoCamera")
+IMAGE_KEEPER = spec("ImageKeep", "tests.port_fixture:ImageKeeper")
 
 
 @pytest.fixture
@@ -415,3 +418,26 @@ async def test_two_ports_recorded_together_get_a_channel_each_and_a_duration_end
     numbers = [msgpack.unpackb(data) for topic, data in messages if topic == "Pub.out"]
     assert numbers == list(range(numbers[0], numbers[0] + len(numbers)))  # none missing
     await until_async("the tap's connections removed", lambda: not manager.adhoc_connections())
+
+
+async def test_typed_images_record_as_their_wire_bytes_and_replay_into_a_typed_port(
+    agent, tmp_path
+):
+    client, manager = agent
+    await run(manager, MONO, IMAGE_KEEPER)
+    api = ["--api", str(client.make_url("")).rstrip("/"), "--token", TOKEN]
+    out = tmp_path / "mono.mcap"
+    argv = ["port", "record", "Mono.image", "-o", str(out), "--count", "10", *api]
+    assert await asyncio.to_thread(cli_main, argv) == 0
+    recorded = [m.data for m in read_recording(out)]
+    assert len(recorded) == 10
+    for data in recorded:  # the array of its fields, the pixels a bin 32 blob at the end
+        assert data[:1] == b"\x97"
+        assert data[-76_800 - 5 : -76_800] == b"\xc6" + (76_800).to_bytes(4, "big")
+    wires = [msgpack.unpackb(d) for d in recorded]
+    argv = ["port", "replay", str(out), "--map", "Mono.image=ImageKeep.image", "--speed", "0"]
+    assert await asyncio.to_thread(cli_main, [*argv, *api]) == 0
+    kept = await until_answer(
+        "10 images taken", lambda: manager.snapshot("ImageKeep"), lambda v: len(v) >= 10
+    )
+    assert kept == [[w[0], w[6][0], 76_800] for w in wires]
