@@ -10,6 +10,7 @@ import msgpack
 import pytest
 from mcap.reader import make_reader
 
+from sdrpeer.cli.port import replay_chunks
 from sdrpeer.ports.mcapfile import (
     RecordingWriter,
     publish_ns,
@@ -108,3 +109,18 @@ def test_a_typed_schema_lists_its_fields_in_order():
     assert doc["items"] is False
     assert json.loads(json.dumps(doc)) == doc
     assert schema_for(None, [])["title"] == "sdrpeer/any"
+
+
+def test_replay_sends_the_recorded_bytes_in_order_and_loops_on_request(tmp_path):
+    path = tmp_path / "r.mcap"
+    datas = write(path, 5)
+    counts: dict[str, int] = {}
+    index = {"Odo.pose": 0, "Cam.image": 1}
+    chunks = replay_chunks(path, index, 0.0, True, counts)
+    got = [next(chunks) for _ in range(3 * len(datas))]  # three times round
+    want = [b"\x92" + msgpack.packb(i % 2) + d for i, d in enumerate(datas)]
+    assert got == want * 3
+    assert [msgpack.unpackb(c)[1] for c in got[:2]] == [msgpack.unpackb(d) for d in datas[:2]]
+    assert counts == {"Odo.pose": 15, "Cam.image": 15}
+    only_pose = list(replay_chunks(path, {"Odo.pose": 0}, 0.0, False, {}))
+    assert only_pose == want[::2]  # a channel not asked for is left out
