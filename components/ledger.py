@@ -6,13 +6,18 @@ source) and hands its count over when it moves. `Ledger` takes every number that
 `inp` and appends it, one line each, to ``<dir>/<instance>-<pid>.seq`` (flushed per execution,
 so a crash loses at most what its process had not written). Every instance of a moving Ledger
 writes its own file; together the files say what was taken, lost (a number missing between 1
-and the largest seen) and taken twice. `tools/bench_moves.py` reads them.
+and the largest seen) and taken twice. `tools/bench_moves.py` reads them. `FrameLedger` is the
+same for any value: it appends the msgpack encoding of every value it takes to
+``<dir>/<instance>-<pid>.msgpack`` (`read_frames` cuts them apart again), which is how
+`tools/bench_record.py` checks a replay byte for byte.
 """
 
 from __future__ import annotations
 
 import os
 from typing import IO, Any
+
+import msgpack
 
 from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Periodic
 
@@ -74,6 +79,59 @@ class Ledger(Component):
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+class FrameLedger(Component):
+    """Appends the msgpack encoding of every value arriving on `inp` to its own file in `dir`."""
+
+    execution = OnInput("inp")
+    inp = InPort("any values", policy={"push": "fifo", "buffer": 100_000, "full": "block"})
+    dir = Param(str, "", "directory of the frame files (empty: count only)")
+
+    def on_initialize(self) -> None:
+        """Open this instance's file."""
+        self.taken = 0
+        self._pack = msgpack.Packer().pack
+        self._file: IO[bytes] | None = None
+        if self.dir:
+            os.makedirs(self.dir, exist_ok=True)
+            name = f"{self.instance_name}-{os.getpid()}.msgpack"
+            self._file = open(os.path.join(self.dir, name), "ab")  # noqa: SIM115
+
+    def on_execute(self) -> None:
+        """Take everything queued; write it down."""
+        chunks = []
+        while self.inp.qsize():
+            chunks.append(self._pack(self.inp.get_nowait()))
+        self.taken += len(chunks)
+        if self._file is not None and chunks:
+            self._file.write(b"".join(chunks))
+            self._file.flush()
+
+    def on_finalize(self) -> None:
+        """Close the file."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+def read_frames(directory: str) -> list[bytes]:
+    """The msgpack encodings `FrameLedger` instances wrote to `directory`, file by file in name
+    order, each file in the order its values were taken."""
+    out: list[bytes] = []
+    for name in sorted(os.listdir(directory)):
+        if not name.endswith(".msgpack"):
+            continue
+        with open(os.path.join(directory, name), "rb") as f:
+            data = f.read()
+        unpacker = msgpack.Unpacker(raw=False, max_buffer_size=max(len(data), 1 << 20))
+        unpacker.feed(data)
+        start = 0
+        for _ in unpacker:
+            end = unpacker.tell()
+            out.append(data[start:end])
+            start = end
+    return out
 
 
 SYSTEM = """\

@@ -13,10 +13,12 @@ import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
+
+import msgpack
 
 from sdrpeer.errors import ApiError, SdrpeerError
 
@@ -68,6 +70,50 @@ class AgentClient:
             return json.loads(raw) if raw else None
         except json.JSONDecodeError:
             raise ApiError(f"agent at {self.base} sent something that is not JSON") from None
+
+    def stream(self, path: str, body: Any) -> Iterator[Any]:
+        """POST a JSON body and read the answer as a stream of msgpack values, yielding each as
+        it arrives (a port tap); no time limit while it lasts (the agent ends it)."""
+        data = json.dumps(body).encode()
+        headers = {"Content-Type": "application/json", "Accept": "application/x-msgpack"}
+        with self._open("POST", path, data, headers, None) as response:
+            unpacker = msgpack.Unpacker(raw=False, max_buffer_size=256 * 1024 * 1024)
+            while chunk := response.read1(1 << 20):
+                unpacker.feed(chunk)
+                yield from unpacker
+
+    def upload(self, path: str, chunks: Iterable[bytes]) -> Any:
+        """POST a body sent in chunks as they are produced (chunked transfer encoding; a port
+        feed); the decoded JSON answer."""
+        headers = {"Content-Type": "application/x-msgpack", "Accept": "application/json"}
+        with self._open("POST", path, chunks, headers, None) as response:
+            raw = response.read()
+        try:
+            return json.loads(raw) if raw else None
+        except json.JSONDecodeError:
+            raise ApiError(f"agent at {self.base} sent something that is not JSON") from None
+
+    def _open(
+        self,
+        method: str,
+        path: str,
+        data: bytes | Iterable[bytes],
+        headers: dict[str, str],
+        timeout: float | None,
+    ) -> Any:
+        url = self.base.rstrip("/") + path
+        if self.token:
+            headers["Authorization"] = f"Bearer {self.token}"
+        req = urllib.request.Request(url, data=data, headers=headers, method=method)
+        try:
+            return urllib.request.urlopen(req, timeout=timeout)
+        except urllib.error.HTTPError as exc:
+            message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
+            raise ApiError(message, exc.code) from None
+        except urllib.error.URLError as exc:
+            raise ApiError(unreachable_message(self.base, exc.reason)) from None
+        except (TimeoutError, ConnectionError) as exc:
+            raise ApiError(unreachable_message(self.base, exc)) from None
 
     def members(self) -> list[dict[str, Any]]:
         """GET /v1/members."""

@@ -163,6 +163,16 @@ class ApiError(SdrpeerError):
         """The HTTP status the agent answered with, None when it could not be reached."""
 
 
+class PortToolError(SdrpeerError):
+    """A port tool request (`sdrpeer port ...`) cannot be done as asked: an unknown instance or
+    port, a type mismatch, a value that does not fit the port's type (the message says which)."""
+
+    def __init__(self, message: str, status: int = 400) -> None:
+        super().__init__(message)
+        self.status = status
+        """The HTTP status the API answers it with (400 bad value, 404 unknown, 409 refused)."""
+
+
 class NotAllocator(SdrpeerError):
     """This robot is not the allocator; `leader` is the one it believes in (or None)."""
 

@@ -32,7 +32,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("allocation", {"alloc"}),
     ("recovery", {"recovery"}),
     ("monitoring and the API", {"monitor", "api"}),
-    ("deployment, dashboard, profiling", {"deploy", "dashboard", "profiling"}),
+    ("deployment, dashboard, profiling, port tools", {"deploy", "dashboard", "profiling", "ports"}),
     ("the agent", {"agent"}),
     ("the lab and the simulator", {"lab", "sim"}),
     ("experiments on a lab", {"chaos", "demo"}),

@@ -62,6 +62,7 @@ from sdrpeer.monitor.publish import (
 )
 from sdrpeer.monitor.sources import HostMetrics
 from sdrpeer.monitor.traps import TrapDetector, decode_trap, encode_trap
+from sdrpeer.ports.routes import ROUTES as PORT_ROUTES
 from sdrpeer.record.robot import (
     InstanceInfo,
     LinkBounds,
@@ -270,6 +271,7 @@ class Agent:
             policy=cfg.launch_policy,
         )
         instances.data_keys = data_keys(self.keyring.keys) if self.keyring else ()
+        instances.remote_address = self._remote_data_address
         self.coordinator = Coordinator(
             cfg.name,
             cfg.data_dir,
@@ -352,7 +354,7 @@ class Agent:
             token,
             host,
             port,
-            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES],
+            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES, *PORT_ROUTES],
             peer_tokens=self.peer_tokens,
         )
         self.api_url = self.api_site.name
@@ -538,6 +540,17 @@ class Agent:
     def _wake_coordinator(self) -> None:
         if self.coordinator is not None:
             self.coordinator.wake()
+
+    def _remote_data_address(self, instance: str) -> str | None:
+        """The TCP data address another alive robot's record gives for `instance` (None: no
+        record gives one): where a run-time connection from here reaches it."""
+        for name, record in self._cluster_state().alive.items():
+            if name == self.name:
+                continue
+            for info in record.instances:
+                if info.name == instance and info.data:
+                    return info.data
+        return None
 
     def _cluster_state(self) -> ClusterState:
         """Alive robots (ALIVE or SUSPECT; this one included) with their latest records (made

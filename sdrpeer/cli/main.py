@@ -100,6 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
     from sdrpeer.cli.deploy import add_deploy_parsers  # noqa: PLC0415 - only when parsing
     from sdrpeer.cli.instances import add_instance_parsers  # noqa: PLC0415
     from sdrpeer.cli.lab import add_lab_parsers  # noqa: PLC0415
+    from sdrpeer.cli.port import add_port_parsers  # noqa: PLC0415
     from sdrpeer.cli.profile import add_profile_parser  # noqa: PLC0415 - heavy
     from sdrpeer.cli.system import add_system_parser  # noqa: PLC0415
     from sdrpeer.cli.top import add_top_parser  # noqa: PLC0415
@@ -127,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot_set.set_defaults(func=cmd_robot_set)
     add_instance_parsers(sub, client, as_json)
     add_deploy_parsers(sub, client, as_json)
+    add_port_parsers(sub, client, as_json)
     add_system_parser(sub)
     add_lab_parsers(sub)
     add_top_parser(sub, client)

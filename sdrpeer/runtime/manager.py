@@ -15,7 +15,10 @@ and `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snaps
 `restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when set,
 runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands the
 instance's last state to its successor there. The instance is deactivated first, so it takes no
-frame after that state (the frames it never took are replayed to its successor).
+frame after that state (the frames it never took are replayed to its successor). Connections made
+at run time (`add_connection`: `sdrpeer port connect`, port taps) are kept apart from the desired
+set (sdrpeer.runtime.adhoc) and added to it for each reconcile pass, so a new plan keeps them;
+they go when either end leaves the desired set.
 """
 
 from __future__ import annotations
@@ -44,10 +47,12 @@ from sdrpeer.errors import CommandError, LaunchRefused
 from sdrpeer.launch.composite import parse_composite
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
+from sdrpeer.runtime.adhoc import AdHoc
 from sdrpeer.runtime.config import SupervisorConfig
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import (
     INSTANCE_ACTIONS,
+    ConnectionSpec,
     InstanceSpec,
     connection_to_json,
     desired_to_json,
@@ -93,6 +98,10 @@ class InstanceManager:
         """What new hosts authenticate data connections with (`set_data_keys` on rotation)."""
         self.reconciler = Reconciler()
         self._desired: dict[str, InstanceSpec] = {}
+        self._adhoc = AdHoc()
+        self.remote_address: Callable[[str], str | None] = lambda instance: None
+        """The data address another robot's record gives for an instance (the agent sets it),
+        for run-time connections to receivers there."""
         self._sups: dict[str, Supervisor] = {}
         self._wake = asyncio.Event()
         self._loop_task: asyncio.Task[None] | None = None
@@ -114,14 +123,57 @@ class InstanceManager:
         new = {} if replace_all else dict(self._desired)
         new.update({s.name: s for s in specs})
         self._desired = new
+        self._adhoc.prune(new)
         self.wake()
         return sorted(new)
 
     def remove(self, name: str) -> bool:
-        """Take an instance out of the desired set (it is stopped); False if it was not there."""
+        """Take an instance out of the desired set (it is stopped); False if it was not there.
+        Run-time connections from or to it go with it."""
         found = self._desired.pop(name, None) is not None
+        self._adhoc.prune(self._desired)
         self.wake()
         return found
+
+    # ----------------------------------------------------------------- run-time connections
+    def add_connection(self, sender: str, conn: ConnectionSpec, *, remote: bool = False) -> None:
+        """Connect one of `sender`'s OutPorts at run time, beside the plan's connections
+        (`remote`: to a receiver on another robot, addressed by `remote_address`; KeyError:
+        `sender` is not desired; ValueError: the id is taken, by the plan or another)."""
+        spec = self._desired.get(sender)
+        if spec is None:
+            raise KeyError(sender)
+        if any(c.id == conn.id for c in spec.connections):
+            raise ValueError(f"connection {conn.id!r} exists already (the plan's)")
+        self._adhoc.add(sender, conn, remote=remote)
+        self.wake()
+
+    def remove_connection(self, conn_id: str) -> bool:
+        """Undo `add_connection`; False when no run-time connection has that id."""
+        found = self._adhoc.remove(conn_id)
+        self.wake()
+        return found
+
+    def adhoc_connections(self) -> list[tuple[str, ConnectionSpec]]:
+        """(sender, connection) of every run-time connection."""
+        return self._adhoc.items()
+
+    def hello_ports(self, name: str) -> dict[str, list[str]] | None:
+        """The ports a running instance's host declared ({"in": [...], "out": [...]}), None
+        while it is not running."""
+        sup = self._sups.get(name)
+        return None if sup is None or sup.hello is None else dict(sup.hello.ports)
+
+    def data_address(self, name: str) -> str | None:
+        """Where a sender on this robot reaches the instance's data server, None while it has
+        none."""
+        sup = self._sups.get(name)
+        return None if sup is None else sup.data_address()
+
+    def made_connections(self, name: str) -> dict[str, tuple[ConnectionSpec, str]]:
+        """The connections the instance's host has made: id -> (spec, address it sends to)."""
+        sup = self._sups.get(name)
+        return {} if sup is None else dict(sup.connections)
 
     async def act(self, name: str, action: str) -> dict[str, Any]:
         """activate/deactivate (changes `desired`), reset and step (the commands), restart (the
@@ -198,15 +250,16 @@ class InstanceManager:
 
     def reconcile_once(self) -> list[Action]:
         """One reconcile pass: plan and launch the actions."""
+        desired = self._adhoc.merged(self._desired, self.remote_address)
         for name, sup in list(self._sups.items()):
-            spec = self._desired.get(name)
+            spec = desired.get(name)
             if spec is None and sup.state == ProcessState.STOPPED and not sup.running:
                 del self._sups[name]
             elif spec is not None and spec.same_process(sup.spec):
                 sup.spec = spec  # lifecycle or links changed: the running host stays
         observed = {name: observe(sup) for name, sup in self._sups.items()}
         now = asyncio.get_running_loop().time()
-        actions = self.reconciler.plan(now, self._desired, observed)
+        actions = self.reconciler.plan(now, desired, observed)
         for action in actions:
             task = asyncio.create_task(self._execute(action))
             self._actions.add(task)
@@ -356,6 +409,10 @@ class InstanceManager:
     def port_counters(self) -> dict[str, dict[str, dict[str, int]]]:
         """Instance -> port -> counters, from each running host's last heartbeat."""
         return {name: sup.ports for name, sup in self._sups.items() if sup.ports}
+
+    def port_rates(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Instance -> port -> frames and bytes per second between its last two heartbeats."""
+        return {name: sup.port_rates for name, sup in self._sups.items() if sup.port_rates}
 
     def infos(self) -> tuple[InstanceInfo, ...]:
         """What the robot's gossip record says about its instances."""

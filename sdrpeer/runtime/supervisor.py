@@ -66,6 +66,7 @@ from sdrpeer.runtime.launch import (
     remove_dir,
     wait_exit,
 )
+from sdrpeer.runtime.rates import port_rates
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
 from sdrpeer.vocabulary import InstanceState, LifecycleState, ProcessState
 
@@ -112,6 +113,8 @@ class Supervisor:
         self.hello: Hello | None = None
         """The running host's hello (None until it said it)."""
         self.ports: dict[str, dict[str, int]] = {}
+        self.port_rates: dict[str, dict[str, float]] = {}
+        """Port -> frames and bytes per second, in and out, between the last two heartbeats."""
         self.data_plane: dict[str, int] = {}
         """The host's data server counters from its last heartbeat (accepted, rejected,
         refused_auth, deliver_error, shm, acked)."""
@@ -134,6 +137,7 @@ class Supervisor:
         self._run_dir: Path | None = None
         self._watchdog: asyncio.TimerHandle | None = None
         self._heard = 0.0  # loop time of the host's last message
+        self._beat_at = 0.0  # loop time of its last heartbeat
         self._suspect_since: float | None = None  # the watchdog found it silent (to confirm)
         self._kill_reason: str | None = None
 
@@ -309,6 +313,7 @@ class Supervisor:
             child.close()
         self._proc, self.pid, self._kill_reason = proc, proc.pid, None
         self.hello, self.ports, self.connections, self.start_latency = None, {}, {}, None
+        self.port_rates = {}
         self.data_plane = {}
         try:
             self._ps = psutil.Process(proc.pid)
@@ -339,6 +344,7 @@ class Supervisor:
             await self._channel.close()
         self._channel, self._ps, self.pid = None, None, None
         self.connections, self.ports, self.hello = {}, {}, None
+        self.port_rates = {}
         self.data_plane = {}
         self.cpu_pct, self.rss = 0.0, 0
         log.info("%s: host %s", self.name, exit_text(rc))
@@ -465,7 +471,10 @@ class Supervisor:
         self._problem(problem)
 
     def _on_heartbeat(self, msg: Heartbeat) -> None:
-        self._heard = asyncio.get_running_loop().time()
+        now = asyncio.get_running_loop().time()
+        if self.ports:
+            self.port_rates = port_rates(self.ports, msg.ports, now - self._beat_at)
+        self._heard = self._beat_at = now
         self.ports = msg.ports
         self.data_plane = msg.data or {}
 
