@@ -10,8 +10,9 @@ over the port's declared policy, `full: block` left out: nothing acknowledges), 
 `push: new` and `push: skip`, which the InPort applies per connection. Nothing is sent or
 encrypted, and an untyped value is handed over as it is; a typed OutPort's wire form (a tuple of
 fields, or a `WireBlob` carrying an image) is made what a socket would deliver (msgpack arrays
-as lists), so a typed InPort takes it exactly as from another host; there is nothing to repoint (both ends live and move together), and `close`
-forgets the connection at the InPort (frames already queued stay readable).
+as lists), so a typed InPort takes it exactly as from another host. There is nothing to
+repoint (both ends live and move together), and `close` forgets the connection at the InPort
+(frames already queued stay readable).
 """
 
 from __future__ import annotations
