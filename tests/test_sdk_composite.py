@@ -269,3 +269,7 @@ def test_a_composite_is_checked_when_it_is_built() -> None:
         composite_class("C", [("A", inner)], Stepped())
     with pytest.raises(ComponentError, match="not an identifier"):
         composite_class("C", [("A.b", Source)], Stepped())
+    from components.planner import PathPlanner  # noqa: PLC0415 - only this check needs it
+
+    with pytest.raises(ComponentError, match="declares service ports \\(planner\\)"):
+        composite_class("C", [("A", Source), ("P", PathPlanner)], Stepped())

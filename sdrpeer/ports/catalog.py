@@ -1,10 +1,12 @@
 """The ports of the instances this agent hosts: names, directions, message types, connections.
 
 How it works: a port is named `Instance.port` (`parse_ref`; the instance name may itself hold
-dots, the port is what follows the last one). What a port is comes from the instance's class
-when its launcher is `python` (imported once per target, the way `sdrpeer system check` does:
-sdrpeer.system.classes; that gives the message type of typed ports), else from the ports its
-running host declared in its hello (direction only: such a port is taken as untyped). A class is
+dots, the port is what follows the last one, except that `Catalog.split` first looks for an
+instance it knows: a composite member's port holds a dot itself, `Perception.Cam.image`).
+What a port is comes from the instance's class when its launcher is `python` (imported once per
+target, the way `sdrpeer system check` does: sdrpeer.system.classes; that gives the message type
+of typed ports), else from the ports its running host declared in its hello (direction only:
+such a port is taken as untyped). A class is
 imported in a worker thread (`warm`, before a request uses the catalog), so a slow import does not
 hold up the agent's event loop; the launch policy already let the target run here. `Catalog`
 answers for the instances in the agent's desired set; an instance it does not host is a
@@ -114,9 +116,24 @@ class Catalog:
             for name in sorted(said.get(kind, []))
         }
 
+    def split(self, ref: str, where: str = "port") -> tuple[str, str]:
+        """(instance, port) of `Instance.port`, split after the longest instance name this agent
+        hosts or the cluster's records list (a composite's member ports hold a dot:
+        `Perception.Cam.image`), else at the last dot; PortToolError when it has no such form."""
+        instance, port = parse_ref(ref, where)
+        text = str(ref)
+        desired = self.manager.desired()
+        cut = len(instance)
+        while cut > 0:
+            head = text[:cut]
+            if head in desired or self.elsewhere(head) is not None:
+                return head, text[cut + 1 :]
+            cut = text.rfind(".", 0, cut)
+        return instance, port
+
     def port(self, ref: str, direction: str | None = None, where: str = "port") -> PortFacts:
         """The port `Instance.port` names; PortToolError when unknown or of the other direction."""
-        instance, name = parse_ref(ref, where)
+        instance, name = self.split(ref, where)
         ports = self.ports_of(instance)
         facts = ports.get(name)
         if facts is None:
@@ -133,7 +150,7 @@ class Catalog:
         owners: dict[str, str | None] = {}
         desired = self.manager.desired()
         for i, ref in enumerate(refs):
-            instance, _ = parse_ref(ref, f"ports[{i}]")
+            instance, _ = self.split(ref, f"ports[{i}]")
             if instance in desired:
                 owners[self.robot] = None
                 continue

@@ -134,8 +134,6 @@ async def get_ports(request: web.Request) -> web.Response:
 async def post_connect(request: web.Request) -> web.Response:
     """POST /v1/ports/connect: a run-time connection from an OutPort to an InPort (on this
     robot, or on another: its agent is asked what the port is)."""
-    from sdrpeer.ports.catalog import parse_ref  # noqa: PLC0415 - see TYPE_CHECKING above
-
     body = await json_object(request, '{"from": "A.out", "to": "B.in"}')
     catalog = await _catalog(request)
     try:
@@ -154,7 +152,7 @@ async def post_connect(request: web.Request) -> web.Response:
                 into.type_id,
             )
         else:
-            into_ref, into_instance, into_port = to, *parse_ref(to, "to")
+            into_ref, into_instance, into_port = to, *catalog.split(to, "to")
             into_type = await _remote_in_port(request, remote, into_instance, into_port)
         if out.type_id is not None and into_type is not None and out.type_id != into_type:
             raise PortToolError(

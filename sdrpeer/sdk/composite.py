@@ -280,6 +280,12 @@ def composite_class(
             raise ComponentError(f"composite {name}: member {member}: not a Component class")
         if issubclass(mcls, Composite):
             raise ComponentError(f"composite {name}: member {member}: composites do not nest")
+        if mcls._sdk_services:
+            raise ComponentError(
+                f"composite {name}: member {member}: declares service ports "
+                f"({', '.join(mcls._sdk_services)}), which a composite does not carry yet: "
+                "run it as a component of its own"
+            )
         seen.add(member)
     cls: type[Composite] = type(
         name, (Composite,), {"execution": execution, "members": tuple(members)}
