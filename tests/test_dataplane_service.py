@@ -27,6 +27,7 @@ from sdrpeer.sdk import (
     ServiceCaller,
     ServiceError,
     ServiceProviderRuntime,
+    ServiceRequestError,
     ServiceTimeout,
     ServiceUnavailable,
 )
@@ -278,3 +279,42 @@ async def test_a_repoint_while_dialing_sends_the_next_call_to_the_new_address(
             writer.close()
         silent.close()
         await silent.wait_closed()
+
+
+async def test_closing_a_binding_while_it_dials_fails_the_call_as_unavailable() -> None:
+    """Not a cancel: that would end the caller's execution context without an error."""
+    accepted: list[asyncio.StreamWriter] = []
+
+    async def never_answer(_: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        accepted.append(writer)
+
+    silent = await asyncio.start_server(never_answer, "127.0.0.1", 0)
+    port = silent.sockets[0].getsockname()[1]
+    caller = EchoCaller("Caller").consumer("svc")
+    client = ServiceClient(
+        "b1", f"tcp://127.0.0.1:{port}", "svc", "Caller.svc", ECHO.id,
+        auth=DataAuth([KEY]), dial_timeout=10.0,
+    )  # fmt: skip
+    caller.bind(client)
+    try:
+        call = asyncio.ensure_future(caller.call("echo", 1, timeout=10))
+        await until_async("the dial", lambda: client.counters["dials"] == 1)
+        await client.close()
+        with pytest.raises(ServiceUnavailable, match="closed while connecting"):
+            await call
+        assert caller.unavailable == 1
+    finally:
+        for writer in accepted:
+            writer.close()
+        silent.close()
+        await silent.wait_closed()
+
+
+async def test_an_argument_that_cannot_be_sent_is_a_request_error(
+    providers: Callable[..., Any],
+) -> None:
+    provider = await providers()
+    caller, _ = caller_for(provider.tcp)
+    with pytest.raises(ServiceRequestError, match="unencodable"):
+        await caller.call("echo", object(), timeout=2)
+    assert await caller.call("echo", "fine", timeout=2) == "fine"  # the binding is intact

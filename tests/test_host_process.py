@@ -49,8 +49,8 @@ def wait_log(path: Path, text: str, timeout: float = 5.0) -> str:
         (
             FX,
             "defines several Component subclasses "
-            "(Counter, Crasher, Faulty, Fragile, Hoarder, Laggard, Recorder, Reporter, Sleeper,"
-            " Stubborn, Tally, Tunable)",
+            "(Counter, Crasher, EchoCaller, EchoService, Faulty, Fragile, Hoarder, Laggard,"
+            " Recorder, Reporter, Sleeper, Stubborn, Tally, Tunable)",
         ),
         ("tests/no_such_file.py", "no such file"),
         ("tests/hostctl.py", "defines no subclass of Component"),

@@ -165,3 +165,8 @@ def test_a_composite_runs_where_python_does_each_member_held_to_allow_targets() 
     assert narrow.refusal("composite", "stepped;Cam=components.camera:Camera") is None
     no_python = LaunchPolicy(launchers=("exec",))
     assert "launcher 'composite' is off" in (no_python.refusal("composite", target) or "")
+    only_composites = LaunchPolicy(launchers=("composite",), targets=("components.*",))
+    why = only_composites.refusal("composite", target)  # allowed by name, members still held
+    assert why is not None
+    assert why.startswith("composite member Spy: python target 'evil.mod:Spy'")
+    assert only_composites.refusal("composite", "stepped;Cam=components.camera:Camera") is None

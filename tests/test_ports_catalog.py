@@ -42,3 +42,14 @@ def test_an_unknown_instance_is_split_at_the_last_dot_and_a_bad_form_refused() -
     for bad in ("image", "Cam.", "Cam.1x"):
         with pytest.raises(PortToolError, match=r"expected Instance\.port"):
             catalog().split(bad)
+
+
+def test_a_composites_member_ports_keep_their_message_types() -> None:
+    from sdrpeer.ports.catalog import _class_ports  # noqa: PLC0415 - the class reading itself
+
+    target = "stepped;Pub=tests.typed_fixture:PosePub;Rec=tests.typed_fixture:PoseRec"
+    ports = _class_ports("composite", target)
+    assert ports is not None
+    kinds = {name: (kind, None if m is None else m.name) for name, (kind, m) in ports.items()}
+    assert kinds["Pub.pose"] == ("out", "sdrpeer/Pose")
+    assert kinds["Rec.pose"] == ("in", "sdrpeer/Pose")

@@ -69,3 +69,7 @@ def test_a_remote_receiver_is_addressed_now_or_pending():
     assert (far.to_addr, far.pending) == ("tcp://10.0.0.2:4000", False)
     [_, far] = adhoc.merged(DESIRED, lambda instance: None)["A"].connections
     assert (far.to_addr, far.pending) == (None, True)
+    # the receiver moved to this robot: resolved here, not pending for ever on another's record
+    here = {**DESIRED, "Far": spec("Far")}
+    [_, far] = adhoc.merged(here, addresses.get)["A"].connections
+    assert (far.to_addr, far.pending) == (None, False)

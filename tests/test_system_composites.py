@@ -93,6 +93,17 @@ ERRORS: list[tuple[str, str, str]] = [
         "sys.yaml:6: field 'composites[0].execution': expected stepped or {periodic: HZ}",
     ),
     (
+        "missing name, its members' ports connected",
+        GOOD.replace("  - name: Vision\n", "  - nombre: Vision\n"),
+        "sys.yaml:5: field 'composites[0].name': missing (required)",
+    ),
+    (
+        "missing members, their ports connected",
+        GOOD.split("    members:", maxsplit=1)[0]
+        + "connections:\n  - {from: Cam.image, to: Ctl.alarm}\n",
+        "sys.yaml:5: field 'composites[0].members': missing (required)",
+    ),
+    (
         "missing context",
         GOOD.replace("    execution: {periodic: 20}\n", ""),
         "sys.yaml:5: field 'composites[0].execution': missing (required)",

@@ -59,6 +59,7 @@ OTHER_MEANINGS: dict[str, dict[str, str]] = {
     "sdrpeer/election/rules.py": {"left": "an election trigger"},
     "sdrpeer/recovery/plugins.py": {"standby": "the recovery action 'promote a standby'"},
     "sdrpeer/system/components.py": {"standby": "the `standby:` block of a system file"},
+    "sdrpeer/system/composites.py": {"standby": "the `standby:` block of a composite"},
     "sdrpeer/lab/files.py": {"stopped": "what `lab down` says of an agent process"},
     "sdrpeer/cli/lab.py": {"stopped": "what `lab status` says of an agent process"},
 }

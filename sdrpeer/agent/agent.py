@@ -78,7 +78,7 @@ from sdrpeer.record.robot import (
     state_to_wire,
 )
 from sdrpeer.runtime.overflow import OverflowWatch
-from sdrpeer.vocabulary import MemberState
+from sdrpeer.vocabulary import LifecycleState, MemberState
 
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
@@ -543,14 +543,16 @@ class Agent:
 
     def _remote_data_address(self, instance: str) -> str | None:
         """The TCP data address another alive robot's record gives for `instance` (None: no
-        record gives one): where a run-time connection from here reaches it."""
+        record gives one): where a run-time connection from here reaches it. While it moves,
+        two records may list it: the one running it ACTIVE wins."""
+        found: list[tuple[bool, str]] = []
         for name, record in self._cluster_state().alive.items():
             if name == self.name:
                 continue
             for info in record.instances:
                 if info.name == instance and info.data:
-                    return info.data
-        return None
+                    found.append((info.state == LifecycleState.ACTIVE, info.data))
+        return max(found, key=lambda f: f[0])[1] if found else None
 
     def _cluster_state(self) -> ClusterState:
         """Alive robots (ALIVE or SUSPECT; this one included) with their latest records (made

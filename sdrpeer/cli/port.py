@@ -27,6 +27,7 @@ import yaml
 from sdrpeer.cli.common import client_for, parse_assignment, print_json
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError, ConfigError, SdrpeerError
+from sdrpeer.vocabulary import MemberState
 
 RECORD_POLICY = {"push": "fifo", "full": "overwrite", "buffer": 256}
 """A recording keeps every frame in order unless the agent falls 256 behind (then the oldest
@@ -47,7 +48,7 @@ def cmd_list(args: argparse.Namespace) -> int:
     else:
         for member in client.members():
             api = member.get("api")
-            if member.get("state") not in ("alive", "suspect") or not api:
+            if member.get("state") not in (MemberState.ALIVE, MemberState.SUSPECT) or not api:
                 continue
             try:
                 rows.extend(AgentClient(str(api), client.token).get("/v1/ports"))

@@ -51,7 +51,7 @@ class DataServer:
         self,
         resolve: Callable[[str], InPortLike | None],
         *,
-        tcp_host: str = "127.0.0.1",
+        tcp_host: str | None = "127.0.0.1",
         tcp_port: int = 0,
         unix_path: str | None = None,
         max_frame: int = DEFAULT_MAX_FRAME,
@@ -91,14 +91,16 @@ class DataServer:
         self._last_log: dict[str, float] = {}
 
     async def start(self) -> None:
-        """Listen on TCP (port 0: a free port) and, if configured, on the Unix socket."""
+        """Listen on TCP (port 0: a free port; `tcp_host` None: not at all) and, if configured,
+        on the Unix socket."""
         loop = asyncio.get_running_loop()
-        tcp = await loop.create_server(
-            lambda: Receiver(self), self.tcp_host, self.tcp_port, reuse_address=True
-        )
-        self._servers.append(tcp)
-        port = tcp.sockets[0].getsockname()[1]
-        self._addresses["tcp"] = format_tcp(self.tcp_host, port)
+        if self.tcp_host is not None:
+            tcp = await loop.create_server(
+                lambda: Receiver(self), self.tcp_host, self.tcp_port, reuse_address=True
+            )
+            self._servers.append(tcp)
+            port = tcp.sockets[0].getsockname()[1]
+            self._addresses["tcp"] = format_tcp(self.tcp_host, port)
         if self.unix_path is not None:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(self.unix_path)

@@ -221,7 +221,16 @@ class ServiceClient:
         if self._dialing is None:
             self._dialing = asyncio.ensure_future(self._dial(self.to))
             self._dialing.add_done_callback(_retrieve)
-        return await asyncio.shield(self._dialing)
+        dialing = self._dialing
+        try:
+            return await asyncio.shield(dialing)
+        except asyncio.CancelledError:
+            task = asyncio.current_task()
+            if not dialing.cancelled() or (task is not None and task.cancelling()):
+                raise  # the caller itself is being cancelled
+            # the dial was (`close`): a ConnectionError for the caller, not a cancel that would
+            # end its component's execution context
+            raise ConnectionError("the binding was closed while connecting") from None
 
     async def _dial(self, to: str) -> Link:
         self.counters["dials"] += 1

@@ -57,6 +57,10 @@ class LaunchPolicy:
             )
         if launcher == "python" and isinstance(target, str):
             return self._target_refusal(target)
+        if launcher == "composite":  # allowed by name: its members are still python classes
+            if not isinstance(target, str):
+                return f"composite target {target!r}: expected a string"
+            return self._members_refusal(target)
         return None
 
     def _target_refusal(self, target: str) -> str | None:

@@ -6,8 +6,8 @@ instance of another robot is sent on, once, to that robot's API with this agent'
 (derived from the cluster key: every agent accepts it) and a `X-Sdrpeer-Forwarded` header, so a
 request is never passed on twice; the answer comes back as it is. A tap's stream and a feed's
 body are relayed chunk by chunk as they come (`relay_stream`, `relay_body`); the relay of a tap
-checks every `poll` seconds that its own client is still there, and ends the upstream request
-when it is not (the other agent then removes its tap).
+or of an inject checks every `poll` seconds that its own client is still there, and ends the
+upstream request when it is not (the other agent then removes its tap, or stops injecting).
 """
 
 from __future__ import annotations
@@ -44,9 +44,14 @@ async def _passed_back(resp: aiohttp.ClientResponse) -> web.Response:
     return web.Response(body=body, status=resp.status, content_type="application/json")
 
 
-async def relay_json(api: str, path: str, token: str, body: Any) -> web.Response:
-    """POST a JSON body to the other agent; its answer."""
-    try:
+async def relay_json(
+    request: web.Request, api: str, path: str, token: str, body: Any, *, poll: float = 0.5
+) -> web.Response:
+    """POST a JSON body to the other agent; its answer. While it is awaited (an inject may run
+    for long), our client is checked every `poll` seconds: once it has left, the upstream
+    request is ended, so the other agent stops too (it checks its own client the same way)."""
+
+    async def ask() -> web.Response:
         async with (
             _session() as session,
             session.post(
@@ -54,8 +59,23 @@ async def relay_json(api: str, path: str, token: str, body: Any) -> web.Response
             ) as resp,
         ):
             return await _passed_back(resp)
+
+    upstream = asyncio.ensure_future(ask())
+    try:
+        while not upstream.done():
+            await asyncio.wait((upstream,), timeout=poll)
+            transport = request.transport
+            if not upstream.done() and (transport is None or transport.is_closing()):
+                upstream.cancel()  # our client left: end the request upstream
+                with contextlib.suppress(asyncio.CancelledError):
+                    await upstream
+                return web.Response(status=499)
+        return upstream.result()
     except (aiohttp.ClientError, TimeoutError) as e:
         return web.json_response({"error": f"cannot reach {api}: {e}"}, status=502)
+    finally:
+        if not upstream.done():  # we were cancelled ourselves
+            upstream.cancel()
 
 
 async def relay_stream(

@@ -232,7 +232,7 @@ async def _relay_json(
 ) -> web.Response:
     from sdrpeer.ports.forward import relay_json  # noqa: PLC0415 - see TYPE_CHECKING above
 
-    return await relay_json(relay[0], request.path, relay[1], body)
+    return await relay_json(request, relay[0], request.path, relay[1], body)
 
 
 def _header(facts: list[PortFacts], robot: str) -> dict[str, Any]:
@@ -446,12 +446,11 @@ async def post_feed(request: web.Request) -> web.Response:
         if whole != received:
             raise PortToolError(f"frame {frames + 1}: the body ends inside it")
     except PortToolError as exc:
-        await injector.close()
         return _fail(exc)
     except (msgpack.UnpackException, ValueError) as exc:
-        await injector.close()
         return json_error(400, f"frame {frames + 1}: not msgpack: {exc}")
-    await injector.close()
+    finally:  # whatever ended the body (the client gone mid-way too): no sender left behind
+        await injector.close()
     sent = _per_ref(injector, first, targets_of)
     return web.json_response({"frames": frames, "sent": dict(zip(refs, sent, strict=True))})
 

@@ -71,8 +71,9 @@ class Tap:
         self._wake = asyncio.Event()
         self.sinks = [TapSink(i, self._frames, self._wake, clock) for i in range(ports)]
         self._dir = tempfile.mkdtemp(prefix="sdrpeer-tap-")
-        self.server = DataServer(
+        self.server = DataServer(  # a Unix socket in a private directory, no TCP listener
             self._resolve,
+            tcp_host=None,
             unix_path=os.path.join(self._dir, "tap.sock"),
             auth=DataAuth(keys),
         )
@@ -101,8 +102,12 @@ class Tap:
         return sum(s.received for s in self.sinks) - kept - self._taken
 
     async def start(self) -> None:
-        """Listen."""
-        await self.server.start()
+        """Listen (a failure leaves nothing behind: the directory goes too)."""
+        try:
+            await self.server.start()
+        except BaseException:
+            await self.close()
+            raise
 
     async def next(self, within: float) -> TapFrame | None:
         """The oldest frame not taken yet, waiting up to `within` s for one (None: none came)."""

@@ -9,7 +9,8 @@ receiver is an instance of this robot (no `to_addr`) that left it: a connection 
 end stops. A connection with `to_addr` (a tap) goes with its sender or when removed. A *remote*
 one (its receiver on another robot) is addressed afresh for each pass by `resolve` (the data
 address that robot's record gives now; unknown: `pending`, so one made stays as it is and is
-re-pointed when the receiver moves or restarts); it goes with its sender or when removed.
+re-pointed when the receiver moves or restarts; moved to this robot: resolved here like a
+plan's connection); it goes with its sender or when removed.
 """
 
 from __future__ import annotations
@@ -76,7 +77,9 @@ class AdHoc:
             if spec is None or any(c.id == cid for c in spec.connections):
                 continue
             conn = made
-            if cid in self._remote:
+            if cid in self._remote and made.to_instance in desired:
+                conn = replace(made, to_addr=None)  # the receiver moved here: resolved locally
+            elif cid in self._remote:
                 addr = resolve(made.to_instance)
                 conn = replace(made, to_addr=addr, pending=addr is None)
             out[sender] = replace(spec, connections=(*spec.connections, conn))

@@ -41,6 +41,7 @@ from sdrpeer.sdk.services import (
     ServiceInfo,
     ServiceProvider,
     ServiceProviderRuntime,
+    ServiceRequestError,
     ServiceTimeout,
     ServiceUnavailable,
 )
@@ -101,6 +102,7 @@ __all__ = [
     "ServiceInfo",
     "ServiceProvider",
     "ServiceProviderRuntime",
+    "ServiceRequestError",
     "ServiceTimeout",
     "ServiceUnavailable",
     "Stepped",

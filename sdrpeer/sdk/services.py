@@ -19,7 +19,8 @@ provider's host refuses a consumer whose id differs, and so does `sdrpeer system
   `kind` and `message`), `ServiceTimeout` (no reply in time; the call may still run on the
   provider), `ServiceUnavailable` (not bound, the provider unreachable or not ACTIVE, or the
   link lost or re-pointed while the call was in flight: it is not retried, since the provider
-  may have run it).
+  may have run it), `ServiceRequestError` (the call's argument cannot be encoded or its request
+  is over the maximum frame: nothing was sent).
 """
 
 from __future__ import annotations
@@ -31,9 +32,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final, Literal, Protocol, TypeVar, overload
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import MalformedError, SdrpeerError
 from sdrpeer.sdk.errors import ComponentError, PortError
 from sdrpeer.sdk.typed import PortTypeError, port_message
+from sdrpeer.vocabulary import LifecycleState
 
 try:  # the C module itself: `hashlib` would load OpenSSL into every host (sdrpeer.host.lean)
     from _blake2 import blake2b
@@ -50,6 +52,7 @@ __all__ = [
     "ServiceInfo",
     "ServiceProvider",
     "ServiceProviderRuntime",
+    "ServiceRequestError",
     "ServiceTimeout",
     "ServiceUnavailable",
 ]
@@ -77,6 +80,10 @@ class ServiceError(ServiceCallError):
         self.method = method
         self.kind = kind
         self.message = message
+
+
+class ServiceRequestError(ServiceCallError):
+    """The request was not sent: its argument cannot be encoded, or it is over the maximum frame."""
 
 
 class ServiceTimeout(ServiceCallError):
@@ -197,7 +204,7 @@ class ServiceProviderRuntime:
         self.handlers = dict(handlers)
         self.serving = False
         """True while the component is ACTIVE (the host sets it): calls are served only then."""
-        self.state = "CREATED"
+        self.state: str = LifecycleState.CREATED
         """The component's lifecycle state, for the error reply while not serving."""
         self.calls = 0
         """Requests answered (ok or not)."""
@@ -438,6 +445,8 @@ class ServiceCaller:
             raise ServiceTimeout(f"{self.name}.{method}: no reply within {timeout:g} s") from None
         except (ConnectionError, OSError) as exc:
             raise ServiceUnavailable(f"{self.name}.{method}: {exc}") from None
+        except MalformedError as exc:  # the data plane's FrameError: nothing was sent
+            raise ServiceRequestError(f"{self.name}.{method}: {exc}") from None
         if ok:
             return value
         kind, message = _error(value)

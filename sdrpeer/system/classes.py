@@ -3,12 +3,13 @@
 How it works: for the `python` launcher (`package.module:Class`) the class is imported the way a
 host imports it (sdrpeer.host.loader) and its declared in- and out-ports (with the message type
 of each typed port), service ports (with their interface ids) and params are read from the
-class, without creating an instance. Other launchers (`script`, `exec`, plugins) run code we do
-not import at load time: `inspect_target` returns None for them and their ports and params are
-taken on trust (the host reports them when it starts). A class that cannot be imported is a
-`ValueError` naming the target and the reason. `check_params` converts each param with the
-class's own `Param.convert` (types, choices, min and max), so a bad value fails at load time
-rather than when the host starts.
+class, without creating an instance; a `composite` target's class is built from its members'
+the way its host builds it (`Member.port` ports). Other launchers (`script`, `exec`, plugins)
+run code we do not import at load time: `inspect_target` returns None for them and their ports
+and params are taken on trust (the host reports them when it starts). A class that cannot be
+imported is a `ValueError` naming the target and the reason. `check_params` converts each param
+with the class's own `Param.convert` (types, choices, min and max), so a bad value fails at load
+time rather than when the host starts.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.host.loader import load_component_class
+from sdrpeer.host.loader import load_component_class, load_composite_class
 from sdrpeer.sdk import Component
 
 
@@ -67,7 +68,13 @@ class ClassInfo:
 
 
 def inspect_target(launcher: str, target: str | tuple[str, ...]) -> ClassInfo | None:
-    """The class a `python` launcher target names (None for other launchers)."""
+    """The class a `python` launcher target names, or the class a `composite` target builds
+    (None for other launchers)."""
+    if launcher == "composite" and isinstance(target, str):
+        try:
+            return class_info(load_composite_class("Composite", target))
+        except SdrpeerError as e:
+            raise ValueError(f"cannot build the composite: {e}") from None
     if launcher != "python" or not isinstance(target, str):
         return None
     try:

@@ -98,7 +98,13 @@ def _composite(
     hz = p.get(fields, "execution", where, _execution, MISSING)
     read = _members(p, fields.get("members"), f"{where}.members", base_dir=base_dir)
     parts = [(m, e) for m, e, f in read if _fits(p, (m, e, f), into=name, known=known)]
-    if len(p.items) != errors_before or entry.definition is None or hz is MISSING:
+    if (
+        len(p.items) != errors_before
+        or entry.definition is None
+        or hz is MISSING
+        or name is MISSING  # a missing required key was recorded by `mapping` already
+        or "members" not in fields
+    ):
         return name, ComponentEntry(node, where, None, None)
     context = Stepped() if hz is None else Periodic(hz=hz)
     try:

@@ -70,8 +70,8 @@ def read_connections(
         elif service:
             bound[sender] = item.start_mark.line + 1
         traffic: float | None = p.get(fields, "traffic", where, parse_bandwidth, None)
-        if len(p.items) != before:
-            continue
+        if len(p.items) != before or MISSING in (*sender, *receiver):
+            continue  # (an end in a composite that is in error was reported there)
         entry = components[sender[0]].definition
         if traffic is None and entry is not None and not service:
             traffic = entry.requires.port_rate(sender[1])
@@ -134,6 +134,8 @@ def _end(
         p.add(node, field, message)
         return MISSING, MISSING
     if member is not None:
+        if member.composite not in components:  # its composite is in error (recorded there)
+            return MISSING, MISSING
         return member.composite, f"{comp}.{port}"
     return comp, port
 
