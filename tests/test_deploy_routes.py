@@ -12,7 +12,7 @@ from sdrpeer.alloc.result import Infeasible, Unplaced
 from sdrpeer.api.app import build_app
 from sdrpeer.deploy.routes import ROUTES
 from sdrpeer.deploy.view import ClusterState
-from sdrpeer.system.model import SystemDef
+from sdrpeer.system.model import ComponentDef, ConnectionDef, SystemDef
 from tests.test_deploy_core import SYSTEM, record
 from tests.test_runtime_api import View as AgentStub
 
@@ -44,10 +44,12 @@ class View(AgentStub):
         self.coordinator = coordinator
 
 
-async def post_deploy(heard: frozenset[str]) -> tuple[int, dict[str, Any]]:
+async def post_deploy(
+    heard: frozenset[str], system: SystemDef = SYSTEM
+) -> tuple[int, dict[str, Any]]:
     app = build_app(View(Coordinator(heard)), token=TOKEN, extra_routes=ROUTES)
     async with TestClient(TestServer(app)) as client:
-        resp = await client.post("/v1/deploy", json={"system": SYSTEM.to_json()}, headers=AUTH)
+        resp = await client.post("/v1/deploy", json={"system": system.to_json()}, headers=AUTH)
         return resp.status, await resp.json()
 
 
@@ -63,3 +65,26 @@ async def test_a_robot_alive_without_its_record_makes_it_retry_not_refuse() -> N
     assert code == 503  # the CLI retries 503 (sdrpeer.client.post_when_elected)
     assert "r2 alive but not heard from in full" in body["error"]
     assert "r1: already holds A" in body["error"]  # the report as it stands now
+
+
+async def test_a_document_whose_connections_the_classes_refuse_is_refused() -> None:
+    """A system document posted as it is (no loader saw it) is checked against the classes."""
+    publisher = ComponentDef("Pub", "python", "tests.typed_fixture:PosePub")
+    images = ComponentDef("Rec", "python", "tests.typed_fixture:ImageRec")
+    caller = ComponentDef("Caller", "python", "components.planner:PlanCaller")
+    elsewhere = ComponentDef("Far", "python", "not_on_this_robot.mod:Thing")
+    system = SystemDef(
+        "s",
+        (publisher, images, caller, elsewhere),
+        (
+            ConnectionDef("Pub", "pose", "Rec", "image"),
+            ConnectionDef("Caller", "planner", "Rec", "image"),
+            ConnectionDef("Pub", "pose", "Far", "inp"),  # not importable here: not judged
+        ),
+    )
+    code, body = await post_deploy(frozenset({"r1"}), system)
+    assert code == 409
+    assert "Pub.pose sends sdrpeer/Pose#" in body["error"]
+    assert "but Rec.image takes sdrpeer/Image#" in body["error"]
+    assert "Caller.planner is a service port but Rec.image is a data port" in body["error"]
+    assert "Far" not in body["error"]

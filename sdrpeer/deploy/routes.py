@@ -12,6 +12,7 @@ planned move of one component (sdrpeer.deploy.move).
 
 from __future__ import annotations
 
+import asyncio
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +26,7 @@ from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
 from sdrpeer.errors import ApiError, MoveError, NotAllocator
 from sdrpeer.plan import plan_from_json
 from sdrpeer.runtime.handoff import MAX_STATE
+from sdrpeer.system.classes import disagreements
 from sdrpeer.system.model import SystemDef, system_from_json
 from sdrpeer.system.recovery_defaults import ACTIONS
 
@@ -107,6 +109,10 @@ async def post_deploy(request: web.Request) -> web.Response:
         return json_error(
             400, "field 'system': not a system document: a field has the wrong type or value"
         )
+    if not body.get("forwarded"):  # the first agent asked judges it (imports: in a thread)
+        wrong = await asyncio.to_thread(disagreements, system)
+        if wrong:
+            return json_error(409, "connections the classes refuse: " + "; ".join(wrong))
     return await _allocate(request, system, body)
 
 

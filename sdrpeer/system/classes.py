@@ -20,6 +20,7 @@ from typing import Any
 from sdrpeer.errors import SdrpeerError
 from sdrpeer.host.loader import load_component_class, load_composite_class
 from sdrpeer.sdk import Component
+from sdrpeer.system.model import SystemDef
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,3 +110,35 @@ def check_params(info: ClassInfo, params: dict[str, Any]) -> list[tuple[str, str
         except SdrpeerError as e:
             bad.append((name, str(e)))
     return bad
+
+
+def disagreements(system: SystemDef) -> list[str]:
+    """What a system document's connections get wrong about the classes this process can import:
+    a typed sender and a typed receiver of different message types, a service binding between
+    two interfaces, a service port bound to a data port. A class that cannot be imported here
+    is not judged (the robot that runs it may have it). The check a document posted to the API
+    gets, which no system file loader has seen."""
+    infos: dict[str, ClassInfo | None] = {}
+    for comp in system.components:
+        try:
+            infos[comp.name] = inspect_target(comp.launcher, comp.target)
+        except ValueError:
+            infos[comp.name] = None
+    found: list[str] = []
+    for conn in system.connections:
+        a, a_port, b, b_port = conn.from_component, conn.from_port, conn.to_component, conn.to_port
+        out_info, in_info = infos.get(a), infos.get(b)
+        if out_info is None or in_info is None:
+            continue
+        sender, receiver = f"{a}.{a_port}", f"{b}.{b_port}"
+        requires, provides = out_info.interface(a_port), in_info.interface(b_port)
+        if requires is not None and provides is not None and requires != provides:
+            found.append(f"{sender} requires {requires} but {receiver} provides {provides}")
+        elif (requires is None) != (provides is None):
+            service, data = (sender, receiver) if requires is not None else (receiver, sender)
+            found.append(f"{service} is a service port but {data} is a data port")
+        elif requires is None:
+            sends, takes = out_info.port_type(a_port), in_info.port_type(b_port)
+            if sends is not None and takes is not None and sends != takes:
+                found.append(f"{sender} sends {sends} but {receiver} takes {takes}")
+    return found
