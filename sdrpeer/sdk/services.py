@@ -30,7 +30,7 @@ import inspect
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Final, Literal, Protocol, TypeVar, overload
+from typing import Any, ClassVar, Final, Literal, Protocol, TypeVar, overload
 
 from sdrpeer.errors import MalformedError, SdrpeerError
 from sdrpeer.sdk.errors import ComponentError, PortError
@@ -286,20 +286,26 @@ class ServiceProviderRuntime:
             task.cancel()
 
 
-class ServiceProvider:
-    """Declare a provided service on a Component class; mark its handlers with `method`."""
+class _ServicePort:
+    """What the two declarations of a service port share: the interface, a doc, the name."""
 
-    role: Final = "provides"
+    role: ClassVar[str]
 
     def __init__(self, interface: Interface, doc: str = "") -> None:
         if not isinstance(interface, Interface):
-            raise TypeError(f"ServiceProvider needs an Interface, got {interface!r}")
+            raise TypeError(f"{type(self).__name__} needs an Interface, got {interface!r}")
         self.interface = interface
         self.doc = doc
         self.name = "<unbound>"
 
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
+
+
+class ServiceProvider(_ServicePort):
+    """Declare a provided service on a Component class; mark its handlers with `method`."""
+
+    role = "provides"
 
     @overload
     def method(self, fn_or_name: F) -> F: ...
@@ -472,20 +478,10 @@ def _error(value: Any) -> tuple[str, str]:
     return "ProtocolError", f"malformed error reply {value!r:.60}"
 
 
-class ServiceConsumer:
+class ServiceConsumer(_ServicePort):
     """Declare a required service on a Component class."""
 
-    role: Final = "requires"
-
-    def __init__(self, interface: Interface, doc: str = "") -> None:
-        if not isinstance(interface, Interface):
-            raise TypeError(f"ServiceConsumer needs an Interface, got {interface!r}")
-        self.interface = interface
-        self.doc = doc
-        self.name = "<unbound>"
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
+    role = "requires"
 
     @overload
     def __get__(self, instance: None, owner: type | None = None) -> ServiceConsumer: ...
