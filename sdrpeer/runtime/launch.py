@@ -129,12 +129,48 @@ async def create_process(argv: list[str], **options: Any) -> asyncio.subprocess.
         raise
 
 
+def _private_base() -> str:
+    base = os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir()
+    return base if len(base) <= 60 else tempfile.gettempdir()
+
+
 def private_dir(prefix: str) -> Path:
     """A fresh 0700 directory for a host's Unix socket, short enough for sun_path (108 bytes)."""
-    base = os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir()
-    if len(base) > 60:
-        base = tempfile.gettempdir()
-    return Path(tempfile.mkdtemp(prefix=f"sdrp-{prefix[:24]}-", dir=base))
+    return Path(tempfile.mkdtemp(prefix=f"sdrp-{prefix[:24]}-", dir=_private_base()))
+
+
+def listening_unix_paths(table: str = "/proc/net/unix") -> set[str] | None:
+    """The paths of every Unix socket bound on this machine now (None where the kernel's table
+    cannot be read: then nothing can be called stale)."""
+    try:
+        with open(table, encoding="utf-8", errors="replace") as f:
+            next(f, None)  # the header
+            return {fields[7] for line in f if len(fields := line.split()) >= 8}
+    except OSError:
+        return None
+
+
+def sweep_private_dirs(now: float, min_age: float = 60.0, base: str | None = None) -> int:
+    """Remove the host directories of hosts that died without their agent cleaning up (a
+    SIGKILLed agent leaves them): `sdrp-*` directories older than `min_age` seconds in which no
+    socket is bound any more. Agents share the base directory, so another agent's live host is
+    kept by its bound socket, and one starting now by its age. How many were removed."""
+    bound = listening_unix_paths()
+    if bound is None:
+        return 0
+    removed = 0
+    root = Path(base or _private_base())
+    for path in root.glob("sdrp-*"):
+        try:
+            if not path.is_dir() or path.is_symlink() or now - path.stat().st_mtime < min_age:
+                continue
+            if any(str(child) in bound for child in path.iterdir()):
+                continue
+        except OSError:
+            continue
+        remove_dir(path)
+        removed += not path.exists()
+    return removed
 
 
 def remove_dir(path: Path) -> None:

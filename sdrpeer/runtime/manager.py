@@ -27,6 +27,7 @@ import asyncio
 import contextlib
 import logging
 import math
+import time
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
@@ -49,6 +50,7 @@ from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.record.robot import InstanceInfo
 from sdrpeer.runtime.adhoc import AdHoc
 from sdrpeer.runtime.config import SupervisorConfig
+from sdrpeer.runtime.launch import sweep_private_dirs
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import (
     INSTANCE_ACTIONS,
@@ -218,7 +220,10 @@ class InstanceManager:
         self._wake.set()
 
     async def start(self) -> None:
-        """Start the reconcile loop."""
+        """Start the reconcile loop (after removing the host directories dead hosts left)."""
+        swept = await asyncio.to_thread(sweep_private_dirs, time.time())
+        if swept:
+            log.info("removed %d host directories left by hosts no agent stopped", swept)
         self._loop_task = asyncio.create_task(self._loop(), name="instance-manager")
 
     async def stop(self) -> None:
