@@ -50,6 +50,19 @@ def test_a_composites_member_ports_keep_their_message_types() -> None:
     target = "stepped;Pub=tests.typed_fixture:PosePub;Rec=tests.typed_fixture:PoseRec"
     ports = _class_ports("composite", target)
     assert ports is not None
-    kinds = {name: (kind, None if m is None else m.name) for name, (kind, m) in ports.items()}
+    kinds = {name: (kind, None if m is None else m.name) for name, (kind, m, _) in ports.items()}
     assert kinds["Pub.pose"] == ("out", "sdrpeer/Pose")
     assert kinds["Rec.pose"] == ("in", "sdrpeer/Pose")
+
+
+def test_service_ports_are_listed_with_their_role_and_interface() -> None:
+    from components.planner import PLANNER  # noqa: PLC0415
+    from sdrpeer.ports.catalog import _class_ports  # noqa: PLC0415
+
+    provider = _class_ports("python", "components.planner:PathPlanner")
+    caller = _class_ports("python", "components.planner:PlanCaller")
+    assert provider is not None
+    assert caller is not None
+    assert provider["planner"] == ("provides", None, PLANNER.id)
+    assert caller["planner"] == ("requires", None, PLANNER.id)
+    assert caller["path"][0] == "out"

@@ -64,11 +64,13 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def format_ports(rows: list[dict[str, Any]]) -> str:
-    """The port table: robot, instance.port, direction, type, frames, frames/s, connections."""
+    """The port table: robot, instance.port, direction, type, frames (a service port: calls),
+    frames/s, connections."""
     header = ("ROBOT", "PORT", "DIR", "TYPE", "FRAMES", "HZ", "CONNECTIONS")
     lines = [header]
+    keys = {"out": "frames_out", "in": "frames_in", "provides": "calls", "requires": "calls"}
     for r in rows:
-        key = "frames_out" if r["direction"] == "out" else "frames_in"
+        key = keys.get(r["direction"], "frames_in")
         frames = (r.get("counters") or {}).get(key, 0)
         rate = (r.get("rates") or {}).get(f"{key}_per_s")
         ends = [

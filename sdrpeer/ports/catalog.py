@@ -25,8 +25,10 @@ from sdrpeer.runtime.manager import InstanceManager
 from sdrpeer.sdk.typed import MessageType, port_message
 from sdrpeer.system.classes import inspect_target
 
-_CLASS_PORTS: dict[tuple[str, str], dict[str, tuple[str, MessageType | None]] | None] = {}
-"""(launcher, target) -> port -> (direction, message type): classes already inspected."""
+_Declared = dict[str, tuple[str, MessageType | None, str | None]]
+_CLASS_PORTS: dict[tuple[str, str], _Declared | None] = {}
+"""(launcher, target) -> port -> (direction, message type, interface id): classes already
+inspected. A service port's direction is `provides` or `requires` (sdrpeer.sdk.services)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,6 +41,8 @@ class PortFacts:
     """"in" or "out"."""
     message: MessageType | None = None
     """Its message type (sdrpeer.sdk.typed), None: it takes or sends any value."""
+    interface: str | None = None
+    """A service port's interface id (sdrpeer.sdk.services), None for a data port."""
 
     @property
     def ref(self) -> str:
@@ -47,8 +51,8 @@ class PortFacts:
 
     @property
     def type_id(self) -> str | None:
-        """The message type's id, None when untyped."""
-        return None if self.message is None else self.message.type_id
+        """The message type's id (a service port: its interface's), None when untyped."""
+        return self.interface if self.message is None else self.message.type_id
 
 
 def parse_ref(text: str, where: str = "port") -> tuple[str, str]:
@@ -59,20 +63,22 @@ def parse_ref(text: str, where: str = "port") -> tuple[str, str]:
     return instance, port
 
 
-def _class_ports(launcher: str, target: Any) -> dict[str, tuple[str, MessageType | None]] | None:
+def _class_ports(launcher: str, target: Any) -> _Declared | None:
     key = (launcher, str(target))
     if key not in _CLASS_PORTS:
         try:
             info = inspect_target(launcher, target)
         except ValueError:
             info = None
-        ports: dict[str, tuple[str, MessageType | None]] | None = None
+        ports: _Declared | None = None
         if info is not None:
             declared = info.cls._sdk_ports  # the class's declarations, as system check reads
             ports = {
-                name: (d.kind, port_message(getattr(d, "type", None)))
+                name: (d.kind, port_message(getattr(d, "type", None)), None)
                 for name, d in declared.items()
             }
+            for name, service in info.cls.service_ports().items():
+                ports[name] = (service.role, None, service.interface)
         _CLASS_PORTS[key] = ports
     return _CLASS_PORTS[key]
 
@@ -106,8 +112,8 @@ class Catalog:
         declared = _class_ports(spec.launcher, spec.target)
         if declared is not None:
             return {
-                name: PortFacts(instance, name, kind, msg)
-                for name, (kind, msg) in sorted(declared.items())
+                name: PortFacts(instance, name, kind, msg, interface)
+                for name, (kind, msg, interface) in sorted(declared.items())
             }
         said = self.manager.hello_ports(instance) or {}
         return {
@@ -141,7 +147,12 @@ class Catalog:
             raise PortToolError(f"{where}: {instance} has no port {name!r} (ports: {known})", 404)
         if direction is not None and facts.direction != direction:
             want = "an out-port" if direction == "out" else "an in-port"
-            raise PortToolError(f"{where}: {ref} is an {facts.direction}-port, not {want}", 409)
+            what = (
+                f"a service port ({facts.direction} {facts.interface})"
+                if facts.interface is not None
+                else f"an {facts.direction}-port"
+            )
+            raise PortToolError(f"{where}: {ref} is {what}, not {want}", 409)
         return facts
 
     def owner(self, refs: list[str]) -> tuple[str, str | None] | None:
@@ -207,7 +218,7 @@ class Catalog:
         made: dict[str, Any],
         adhoc: set[str],
     ) -> Iterable[dict[str, Any]]:
-        if facts.direction == "out":
+        if facts.direction in ("out", "requires"):  # a sender, or a service's caller
             for cid, (conn, addr) in sorted(made.items()):
                 if conn.out_port == facts.port:
                     to = f"{conn.to_instance}.{conn.in_port}"

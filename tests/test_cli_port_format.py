@@ -1,0 +1,36 @@
+"""`sdrpeer port list`'s table: a service port shows its role, interface and calls."""
+
+from __future__ import annotations
+
+from sdrpeer.cli.port import format_ports
+
+
+def test_service_ports_show_role_interface_and_calls() -> None:
+    rows = [
+        {
+            "robot": "robot-1",
+            "instance": "Caller",
+            "port": "planner",
+            "direction": "requires",
+            "type": "demo/Planner#5692b540",
+            "counters": {"calls": 61, "frames_in": 0},
+            "connections": [{"id": "b", "to": "Planner.planner", "adhoc": False}],
+        },
+        {
+            "robot": "robot-1",
+            "instance": "Cam",
+            "port": "image",
+            "direction": "out",
+            "type": None,
+            "counters": {"frames_out": 7},
+            "rates": {"frames_out_per_s": 2.5},
+            "connections": [{"id": "c", "to": "Det.image", "adhoc": True}],
+        },
+    ]
+    lines = format_ports(rows).splitlines()
+    assert lines[1].split() == [
+        "robot-1", "Caller.planner", "requires", "demo/Planner#5692b540", "61", "-",
+        "Planner.planner",
+    ]  # fmt: skip
+    assert lines[2].split() == ["robot-1", "Cam.image", "out", "-", "7", "2.5", "+Det.image"]
+    assert lines[-1] == "(+ run-time connection)"
