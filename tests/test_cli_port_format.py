@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from sdrpeer.cli.port import format_ports
 
 
 def test_service_ports_show_role_interface_and_calls() -> None:
-    rows = [
+    rows: list[dict[str, Any]] = [
         {
             "robot": "robot-1",
             "instance": "Caller",
