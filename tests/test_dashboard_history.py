@@ -178,10 +178,9 @@ def timeline(moments: list[dict[str, Any]]) -> list[tuple[Any, ...]]:
 def test_a_failover_is_a_change_of_colour_on_the_timeline_never_a_gap() -> None:
     # issue 18: after a death the new active's state and the old active's "gone" came in one
     # diff, "gone" last, and the page drew the component blank from then on
-    down = {
-        **STATUS,
-        "components": [{**STATUS["components"][0], "state": "robot down"}],
-    }
+    (cam,) = STATUS["components"]
+    assert isinstance(cam, dict)
+    down = {**STATUS, "components": [{**cam, "state": "robot down"}]}
     m = Moments(window_s=100)
     for ts, doc in ((0.0, STATUS), (3.0, down), (4.0, MOVED), (5.0, MOVED)):
         m.observe(ts, doc)

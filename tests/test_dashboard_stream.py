@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+import time
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -236,15 +237,16 @@ async def test_a_sample_keeps_a_reaped_robot_and_carries_the_warnings(
         "components": [{**cam, "instance": "Cam-s1", "standbys": [], "standbys_wanted": 1}],
         "connections": [{"from": "Cam.image", "to": "Det.image", "lost_per_s": 12}],
     }
-    source.fleet = [member("r1"), {**member("r2", state="dead"), "since": 40.0}]
-    source.dashboard.tick(50.0)
+    died = time.time() - 20  # the page's sample is taken now, in wall time
+    source.fleet = [member("r1"), {**member("r2", state="dead"), "since": died}]
+    source.dashboard.tick(died + 1)
     source.fleet = [member("r1")]  # gossip reaped r2
-    source.dashboard.tick(60.0)
+    source.dashboard.tick(died + 11)
     resp = await c.get("/v1/stream?once=1")
     *_, (_, _, sample), _ = await read_events(resp, 5)
     r1, r2 = sample["members"]
     assert (r1["name"], "dead_since" in r1) == ("r1", False)
-    assert (r2["name"], r2["state"], r2["dead_since"], r2["reaped"]) == ("r2", "dead", 40.0, True)
+    assert (r2["name"], r2["state"], r2["dead_since"], r2["reaped"]) == ("r2", "dead", died, True)
     assert sample["status"]["components"][0]["was_standby"] is True
     assert [(w["kind"], w["subject"]) for w in sample["warnings"]] == [
         ("no_standby", "Cam"),

@@ -57,7 +57,7 @@ class Overflows:
 
 
 def _standby_warnings(comps: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    out = []
+    out: list[dict[str, Any]] = []
     for comp in comps:
         wanted = comp.get("standbys_wanted")
         if not isinstance(wanted, int) or wanted <= 0:
@@ -87,7 +87,7 @@ def _standby_warnings(comps: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]
 def _frame_warnings(
     conns: Iterable[Mapping[str, Any]], overflows: Iterable[Mapping[str, Any]]
 ) -> list[dict[str, Any]]:
-    out = []
+    out: list[dict[str, Any]] = []
     senders = set()
     for c in conns:
         lost = c.get("lost_per_s")

@@ -293,8 +293,8 @@
     const boxW = BOX_W, rowH = ROW_H, pad = 10, gap = 26;
     const cols = Math.max(1, Math.floor((width + gap) / (boxW + gap)));
     const pos = {};
-    let html = '<defs><marker id="arrow" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="6" ' +
-      'markerHeight="6" orient="auto-start-reverse"><path d="M 0 0 L 10 5 L 0 10 z" fill="#64748b"/></marker></defs>';
+    let html = '<defs><marker id="arrow" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" ' +
+      'markerHeight="7" markerUnits="userSpaceOnUse" orient="auto-start-reverse"><path d="M 0 0 L 10 5 L 0 10 z" fill="#64748b"/></marker></defs>';
     let y = 0, rowMax = 0, boxes = "";
     robots.forEach((m, i) => {
       const col = i % cols;
