@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from sdrpeer.dashboard.history import METRICS, History, frame_values
-from sdrpeer.dashboard.moments import Moments, diff_status
+from sdrpeer.dashboard.moments import Moments, diff_status, was_standby
 
 
 def member(
@@ -107,6 +107,7 @@ def test_first_look_reports_every_state_and_the_plan() -> None:
         ("allocation", None, None),
         ("state", "Cam", "active"),
         ("state", "Cam-s1", "inactive"),
+        ("component", "Cam", "active"),
     ]
     assert diff_status(None, None, 5.0) == []
     assert diff_status(STATUS, STATUS, 6.0) == []  # nothing changed, nothing said
@@ -119,6 +120,7 @@ def test_a_move_reports_election_plan_states_and_the_move() -> None:
         ("allocation", None, None),
         ("state", "Cam-s1", "active"),  # the standby's role and state changed
         ("state", "Cam", "gone"),
+        ("component", "Cam-s1", "active"),  # what Cam's timeline shows: its new active
         ("move", "Cam", None),
     ]
     move = moments[-1]
@@ -128,11 +130,11 @@ def test_a_move_reports_election_plan_states_and_the_move() -> None:
 def test_moments_are_kept_for_the_window() -> None:
     m = Moments(window_s=10)
     m.observe(0.0, STATUS)
-    assert len(m) == 3
+    assert len(m) == 4
     m.observe(5.0, MOVED)
-    assert len(m) == 8
+    assert len(m) == 10
     m.observe(12.0, MOVED)  # the first look's moments are older than 10 s now
-    assert [x["ts"] for x in m.all()] == [5.0] * 5
+    assert [x["ts"] for x in m.all()] == [5.0] * 6
     assert m.observe(13.0, None) == []  # no status (an agent that deploys nothing): no moments
 
 
@@ -146,8 +148,12 @@ def test_moments_are_kept_for_the_window() -> None:
         # components that vanish are gone; that appear, are news in their states
         (
             "components",
-            [("state", "Cam", "gone"), ("state", "Cam-s1", "gone")],
-            [("state", "Cam", "active"), ("state", "Cam-s1", "inactive")],
+            [("state", "Cam", "gone"), ("state", "Cam-s1", "gone"), ("component", "Cam", "gone")],
+            [
+                ("state", "Cam", "active"),
+                ("state", "Cam-s1", "inactive"),
+                ("component", "Cam", "active"),
+            ],
         ),
     ],
 )
@@ -158,3 +164,53 @@ def test_a_missing_field_reads_as_absent_not_as_a_crash(
     assert kinds(diff_status(STATUS, partial, 1.0)) == lost
     assert kinds(diff_status(partial, STATUS, 1.0)) == found
     assert diff_status(partial, partial, 2.0) == []  # still missing: nothing new
+
+
+def timeline(moments: list[dict[str, Any]]) -> list[tuple[Any, ...]]:
+    """What the page's state row of a component draws: its `component` moments in order."""
+    return [
+        (m["ts"], m["instance"], m["state"], m["was_standby"])
+        for m in moments
+        if m["kind"] == "component"
+    ]
+
+
+def test_a_failover_is_a_change_of_colour_on_the_timeline_never_a_gap() -> None:
+    # issue 18: after a death the new active's state and the old active's "gone" came in one
+    # diff, "gone" last, and the page drew the component blank from then on
+    (cam,) = STATUS["components"]
+    assert isinstance(cam, dict)
+    down = {**STATUS, "components": [{**cam, "state": "robot down"}]}
+    m = Moments(window_s=100)
+    for ts, doc in ((0.0, STATUS), (3.0, down), (4.0, MOVED), (5.0, MOVED)):
+        m.observe(ts, doc)
+    assert timeline(m.all()) == [
+        (0.0, "Cam", "active", False),
+        (3.0, "Cam", "robot down", False),
+        (4.0, "Cam-s1", "active", True),  # the promoted standby, under its own name
+    ]
+    states = [x for x in m.all() if x["kind"] == "state"]
+    assert (states[-1]["instance"], states[-1]["state"]) == ("Cam", "gone")  # still in the log
+
+
+def test_a_state_older_than_the_window_is_still_drawn() -> None:
+    m = Moments(window_s=10)
+    m.observe(0.0, STATUS)
+    m.observe(30.0, STATUS)  # nothing changed for 30 s: every moment is older than the window
+    assert len(m) == 0
+    assert timeline(m.all()) == [(0.0, "Cam", "active", False)]
+    m.observe(31.0, MOVED)
+    assert timeline(m.all()) == [(31.0, "Cam-s1", "active", True)]
+    m.observe(32.0, {**MOVED, "components": []})  # undeployed: nothing is held any more
+    m.observe(50.0, {**MOVED, "components": []})
+    assert timeline(m.all()) == []
+
+
+@pytest.mark.parametrize(
+    ("component", "instance", "promoted"),
+    [("Cam", "Cam", False), ("Cam", "Cam-s1", True), ("Cam", None, False), ("Cam", "", False)],
+)
+def test_was_standby_reads_the_allocators_names(
+    component: str, instance: str | None, promoted: bool
+) -> None:
+    assert was_standby(component, instance) is promoted

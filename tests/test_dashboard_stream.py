@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+import time
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -98,7 +99,7 @@ async def test_a_new_page_gets_hello_history_events_and_a_sample_in_that_order(
     assert hello == {"robot": "r1", "window_s": 900.0, "interval_s": 1.0}
     assert history["t"] == [10.0]
     assert history["robots"]["r1"]["rtt_ms"] == [2.0]
-    assert [m["kind"] for m in history["moments"]] == ["allocation", "state", "state"]
+    assert [m["kind"] for m in history["moments"]] == ["allocation", "state", "state", "component"]
     assert [e["kind"] for e in events] == ["member.join", "trap"]
     assert id3 == "2"  # the page resumes from here after a reconnect
     (row,) = sample["members"]
@@ -204,5 +205,50 @@ async def test_a_state_change_brings_a_fresh_sample_without_waiting_for_the_tick
     got = await read_events(resp, 5)
     assert [k for k, _, _ in got] == ["event", "event", "event", "event", "sample"]
     moments = got[-1][2]["moments"]
-    assert [(m["kind"], m["instance"], m["state"]) for m in moments] == [("state", "Cam", "error")]
+    assert [(m["kind"], m["instance"], m["state"]) for m in moments] == [
+        ("state", "Cam", "error"),
+        ("component", "Cam", "error"),
+    ]
     resp.close()
+
+
+async def test_once_sends_what_a_new_page_gets_then_ends(
+    client: tuple[TestClient[Any, Any], Source],
+) -> None:
+    c, source = client
+    source.events.add(1.0, "member.join", "r2")
+    resp = await c.get("/v1/stream?once=1")
+    got = await read_events(resp, 5)
+    assert [k for k, _, _ in got] == ["hello", "history", "events", "sample", "end"]
+    async with asyncio.timeout(5):
+        assert await resp.content.read() == b""  # the response is over: nothing keeps a page
+    assert source.dashboard.hub.clients == 0  # and it never counted as a live stream
+    source.events.add(2.0, "trap", "r1")  # nothing to publish to
+
+
+async def test_a_sample_keeps_a_reaped_robot_and_carries_the_warnings(
+    client: tuple[TestClient[Any, Any], Source],
+) -> None:
+    c, source = client
+    (cam,) = STATUS["components"]
+    assert isinstance(cam, dict)
+    source.status = {
+        **STATUS,
+        "components": [{**cam, "instance": "Cam-s1", "standbys": [], "standbys_wanted": 1}],
+        "connections": [{"from": "Cam.image", "to": "Det.image", "lost_per_s": 12}],
+    }
+    died = time.time() - 20  # the page's sample is taken now, in wall time
+    source.fleet = [member("r1"), {**member("r2", state="dead"), "since": died}]
+    source.dashboard.tick(died + 1)
+    source.fleet = [member("r1")]  # gossip reaped r2
+    source.dashboard.tick(died + 11)
+    resp = await c.get("/v1/stream?once=1")
+    *_, (_, _, sample), _ = await read_events(resp, 5)
+    r1, r2 = sample["members"]
+    assert (r1["name"], "dead_since" in r1) == ("r1", False)
+    assert (r2["name"], r2["state"], r2["dead_since"], r2["reaped"]) == ("r2", "dead", died, True)
+    assert sample["status"]["components"][0]["was_standby"] is True
+    assert [(w["kind"], w["subject"]) for w in sample["warnings"]] == [
+        ("no_standby", "Cam"),
+        ("dropping_frames", "Cam.image → Det.image"),
+    ]

@@ -6,13 +6,13 @@ from sdrpeer.cli.status import format_status
 from sdrpeer.deploy.status import SinceTracker, all_active, status_doc
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
-from sdrpeer.system.model import ComponentDef, SystemDef
+from sdrpeer.system.model import ComponentDef, StandbySpec, SystemDef
 from sdrpeer.vocabulary import InstanceRole
 
 SYSTEM = SystemDef(
     name="s",
     components=(
-        ComponentDef("A", "python", "m:A"),
+        ComponentDef("A", "python", "m:A", standby=StandbySpec(same_robot=1, other_robots=2)),
         ComponentDef("B", "python", "m:B"),
     ),
 )
@@ -50,6 +50,7 @@ def test_states_from_records_standbys_and_since() -> None:
         ("A-s2", "cold", "cold"),
     ]
     assert (b["robot"], b["state"]) == ("r2", "active")
+    assert (a["standbys_wanted"], b["standbys_wanted"]) == (3, 0)  # what the system asks for
     assert all_active(doc)
     again = status_doc(PLAN, alive, {"name": "r1", "epoch": 3}, since, 130.0)
     assert again["components"][0]["since"] == 100.0  # still ACTIVE since 100

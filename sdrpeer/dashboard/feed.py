@@ -10,6 +10,12 @@ log entry is published as an `event` the moment it is added. A new page first ge
 `sample`. Every sample also carries the moments since the one before. A change the page draws
 (an instance's state, an election, a plan, a member, another robot's new record: `poke()`) sends
 a sample within 50 ms instead of at the next tick, so a state change shows at once.
+
+A sample's robots come through a `roster.Roster`, so a robot that died stays on the page, with
+`dead_since`, after gossip has reaped it; its active instances say `was_standby` when a promoted
+standby holds the role (`moments.was_standby`); and it carries the `warnings.fleet_warnings` of
+the status and this robot's recent `port.overflow` events. A page in snapshot mode (`/?snapshot=1`)
+reads `GET /v1/stream?once=1`: `hello()`'s messages, then the end (`Hub.serve(once=True)`).
 """
 
 from __future__ import annotations
@@ -23,9 +29,12 @@ from collections.abc import Mapping
 from typing import Any, Protocol
 
 from sdrpeer.dashboard.history import History, typical_link
-from sdrpeer.dashboard.moments import Moments
+from sdrpeer.dashboard.moments import Moments, was_standby
+from sdrpeer.dashboard.roster import Roster
 from sdrpeer.dashboard.stream import Hub, encode_event
+from sdrpeer.dashboard.warnings import Overflows, fleet_warnings
 from sdrpeer.eventlog import EventKind
+from sdrpeer.vocabulary import InstanceRole
 
 log = logging.getLogger(__name__)
 
@@ -68,12 +77,21 @@ def _rounded(value: Any) -> float | None:
     return round(float(value), 3)
 
 
+def _instance(inst: Mapping[str, Any]) -> dict[str, Any]:
+    """An instance of a member, with `was_standby` when it is a promoted standby."""
+    promoted = inst.get("role") == InstanceRole.ACTIVE and was_standby(
+        str(inst.get("component")), inst.get("name")
+    )
+    return {**inst, "was_standby": promoted}
+
+
 def member_summary(member: Mapping[str, Any]) -> dict[str, Any]:
     """One robot as a live sample shows it: its links summed up (its typical link), not listed
-    pair by pair."""
+    pair by pair; a dead or departed one with `dead_since` (and `reaped` once gossip forgot it,
+    see `roster.Roster`)."""
     summary = member.get("link_summary")
     typical = typical_link(member)
-    return {
+    row = {
         "name": member.get("name"),
         "state": member.get("state"),
         "api": member.get("api"),
@@ -84,8 +102,23 @@ def member_summary(member: Mapping[str, Any]) -> dict[str, Any]:
             "jitter_ms": _rounded(typical.get("jitter_ms")),
             "loss": _rounded(typical.get("loss")),
         },
-        "instances": member.get("instances") or [],
+        "instances": [_instance(i) for i in member.get("instances") or []],
     }
+    if "dead_since" in member:
+        row["dead_since"] = member["dead_since"]
+        row["reaped"] = bool(member.get("reaped"))
+    return row
+
+
+def _with_roles(status: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The status with `was_standby` on each component's active (a copy; the agent's stays)."""
+    if status is None:
+        return None
+    comps = [
+        {**c, "was_standby": was_standby(str(c.get("component")), c.get("instance"))}
+        for c in status.get("components") or []
+    ]
+    return {**status, "components": comps}
 
 
 class Feed:
@@ -108,12 +141,16 @@ class Feed:
         self.replay = replay
         self.poke_s = poke_s
         self.moments = Moments(self.history.window_s)
+        self.roster = Roster(self.history.window_s)
+        self.overflows = Overflows()
         self._poke: asyncio.TimerHandle | None = None
 
     def on_event(self, entry: dict[str, Any]) -> None:
         """An event log listener: publish the entry at once (and a fresh sample soon after a
         change the pages draw: an instance's state, an election, a plan, a member)."""
         self.hub.publish("event", entry, int(entry["id"]))
+        if entry["kind"] == EventKind.PORT_OVERFLOW:
+            self.overflows.add(entry)
         if str(entry["kind"]).startswith(POKE_KINDS):
             self.poke()
 
@@ -133,7 +170,7 @@ class Feed:
 
     def tick(self, now: float, *, history: bool = True) -> None:
         """One frame: into the history (unless a poke) and the moments; to the pages, if any."""
-        members = self.source.members_view()
+        members = self.roster.observe(now, self.source.members_view())
         status = self.source.status_view()
         if history:
             self.history.add(now, members)
@@ -150,14 +187,15 @@ class Feed:
     ) -> dict[str, Any]:
         """The live state of the fleet as this agent sees it, with the moments since the last."""
         if members is None:
-            members = self.source.members_view()
+            members = self.roster.observe(now, self.source.members_view())
             status = self.source.status_view()
         return {
             "ts": round(now, 3),
             "robot": self.source.name,
             "members": [member_summary(m) for m in members],
-            "status": status,
+            "status": _with_roles(status),
             "moments": moments or [],
+            "warnings": fleet_warnings(status, self.overflows.recent(now)),
         }
 
     def hello(self, last_event_id: str | None) -> list[bytes]:

@@ -3,8 +3,10 @@
 How it works: `GET /` is the page (`static/index.html`); `GET /dashboard/{file}` serves only the
 files shipped in `sdrpeer/dashboard/static` (robots are offline: no CDN); `GET /v1/history` is
 the metric history as columns (`?since=` unix seconds); `GET /v1/stream` is the server-sent
-event stream (`stream.Hub`). All are read-only, so no token: the API listens on loopback unless
-told otherwise. The agent exposes its `Feed` as `dashboard`.
+event stream (`stream.Hub`; `?once=1`: what a new page gets, then the end: the page's snapshot
+mode, `/?snapshot=1`, reads it so a headless browser's screenshot finishes). All are read-only,
+so no token: the API listens on loopback unless told otherwise. The agent exposes its `Feed` as
+`dashboard`.
 """
 
 from __future__ import annotations
@@ -67,9 +69,11 @@ async def get_history(request: web.Request) -> web.Response:
 
 
 async def get_stream(request: web.Request) -> web.StreamResponse:
-    """GET /v1/stream: hello, history, events, then samples and events as they happen (SSE)."""
+    """GET /v1/stream: hello, history, events, then samples and events as they happen (SSE);
+    `?once=1`: hello, history, events, one sample, `end`, and the response ends."""
     feed = _feed(request)
-    return await feed.hub.serve(request, feed.hello)
+    once = request.query.get("once", "") not in ("", "0", "false")
+    return await feed.hub.serve(request, feed.hello, once=once)
 
 
 ROUTES = [

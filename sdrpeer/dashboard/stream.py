@@ -7,6 +7,9 @@ a client too slow to keep up is dropped (its browser reconnects and catches up f
 the others. `serve(request, hello)` answers `GET /v1/stream`: it writes `hello()`'s messages
 (what a new page needs first), then whatever is published, with a comment line every
 `keepalive_s` so proxies and browsers keep the connection; the number of clients is capped.
+`serve(..., once=True)` writes `hello()`'s messages and an `end` message, then ends the response:
+a page in snapshot mode gets one consistent picture and nothing keeps it loading (a headless
+browser's `--virtual-time-budget` waits for open requests).
 """
 
 from __future__ import annotations
@@ -68,9 +71,14 @@ class Hub:
             queue.put_nowait(_CLOSE)
 
     async def serve(
-        self, request: web.Request, hello: Callable[[str | None], Iterable[bytes]]
+        self,
+        request: web.Request,
+        hello: Callable[[str | None], Iterable[bytes]],
+        *,
+        once: bool = False,
     ) -> web.StreamResponse:
-        """GET /v1/stream: `hello(last_event_id)` first, then everything published."""
+        """GET /v1/stream: `hello(last_event_id)` first, then everything published (`once`:
+        then an `end` message, and the response ends)."""
         if len(self._clients) >= self.max_clients:
             self.counters["refused_clients"] += 1
             raise web.HTTPServiceUnavailable(reason=f"at most {self.max_clients} streams")
@@ -82,6 +90,12 @@ class Hub:
             }
         )
         await response.prepare(request)
+        if once:
+            for message in hello(request.headers.get("Last-Event-ID")):
+                await response.write(message)
+            await response.write(encode_event("end", {}))
+            await response.write_eof()
+            return response
         queue: asyncio.Queue[bytes] = asyncio.Queue(self.queue_len + 1)
         self._clients.add(queue)
         try:

@@ -59,8 +59,12 @@ def status_doc(
     if plan is None:
         return {"allocator": dict(allocator), "plan": None, "components": []}
     comps: dict[str, dict[str, Any]] = {}
-    order = [] if plan.system is None else [c.name for c in plan.system.components]
-    for name in order:
+    wanted: dict[str, int] = (
+        {}
+        if plan.system is None
+        else {c.name: c.standby.same_robot + c.standby.other_robots for c in plan.system.components}
+    )
+    for name, count in wanted.items():
         comps[name] = {
             "component": name,
             "instance": None,
@@ -68,6 +72,7 @@ def status_doc(
             "state": "unplaced",
             "since": None,
             "standbys": [],
+            "standbys_wanted": count,
         }
     for p in plan.placements:
         state = instance_state(alive, p.robot, p.instance, plan)

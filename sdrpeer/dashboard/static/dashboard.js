@@ -6,6 +6,14 @@
 // Messages only update the state `S`; drawing happens once per animation frame for the parts
 // marked dirty, and every render's duration is kept in `S.perf` (the benchmark and the browser
 // test read `window.__sdrpeer`). Nothing is fetched from outside the agent: uPlot is vendored.
+//
+// The topology draws connections without text (labels of ten connections overlap): hovering an
+// edge, or its row in the connections table under it, shows that one connection's traffic. Dead
+// robots stay, greyed, with "dead since" (the agent keeps them after gossip reaps them). The
+// component timelines are drawn from the `component` moments (the state of whichever instance is
+// the component's active), so a failover is a change of colour, never a gap. `?snapshot=1` reads
+// the stream once (`/v1/stream?once=1`), draws everything, marks `<html data-snapshot="ready">`
+// and keeps nothing open, so `chromium --headless --screenshot --virtual-time-budget=...` ends.
 "use strict";
 (() => {
   const METRICS = [
@@ -24,11 +32,14 @@
   };
   const MARKERS = { allocation: "#f28e2b", move: "#8a3ffc", election: "#9ca3af" };
   const MAX_EVENTS = 5000, MAX_ROWS = 200, MAX_PERF = 4000, MAX_POINTS = 300;
+  const SNAPSHOT = new URLSearchParams(location.search).has("snapshot");
+  const GONE_STATES = new Set(["dead", "left"]);
 
   const S = {
     robot: null, windowS: 900, connected: false,
     t: [], series: {}, robots: [], members: [], status: null,
     events: [], moments: [], momentsVersion: 0, fleet: [], charts: {}, chartRobots: null,
+    warnings: [], snapshot: SNAPSHOT,
     dirty: new Set(), scheduled: false,
     perf: { renders: [], frames: [], samples: 0, events: 0, lastSampleAt: 0 },
   };
@@ -47,6 +58,11 @@
   const edgeText = (c) => `${c.from.split(".")[1]}: ${bytes(c.bytes_per_s)}` +
     (c.lost_per_s ? ` · ${c.lost_per_s} lost/s` : "");
   const clock = (ts) => new Date(ts * 1000).toLocaleTimeString([], { hour12: false });
+  const isFleet = (m) => m.kind !== "state" && m.kind !== "component";
+  // an instance's label: a promoted standby keeps its name, so its role says what it was
+  const roleText = (role, wasStandby) => wasStandby ? `${role} (was standby)` : role;
+  const instText = (i) => `${i.name} · ${i.state}${i.was_standby ? " (was standby)" : ""}`;
+  const connName = (c) => `${c.from} → ${c.to}`;
 
   // ------------------------------------------------------------------ state updates
   function setHistory(h) {
@@ -57,8 +73,9 @@
       for (const [m] of METRICS) S.series[name][m] = lists[m].slice();
     }
     S.moments = (h.moments || []).slice();
+    S.held = 0;
     S.momentsVersion += 1;
-    S.fleet = S.moments.filter((m) => m.kind !== "state").map(fleetEvent);
+    S.fleet = S.moments.filter(isFleet).map(fleetEvent);
     mark("charts", "states", "events");
   }
 
@@ -73,6 +90,7 @@
     S.perf.lastSampleAt = performance.now();
     S.members = s.members;
     S.status = s.status;
+    S.warnings = s.warnings || [];
     const k = S.t.length;
     S.t.push(s.ts);
     const seen = new Set();
@@ -93,11 +111,11 @@
     trim(s.ts);
     for (const mo of s.moments || []) {
       S.moments.push(mo);
-      if (mo.kind !== "state") S.fleet.push(fleetEvent(mo));
+      if (isFleet(mo)) S.fleet.push(fleetEvent(mo));
     }
     if ((s.moments || []).length) S.momentsVersion += 1;
-    mark("summary", "fleet", "topology", "charts", "states");
-    if ((s.moments || []).some((mo) => mo.kind !== "state")) mark("events");
+    mark("summary", "warnings", "fleet", "topology", "charts", "states");
+    if ((s.moments || []).some(isFleet)) mark("events");
   }
 
   function trim(now) {
@@ -107,10 +125,16 @@
       S.t.splice(0, cut);
       for (const lists of Object.values(S.series)) for (const a of Object.values(lists)) a.splice(0, cut);
     }
-    let m = 0;
+    // the first `S.held` moments are components' states older than the window that still hold
+    let m = S.held || 0;
     while (m < S.moments.length && S.moments[m].ts < now - S.windowS) m++;
-    if (m > 0) {
-      S.moments.splice(0, m);
+    if (m > (S.held || 0)) {
+      const held = {};
+      for (const mo of S.moments.slice(0, m)) if (mo.kind === "component") held[mo.component] = mo;
+      const later = new Set(S.moments.slice(m).filter((mo) => mo.kind === "component").map((mo) => mo.component));
+      const keep = Object.values(held).filter((mo) => !later.has(mo.component) && mo.state !== "gone");
+      S.moments.splice(0, m, ...keep);
+      S.held = keep.length;
       S.momentsVersion += 1;
       S.fleet = S.fleet.filter((e) => e.ts >= now - S.windowS);
     }
@@ -166,9 +190,15 @@
       const x = m.metrics || {}, l = m.link || {};
       const role = m.name === leader ? '<span class="badge alloc">allocator</span>' : "";
       const insts = (m.instances || []).map((i) =>
-        `<span class="badge s-${esc(String(i.state).replace(" ", "-"))}" title="${esc(i.component)} ${esc(i.role)}">${esc(i.name)}</span>`).join(" ");
-      return `<tr id="robot-${esc(m.name)}" data-state="${esc(m.state)}"><td>${esc(m.name)}</td>` +
-        `<td><span class="badge s-${esc(m.state)}">${esc(m.state)}</span></td><td>${role}</td>` +
+        `<span class="badge s-${esc(String(i.state).replace(" ", "-"))}" data-instance="${esc(i.name)}" ` +
+        `data-role="${esc(roleText(i.role, i.was_standby))}" ` +
+        `title="${esc(i.component)} ${esc(roleText(i.role, i.was_standby))}">${esc(i.name)}${i.was_standby ? " ↑" : ""}</span>`).join(" ");
+      const gone = GONE_STATES.has(m.state);
+      const since = m.dead_since ? `<span class="dead-since">${esc(m.state)} since ${clock(m.dead_since)}` +
+        `${m.reaped ? " · forgotten by gossip" : ""}</span>` : "";
+      return `<tr id="robot-${esc(m.name)}" class="${gone ? "gone" : ""}" data-state="${esc(m.state)}"` +
+        `${m.reaped ? ' data-reaped="1"' : ""}><td>${esc(m.name)}</td>` +
+        `<td><span class="badge s-${esc(m.state)}">${esc(m.state)}</span> ${since}</td><td>${role}</td>` +
         `<td class="num">${num(x.cpu_pct)} %</td><td class="num">${num(x.mem_free / 1e6, 0)} MB</td>` +
         `<td class="num">${num(x.battery_pct, 0)} %</td><td class="num">${num(x.rssi_dbm)} dBm</td>` +
         `<td class="num">${num(l.rtt_ms, 2)} ms</td><td class="num">${num(l.jitter_ms, 2)} ms</td>` +
@@ -177,101 +207,169 @@
     $("fleet").tBodies[0].innerHTML = rows.join("");
   }
 
+  function renderWarnings() {
+    const list = S.warnings;
+    $("warnings-section").hidden = !list.length;
+    const html = list.map((w) =>
+      `<li data-kind="${esc(w.kind)}" data-subject="${esc(w.subject)}">${esc(w.text)}</li>`).join("");
+    if (html !== S.warningsHtml) {
+      $("warnings").innerHTML = html;
+      S.warningsHtml = html;
+    }
+  }
+
   function topologyKey(width, robots, leader, st) {
     const parts = [width, leader];
     for (const m of robots) {
-      parts.push(m.name, m.state);
-      for (const i of m.instances || []) parts.push(i.name, i.role);
+      parts.push(m.name, m.state, m.dead_since, m.reaped);
+      for (const i of m.instances || []) parts.push(i.name, i.role, i.was_standby);
     }
-    for (const c of st.components || []) parts.push(c.component, c.instance);
-    parts.push((st.connections || []).length);
+    for (const c of st.components || []) parts.push(c.component, c.instance, c.robot);
+    for (const c of st.connections || []) parts.push(c.from, c.to);
     return parts.join("\u0001");
+  }
+
+  const BOX_W = 230, ROW_H = 15, CHARS = Math.floor((BOX_W - 24) / 5.8);
+  const clip = (text) => text.length <= CHARS ? text : `${text.slice(0, CHARS - 1)}…`;
+
+  function renderConnections(conns) {  // the table under the topology: every edge's label
+    const rows = conns.map((c, k) =>
+      `<tr data-edge="${k}" class="${c.lost_per_s ? "lossy" : ""}"><td>${esc(c.from)}</td><td>${esc(c.to)}</td>` +
+      `<td class="num">${bytes(c.bytes_per_s)}</td><td class="num">${bytes(c.expected_bytes_per_s)}</td>` +
+      `<td class="num">${c.lost_per_s == null ? "-" : esc(c.lost_per_s)}</td></tr>`).join("");
+    if (rows !== S.connectionsHtml) {
+      $("connections").tBodies[0].innerHTML = rows;
+      S.connectionsHtml = rows;
+    }
+    $("connections").hidden = !conns.length;
+  }
+
+  function showEdge(k) {  // a bundle's labels at its middle, one line per connection (hover only)
+    const tip = $("edge-tip");
+    S.hoverEdge = k;
+    for (const el of $("topology").querySelectorAll("path.edge.hover")) el.classList.remove("hover");
+    const g = k === null || !S.topo ? undefined : S.topo.groupOf[k];
+    const conns = (S.status || {}).connections || [];
+    if (g === undefined) { tip.hidden = true; return; }
+    const bundle = S.topo.groups[g];
+    const el = $("topology").querySelector(`path.edge[data-group="${g}"]`);
+    if (el) el.classList.add("hover");
+    const svg = $("topology"), [x, y] = bundle.mid;
+    const scale = svg.clientWidth / S.topo.width || 1;
+    const box = svg.getBoundingClientRect(), section = $("topology-section").getBoundingClientRect();
+    tip.innerHTML = bundle.ks.filter((j) => conns[j]).map((j) =>
+      `<div data-edge="${j}"${j === k ? ' class="this"' : ""}>${esc(connName(conns[j]))} · ${esc(edgeText(conns[j]))}</div>`).join("");
+    tip.dataset.group = g;
+    tip.style.left = `${box.left - section.left + x * scale + 6}px`;
+    tip.style.top = `${box.top - section.top + y * scale + 6}px`;
+    tip.hidden = false;
   }
 
   function renderTopology() {
     const svg = $("topology");
     S.topoWidth ||= Math.max(600, svg.clientWidth || 900);  // measured again only on resize
     const width = S.topoWidth;
-    const robots = S.members.filter((m) => m.state !== "left");
+    const robots = S.members.filter((m) => m.state !== "left" || m.dead_since);
     const leader = (S.status && S.status.allocator || {}).name;
-    const key = topologyKey(width, robots, leader, S.status || {});
+    const st = S.status || {};
+    const conns = st.connections || [];
+    renderConnections(conns);
+    const key = topologyKey(width, robots, leader, st);
     if (S.topo && S.topo.key === key) {  // same shapes: only states and traffic change
       for (const m of robots) {
         for (const inst of m.instances || []) {
-          const t = S.topo.inst[inst.name];
+          const t = S.topo.inst[`${m.name}/${inst.name}`];
           if (!t || t.state === inst.state) continue;
           t.state = inst.state;
           t.g.dataset.state = inst.state;
-          t.g.firstChild.setAttribute("fill", STATE_COLORS[inst.state] || "#cbd5e1");
-          t.g.lastChild.textContent = `${inst.name} · ${inst.state}`;
+          t.g.querySelector("rect").setAttribute("fill", STATE_COLORS[inst.state] || "#cbd5e1");
+          t.g.querySelector("text").textContent = clip(instText(inst));
         }
       }
-      const conns = (S.status || {}).connections || [];
-      for (const [el, k] of S.topo.labels) {
-        const c = conns[k];
-        const text = c ? edgeText(c) : "";
-        if (el.textContent !== text) el.textContent = text;
-        el.classList.toggle("lossy", !!(c && c.lost_per_s));
-      }
+      for (const [el, ks] of S.topo.edges) el.classList.toggle("lossy", ks.some((k) => conns[k] && conns[k].lost_per_s));
+      if (S.hoverEdge !== null && S.hoverEdge !== undefined) showEdge(S.hoverEdge);
       return;
     }
-    const boxW = 200, rowH = 15, pad = 10, gap = 26;
+    const boxW = BOX_W, rowH = ROW_H, pad = 10, gap = 26;
     const cols = Math.max(1, Math.floor((width + gap) / (boxW + gap)));
     const pos = {};
-    let html = '<defs><marker id="arrow" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="6" ' +
-      'markerHeight="6" orient="auto-start-reverse"><path d="M 0 0 L 10 5 L 0 10 z" fill="#64748b"/></marker></defs>';
+    let html = '<defs><marker id="arrow" viewBox="0 0 10 10" refX="10" refY="5" markerWidth="7" ' +
+      'markerHeight="7" markerUnits="userSpaceOnUse" orient="auto-start-reverse"><path d="M 0 0 L 10 5 L 0 10 z" fill="#64748b"/></marker></defs>';
     let y = 0, rowMax = 0, boxes = "";
     robots.forEach((m, i) => {
       const col = i % cols;
       if (col === 0 && i > 0) { y += rowMax + gap; rowMax = 0; }
       const insts = (m.instances || []).slice().sort((a, b) =>
         (a.role === b.role ? a.name.localeCompare(b.name) : a.role === "active" ? -1 : 1));
-      const h = 24 + insts.length * rowH + pad;
+      const head = m.dead_since ? 36 : 24;
+      const h = head + insts.length * rowH + pad;
       rowMax = Math.max(rowMax, h);
       const x = col * (boxW + gap);
-      const cls = `robot ${m.state}${m.name === leader ? " allocator" : ""}`;
+      const cls = `robot ${m.state}${m.name === leader ? " allocator" : ""}${m.reaped ? " reaped" : ""}`;
       boxes += `<g class="${esc(cls)}" data-robot="${esc(m.name)}"><rect x="${x}" y="${y}" width="${boxW}" height="${h}" rx="6"/>` +
         `<text class="name" x="${x + 8}" y="${y + 16}">${esc(m.name)}${m.name === leader ? " ★ allocator" : ""}</text>`;
+      if (m.dead_since) {
+        boxes += `<text class="since" x="${x + 8}" y="${y + 30}">${esc(m.state)} since ${clock(m.dead_since)}</text>`;
+      }
       insts.forEach((inst, k) => {
-        const iy = y + 22 + k * rowH;
+        const iy = y + head - 2 + k * rowH;
         const fill = STATE_COLORS[inst.state] || "#cbd5e1";
-        boxes += `<g class="inst ${esc(inst.role)}" data-instance="${esc(inst.name)}" data-state="${esc(inst.state)}">` +
+        const full = `${inst.component} ${roleText(inst.role, inst.was_standby)}: ${instText(inst)}`;
+        boxes += `<g class="inst ${esc(inst.role)}${inst.was_standby ? " promoted" : ""}" data-instance="${esc(inst.name)}" ` +
+          `data-robot="${esc(m.name)}" data-state="${esc(inst.state)}" data-role="${esc(roleText(inst.role, inst.was_standby))}">` +
+          `<title>${esc(full)}</title>` +
           `<rect x="${x + 8}" y="${iy}" width="${boxW - 16}" height="${rowH - 3}" rx="3" fill="${fill}"/>` +
-          `<text x="${x + 12}" y="${iy + 9}">${esc(inst.name)} · ${esc(inst.state)}</text></g>`;
-        pos[inst.name] = [x + 8, iy + (rowH - 3) / 2, x + boxW - 8];
+          `<text x="${x + 12}" y="${iy + 9}">${esc(clip(instText(inst)))}</text></g>`;
+        pos[`${m.name}/${inst.name}`] = [x + 8, iy + (rowH - 3) / 2, x + boxW - 8];
       });
       boxes += "</g>";
     });
     const total = y + rowMax + 4;
-    let edges = "";
-    const st = S.status || {};
-    const where = {};
-    for (const c of st.components || []) if (c.instance) where[c.component] = c.instance;
-    (st.connections || []).forEach((c, k) => {
-      const a = pos[where[c.from.split(".")[0]]], b = pos[where[c.to.split(".")[0]]];
-      if (!a || !b) return;
-      const label = esc(edgeText(c));
-      const cls = c.lost_per_s ? "edge-label lossy" : "edge-label";
-      if (a[0] === b[0]) {  // same robot: a loop on the box's right side
-        const x = a[2], bulge = x + 22 + Math.min(40, Math.abs(b[1] - a[1]) / 3);
-        edges += `<path class="edge" d="M ${x} ${a[1]} C ${bulge} ${a[1]}, ${bulge} ${b[1]}, ${x} ${b[1]}"/>` +
-          `<text class="${cls}" data-edge="${k}" x="${bulge - 4}" y="${(a[1] + b[1]) / 2 + 3}">${label}</text>`;
-        return;
+    // connections between the same two instances are one bundle: one path, its width growing
+    // with their number, their labels together on hover
+    const where = {}, groups = [], groupOf = {}, byEnds = {};
+    for (const c of st.components || []) if (c.instance) where[c.component] = `${c.robot}/${c.instance}`;
+    conns.forEach((c, k) => {
+      const ka = where[c.from.split(".")[0]], kb = where[c.to.split(".")[0]];
+      if (!pos[ka] || !pos[kb]) return;
+      const ends = `${ka}\u0001${kb}`;
+      if (byEnds[ends] === undefined) {
+        byEnds[ends] = groups.length;
+        groups.push({ a: pos[ka], b: pos[kb], ks: [] });
       }
-      const x1 = a[2], y1 = a[1], x2 = b[0], y2 = b[1];
-      const dx = Math.max(40, Math.abs(x2 - x1) / 2);
-      edges += `<path class="edge" d="M ${x1} ${y1} C ${x1 + dx} ${y1}, ${x2 - dx} ${y2}, ${x2} ${y2}"/>` +
-        `<text class="${cls}" data-edge="${k}" x="${(x1 + x2) / 2}" y="${(y1 + y2) / 2 - 3}">${label}</text>`;
+      groupOf[k] = byEnds[ends];
+      groups[byEnds[ends]].ks.push(k);
+    });
+    let edges = "";
+    groups.forEach((bundle, g) => {
+      const { a, b } = bundle;
+      let d;
+      if (a[0] === b[0]) {  // same robot: a loop on the box's right side
+        const x = a[2], bulge = x + 14 + (g % 6) * 4 + Math.min(30, Math.abs(b[1] - a[1]) / 3);
+        d = `M ${x} ${a[1]} C ${bulge} ${a[1]}, ${bulge} ${b[1]}, ${x} ${b[1]}`;
+        bundle.mid = [x + (bulge - x) * 0.75, (a[1] + b[1]) / 2];
+      } else {
+        const x1 = a[2], y1 = a[1], x2 = b[0], y2 = b[1];
+        const dx = Math.max(40, Math.abs(x2 - x1) / 2);
+        d = `M ${x1} ${y1} C ${x1 + dx} ${y1}, ${x2 - dx} ${y2}, ${x2} ${y2}`;
+        bundle.mid = [(x1 + x2) / 2, (y1 + y2) / 2];
+      }
+      const lossy = bundle.ks.some((k) => conns[k].lost_per_s);
+      const names = bundle.ks.map((k) => connName(conns[k])).join("\n");
+      edges += `<path class="${lossy ? "edge lossy" : "edge"}" data-group="${g}" data-count="${bundle.ks.length}" ` +
+        `style="stroke-width:${Math.min(6, 1.2 + 0.5 * (bundle.ks.length - 1))}" d="${d}"/>` +
+        `<path class="edge-hit" data-group="${g}" data-edge="${bundle.ks[0]}" d="${d}"><title>${esc(names)}</title></path>`;
     });
     svg.setAttribute("viewBox", `-2 -2 ${width + 4} ${total + 4}`);
     svg.style.height = `${total + 4}px`;
     svg.innerHTML = html + boxes + edges;
     const inst = {};
     for (const g of svg.querySelectorAll("g.inst")) {
-      inst[g.dataset.instance] = { g, state: g.dataset.state };
+      inst[`${g.dataset.robot}/${g.dataset.instance}`] = { g, state: g.dataset.state };
     }
-    const labels = [...svg.querySelectorAll("text.edge-label")].map((el) => [el, Number(el.dataset.edge)]);
-    S.topo = { key: topologyKey(width, robots, leader, st), inst, labels };
+    const paths = [...svg.querySelectorAll("path.edge")].map((el) => [el, groups[Number(el.dataset.group)].ks]);
+    S.topo = { key, inst, edges: paths, groups, groupOf, width: width + 4 };
+    if (S.hoverEdge !== null && S.hoverEdge !== undefined) showEdge(S.hoverEdge);
   }
 
   function markerHook(u) {
@@ -344,6 +442,7 @@
   function renderStates() {
     const canvas = $("states");
     const comps = ((S.status && S.status.components) || []).map((c) => c.component);
+    for (const comp of Object.keys(segments())) if (!comps.includes(comp)) comps.push(comp);
     const rowH = 14, left = 190, top = 4;
     S.statesWidth ||= Math.max(600, canvas.clientWidth || 900);  // no layout read per frame
     const width = S.statesWidth;
@@ -359,15 +458,7 @@
     const first = Math.min(S.t.length ? S.t[0] : now, S.moments.length ? S.moments[0].ts : now);
     const t0 = Math.max(now - S.windowS, first), span = Math.max(1, now - t0);
     const xOf = (ts) => left + (width - left - 60) * Math.max(0, Math.min(1, (ts - t0) / span));
-    if (S.segsAt !== S.momentsVersion) {
-      S.segs = {};
-      for (const mo of S.moments) {
-        if (mo.kind !== "state" || mo.role !== "active") continue;
-        (S.segs[mo.component] ||= []).push([mo.ts, mo.state, mo.robot]);
-      }
-      S.segsAt = S.momentsVersion;
-    }
-    const segs = S.segs;
+    const segs = segments();
     const labelsKey = `${comps.join("|")}@${dpr}`;
     if (S.labelsKey !== labelsKey) {  // component names drawn once, then copied
       const lc = document.createElement("canvas");
@@ -388,6 +479,7 @@
       for (let k = 0; k < list.length; k++) {
         const [ts, state] = list[k];
         const end = k + 1 < list.length ? list[k + 1][0] : now;
+        if (state === "gone") continue;
         ctx.fillStyle = STATE_COLORS[state] || "#cbd5e1";
         ctx.fillRect(xOf(ts), y + 2, Math.max(1, xOf(end) - xOf(ts)), rowH - 4);
       }
@@ -405,6 +497,29 @@
     ctx.fillText(clock(t0), left, height - 4);
     ctx.fillText(clock(now), width - 60, height - 4);
   }
+
+  // Each component's timeline: [ts, state, instance, robot, was_standby] from its `component`
+  // moments (whichever instance is its active), rebuilt only when the moments change.
+  function segments() {
+    if (S.segsAt !== S.momentsVersion) {
+      S.segs = {};
+      for (const mo of S.moments) {
+        if (mo.kind !== "component") continue;
+        (S.segs[mo.component] ||= []).push([mo.ts, mo.state, mo.instance, mo.robot, mo.was_standby]);
+      }
+      S.segsAt = S.momentsVersion;
+    }
+    return S.segs;
+  }
+
+  // What the timeline draws for a component: [from, to, state, instance, was_standby] spans
+  // (the browser test reads it: a failover must be a change of state, never a gap).
+  S.timeline = (comp) => {
+    const list = segments()[comp] || [];
+    const now = S.t.length ? S.t[S.t.length - 1] : Date.now() / 1000;
+    return list.map(([ts, state, inst, , promoted], k) =>
+      [ts, k + 1 < list.length ? list[k + 1][0] : Math.max(ts, now), state, inst, !!promoted]);
+  };
 
   function fleetEvent(m) {
     return {
@@ -449,13 +564,13 @@
   }
 
   const RENDER = {
-    summary: renderSummary, fleet: renderFleet, topology: renderTopology,
+    summary: renderSummary, warnings: renderWarnings, fleet: renderFleet, topology: renderTopology,
     charts: renderCharts, states: renderStates, events: renderEvents,
   };
 
   // ------------------------------------------------------------------ the stream
   function connect() {
-    const es = new EventSource("/v1/stream");
+    const es = new EventSource(SNAPSHOT ? "/v1/stream?once=1" : "/v1/stream");
     const on = (kind, fn) => es.addEventListener(kind, (msg) => fn(JSON.parse(msg.data)));
     on("hello", (h) => {
       S.robot = h.robot;
@@ -467,8 +582,23 @@
     on("events", (list) => { S.events = []; addEvents(list); });
     on("event", (e) => addEvents([e]));
     on("sample", addSample);
-    es.onopen = () => { S.connected = true; $("conn").className = "conn on"; $("conn").textContent = "live"; };
-    es.onerror = () => { S.connected = false; $("conn").className = "conn off"; $("conn").textContent = "reconnecting"; };
+    on("end", () => {  // snapshot mode: everything is here; draw it now and keep nothing open
+      es.close();
+      S.connected = false;
+      $("conn").className = "conn snap";
+      $("conn").textContent = `snapshot ${S.t.length ? clock(S.t[S.t.length - 1]) : ""}`;
+      mark("summary", "warnings", "fleet", "topology", "charts", "states", "events");
+      render();
+      document.documentElement.dataset.snapshot = "ready";
+    });
+    es.onopen = () => {
+      if (SNAPSHOT) return;
+      S.connected = true; $("conn").className = "conn on"; $("conn").textContent = "live";
+    };
+    es.onerror = () => {
+      if (SNAPSHOT) return;
+      S.connected = false; $("conn").className = "conn off"; $("conn").textContent = "reconnecting";
+    };
   }
 
   function frames(last) {  // frame intervals, for the benchmark's smoothness figure
@@ -493,7 +623,12 @@
   });
   $("event-kind").addEventListener("change", () => mark("events"));
   $("event-text").addEventListener("input", () => mark("events"));
+  const edgeOf = (e) => { const el = e.target.closest("[data-edge]"); return el ? Number(el.dataset.edge) : null; };
+  for (const id of ["topology", "connections"]) {
+    $(id).addEventListener("mouseover", (e) => showEdge(edgeOf(e)));
+    $(id).addEventListener("mouseleave", () => showEdge(null));
+  }
   renderLegend();
-  frames();
+  if (!SNAPSHOT) frames();
   connect();
 })();
