@@ -285,15 +285,20 @@ class Agent:
             self.discovery = None
 
     def _on_discovered(self, host: str, port: int) -> None:
-        """An agent found by discovery: join it unless it is this one or a member already."""
+        """An agent found by discovery: join what was found while this robot is alone (a robot
+        in the fleet leaves the joining to the newcomer, which is alone: the core keeps its join
+        addresses as reconnect targets, and one that never answers, an agent of another fleet,
+        would take a share of the anti-entropy rounds for good)."""
         if self.shell is None or self.core is None or self.discovery is None:
             return
-        known = {m.addr for m in self.core.members() if m.state == MemberState.ALIVE}
-        known.add(self.core.addr)
-        seeds = [a for a in self.discovery.found.values() if a not in known]
-        if (host, port) in seeds:
-            log.info("discovery: found %s:%d, joining", host, port)
-            self.shell.join(seeds)
+        alive = {m.addr for m in self.core.members() if m.state == MemberState.ALIVE}
+        alive.discard(self.core.addr)
+        if alive:
+            return
+        configured = [parse_hostport(s) for s in self.config.join]
+        found = [a for a in self.discovery.found.values() if a not in configured]
+        log.info("discovery: found %s:%d, joining", host, port)
+        self.shell.join([*configured, *found])
 
     async def _start_stack(self) -> None:
         """The deployment stack: its modules load in a worker thread while the loop serves the

@@ -3,10 +3,10 @@ as Serf's `-discover` does.
 
 How it works: with `discover: true` (off by default) the agent advertises a DNS-SD service
 `_sdrpeer._udp.local.` whose SRV and A records give its gossip address, and browses the same
-type; every robot found is handed to `on_found(host, port)`, which joins it unless it is a
-member already. The instance name is random per run (`sdrpeer-<16 hex>`) and the TXT record holds
-only the protocol version: no robot name, key id or metric is announced, so a listener learns
-only that an sdrpeer agent listens at that address (what a port scan tells too). Discovery finds
+type; every robot found is handed to `on_found(host, port)` (the agent joins what was found
+while it is alone: a newcomer joins the fleet, the fleet does not chase it). The instance name
+is random per run (`sdrpeer-<16 hex>`) and the TXT record holds only the protocol version: no
+robot name, key id or metric is announced, so a listener learns only that an sdrpeer agent listens at that address (what a port scan tells too). Discovery finds
 addresses, nothing else: the join and everything after it is sealed with the cluster key, so a
 robot of another fleet (or a forged announcement) costs one refused exchange (counted
 `unknown_key` or `unauthenticated` by the robot that got it) and is never a member.
@@ -160,6 +160,4 @@ class Discovery:
             async with asyncio.timeout(CLOSE_TIMEOUT):
                 if self._browser is not None:
                     await self._browser.async_cancel()
-                await zc.async_unregister_all_services()
-        with contextlib.suppress(OSError, RuntimeError):
-            await zc.async_close()
+                await zc.async_close()  # goodbyes for our service, then the sockets

@@ -68,7 +68,8 @@ async def post_fleet_keys(request: web.Request) -> web.Response:
     op = body.get("op")
     if op not in OPS:
         return json_error(400, f'field "op": expected one of {", ".join(OPS)}, got {op!r}')
-    key = kid = None
+    key: bytes | None = None
+    kid: bytes | None = None
     try:
         if op == "add":
             key = parse_key(str(body.get("key", "")))

@@ -286,6 +286,8 @@ def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> Running
     """Start the lab's agents and wait until all of them see every robot alive."""
     if options.robots < 1:
         raise SdrpeerError(f"--robots must be at least 1, got {options.robots}")
+    if options.discover and not options.netns:
+        raise SdrpeerError("--discover needs --netns: loopback carries no multicast")
     lab = _prepare(options)
     running = RunningLab(options.lab_dir, lab, options=options)
     key_file = Path(lab.key_file)
