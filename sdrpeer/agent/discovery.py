@@ -6,7 +6,8 @@ How it works: with `discover: true` (off by default) the agent advertises a DNS-
 type; every robot found is handed to `on_found(host, port)` (the agent joins what was found
 while it is alone: a newcomer joins the fleet, the fleet does not chase it). The instance name
 is random per run (`sdrpeer-<16 hex>`) and the TXT record holds only the protocol version: no
-robot name, key id or metric is announced, so a listener learns only that an sdrpeer agent listens at that address (what a port scan tells too). Discovery finds
+robot name, key id or metric is announced, so a listener learns only that an sdrpeer agent
+listens at that address (what a port scan tells too). Discovery finds
 addresses, nothing else: the join and everything after it is sealed with the cluster key, so a
 robot of another fleet (or a forged announcement) costs one refused exchange (counted
 `unknown_key` or `unauthenticated` by the robot that got it) and is never a member.
