@@ -7,7 +7,9 @@ SIGHUP reload) is saved to `DATA_DIR/keyring` (same format, mode 0600, written a
 restarted agent keeps a rotation it took part in. At start and on SIGHUP the agent takes the
 *newer* of the two files (modification time; the data-dir copy on a tie): a rotation done with
 `sdrpeer key` survives restarts, and an operator who edits the key file by hand (a robot that
-missed a rotation) makes it win again, with no file to delete.
+missed a rotation) makes it win again, with no file to delete. The rule trusts the robot's
+clock between the two writes: on a robot whose clock was set back (no RTC, no NTP) a hand edit
+may look older than the saved ring; deleting DATA_DIR/keyring then makes the key file count.
 """
 
 from __future__ import annotations
