@@ -133,8 +133,9 @@ class KeyAdmin:
             *(self._ask(api, "POST", "/v1/keys", bodies[name]) for name, api in apis.items())
         )
         robots: dict[str, Any] = dict(zip(apis, answers, strict=True))
-        new = apply_change(ring, op, key, kid)
-        if new.keys != ring.keys:
+        here = self.current()  # a SIGHUP may have changed it meanwhile
+        new = apply_change(here, op, key, kid)
+        if new.keys != here.keys:
             self.use(new, f"key {op}")
         robots[self.name] = ring_json(self.name, new)
         ok = all("error" not in doc for doc in robots.values())
