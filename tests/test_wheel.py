@@ -33,13 +33,21 @@ def run(argv: list[str], cwd: Path, timeout: float = 600) -> str:
 
 
 SKIP = shutil.ignore_patterns(
-    ".venv", ".git", "out", "build", "dist", "*.egg-info", "__pycache__", ".*_cache", ".sdrpeer-lab"
+    ".venv*",
+    ".git",
+    "out",
+    "build",
+    "dist",
+    "*.egg-info",
+    "__pycache__",
+    ".*_cache",
+    ".sdrpeer-lab",
 )
 
 
 def test_the_wheel_installs_into_a_clean_venv_and_runs(tmp_path: Path) -> None:
     source, dist = tmp_path / "src", tmp_path / "dist"
-    shutil.copytree(ROOT, source, ignore=SKIP)  # pip builds in the tree: not in this one
+    shutil.copytree(ROOT, source, ignore=SKIP, ignore_dangling_symlinks=True)  # built in place
     run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", str(dist), str(source)], tmp_path)
     wheels = list(dist.glob("sdrpeer-*.whl"))
     assert len(wheels) == 1, wheels
@@ -64,13 +72,15 @@ def test_the_wheel_installs_into_a_clean_venv_and_runs(tmp_path: Path) -> None:
         f"data-dir: {data}\npreset: fast_test\n"
     )
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    agent = subprocess.Popen(
-        [str(exe), "agent", "--config", str(config)],
-        cwd=tmp_path,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
+    log = tmp_path / "agent.log"
+    with log.open("wb") as out:
+        agent = subprocess.Popen(
+            [str(exe), "agent", "--config", str(config)],
+            cwd=tmp_path,
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
     try:
         deadline = time.monotonic() + 60
         info = None
@@ -80,10 +90,10 @@ def test_the_wheel_installs_into_a_clean_venv_and_runs(tmp_path: Path) -> None:
                 break
             except (OSError, ValueError):
                 time.sleep(0.1)
-        assert info is not None, agent.stderr.read() if agent.stderr else ""
+        assert info is not None, log.read_text()
         with urllib.request.urlopen(str(info["api"]) + "/", timeout=10) as page:
             assert b"<html" in page.read().lower()
     finally:
         agent.send_signal(signal.SIGTERM)
         code = agent.wait(timeout=30)
-    assert code == 0
+    assert code == 0, log.read_text()

@@ -2,7 +2,8 @@
 """A robot with only the cluster key and its configuration file (no seed address) joining a
 fleet through mDNS, in the namespace lab (root): how long until the fleet has it.
 
-Usage: sudo .venv/bin/python tools/bench_discovery.py [--robots 5] [--runs 5] [--json PATH]
+Usage: sudo .venv/bin/python tools/bench_discovery.py [--robots 5] [--runs 5] [--python PY]
+       [--json PATH]
 
 How it works: a namespace lab of `--robots` robots is started with discovery on and no `--join`
 at all (`UpOptions(discover=True)`: the lab itself forms by mDNS). Each run then stops the last
@@ -11,7 +12,9 @@ file holding only its name, addresses, key file, data and robot files, `discover
 preset, and starts `sdrpeer agent --config FILE` in its namespace. Two times are measured, from
 the process's spawn and from the moment its agent started (its `agent.start` event), to the first
 moment when it sees every other robot alive and every other robot sees it alive (all polled every
-50 ms). The target: within 3 s. The table prints the medians and the worst; `--json` writes
+50 ms). `--python` runs the joining robot with another interpreter, e.g. that of a fresh venv
+holding only the wheel (`pip install dist/sdrpeer-*.whl`): then nothing of this tree is on its
+path. The target: within 3 s. The table prints the medians and the worst; `--json` writes
 every run.
 """
 
@@ -79,8 +82,11 @@ def config_for(running: RunningLab, robot: str, path: Path) -> Path:
     return path
 
 
-def join_once(running: RunningLab, robot: str, work: Path) -> dict[str, Any]:
-    """Stop `robot`, start it again from its configuration file only; the two times."""
+def join_once(
+    running: RunningLab, robot: str, work: Path, python: str | None = None
+) -> dict[str, Any]:
+    """Stop `robot`, start it again from its configuration file only (with `python`, else this
+    interpreter and this tree); the two times."""
     assert running.net is not None
     others = [r for r in running.lab.robots if r.name != robot]
     proc = running.procs[robot]
@@ -95,6 +101,8 @@ def join_once(running: RunningLab, robot: str, work: Path) -> dict[str, Any]:
     assert entry is not None
     api = f"http://{running.net.address(robot)}:8080"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
+    if python is not None:
+        env.pop("PYTHONPATH")
     wall0, t0 = time.time(), time.monotonic()
     with Path(entry.log).open("ab") as log:
         running.procs[robot] = subprocess.Popen(
@@ -106,6 +114,7 @@ def join_once(running: RunningLab, robot: str, work: Path) -> dict[str, Any]:
             stdin=subprocess.DEVNULL,
             start_new_session=True,
             env=env,
+            cwd=work,
         )
     entry.pid = running.procs[robot].pid
     names = {r.name for r in running.lab.robots}
@@ -131,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--robots", type=int, default=5)
     p.add_argument("--runs", type=int, default=5)
     p.add_argument("--preset", default="lan")
+    p.add_argument("--python", metavar="PY", help="the joining robot's interpreter (a wheel venv)")
     p.add_argument("--json", type=Path, metavar="PATH")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="bench-discovery-") as tmp:
@@ -142,7 +152,10 @@ def main(argv: list[str] | None = None) -> int:
         running = start_lab(options, say=lambda _: None)
         formed = time.monotonic() - t0
         try:
-            runs = [join_once(running, f"robot-{args.robots}", work) for _ in range(args.runs)]
+            runs = [
+                join_once(running, f"robot-{args.robots}", work, args.python)
+                for _ in range(args.runs)
+            ]
         finally:
             running.stop(grace=5)
     spawn = [r["from_spawn_s"] for r in runs]
