@@ -6,13 +6,14 @@ Usage: python tools/bench_keys.py [--robots 5] [--runs 3] [--netns] [--preset la
 
 How it works: one lab of `--robots` real agents (`sdrpeer lab up`; `--netns`: each robot in its
 own network namespace, root) is started, then each run rotates its key with the real command
-line, as an operator would: `sdrpeer keygen > new.key`, `sdrpeer key add new.key`,
-`sdrpeer key primary ID`, `sdrpeer key retire OLD`, each timed (the agent asked answers once
-every robot took the change, so the `primary` command's time is the time for the whole fleet to
-switch its sealing key). Afterwards `sdrpeer key list --json` must show every robot on the new
-key alone, and every agent's event log, read from before the run, is searched for
-`member.suspect` and `member.dead` (the target: none), and its `unauthenticated` and
-`unknown_key` rejections counted (none expected: every datagram opens at every step). The
+line, as an operator would: `sdrpeer keygen > new.key`, `sdrpeer key add new.key`, `sdrpeer key
+primary ID`, `sdrpeer key retire OLD`, each timed (the agent asked answers once every robot took
+the change, so the `primary` command's time is the time for the whole fleet to switch its
+sealing key, Python's start-up included; the agents' `keys.reloaded` events give the spread from
+the first robot sealing with the new key to the last). Afterwards `sdrpeer key list --json` must
+show every robot on the new key alone, and every agent's event log, read from before the run, is
+searched for `member.suspect` and `member.dead` (the target: none), and its `unauthenticated`
+and `unknown_key` rejections counted (none expected: every datagram opens at every step). The
 table prints medians over the runs; `--json` writes every run.
 """
 
@@ -93,6 +94,20 @@ def trouble_since(
     return bad, rejected
 
 
+def switch_times(running: RunningLab, before: dict[str, tuple[int, dict[str, int]]]) -> list[float]:
+    """When each agent put the new primary in use (its `keys.reloaded` event, wall clock: the
+    lab's agents share this machine's clock)."""
+    out = []
+    for robot in running.lab.robots:
+        events = AgentClient(str(robot.api), timeout=5).events(since=before[robot.name][0])
+        out += [
+            float(e["ts"])
+            for e in events
+            if e.get("kind") == "keys.reloaded" and e["detail"].get("why") == "key primary"
+        ]
+    return out
+
+
 def rotate(running: RunningLab, work: Path) -> dict[str, Any]:
     """One rotation with the real command line; its figures."""
     lab_dir = running.lab_dir
@@ -105,7 +120,9 @@ def rotate(running: RunningLab, work: Path) -> dict[str, Any]:
     steps: dict[str, float] = {"keygen": keygen_s}
     text, steps["add"] = ok("key add", cli(lab_dir, "key", "add", str(new_key), "--json"))
     new_id = json.loads(text)["key_id"]
+    asked = time.time()
     _, steps["primary"] = ok("key primary", cli(lab_dir, "key", "primary", new_id, "--json"))
+    switched = switch_times(running, before)
     retire_s = 0.0
     for kid in old:
         retire_s += ok("key retire", cli(lab_dir, "key", "retire", kid, "--json"))[1]
@@ -122,6 +139,9 @@ def rotate(running: RunningLab, work: Path) -> dict[str, Any]:
         "retired": old,
         "seconds": steps,
         "switch_primary_s": steps["primary"],
+        "switch_spread_s": round(max(switched) - min(switched), 3),
+        "switch_last_after_ask_s": round(max(switched) - asked, 3),
+        "switched_robots": len(switched),
         "robots_on_new_key": len(on_new),
         "robots": len(running.lab.robots),
         "suspicions": sum(1 for e in bad if e["kind"] == "member.suspect"),
@@ -169,6 +189,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'suspicions (all runs)':<28}{sum(r['suspicions'] for r in runs):>10}")
     print(f"{'deaths (all runs)':<28}{sum(r['deaths'] for r in runs):>10}")
     print(f"{'key rejections (all runs)':<28}{sum(sum(r['rejected'].values()) for r in runs):>10}")
+    spread = statistics.median(r["switch_spread_s"] for r in runs)
+    last = statistics.median(r["switch_last_after_ask_s"] for r in runs)
+    print(f"{'  first to last robot':<28}{spread:>10.3f}")
+    print(f"{'  command start to last':<28}{last:>10.3f}")
     on_new = min(r["robots_on_new_key"] for r in runs)
     print(f"{'robots on the new key alone':<28}{on_new:>7}/{args.robots}")
     if args.json:
@@ -179,6 +203,8 @@ def main(argv: list[str] | None = None) -> int:
             "preset": args.preset,
             "median_s": med,
             "switch_primary_s_median": med["primary"],
+            "switch_spread_s_median": spread,
+            "switch_last_after_ask_s_median": last,
             "suspicions": sum(r["suspicions"] for r in runs),
             "deaths": sum(r["deaths"] for r in runs),
             "runs": runs,
