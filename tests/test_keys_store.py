@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -107,3 +108,23 @@ def test_a_robot_to_robot_change_names_the_bad_field() -> None:
         "primary": key_id(B).hex(),
         "keys": [key_id(B).hex(), key_id(A).hex()],
     }
+
+
+def test_primary_and_retire_wait_for_every_alive_robot_but_not_for_the_dead() -> None:
+    from sdrpeer.agent.keyadmin import KeyAdmin, KeyChangeRefused  # noqa: PLC0415
+
+    new, old = key_id(B).hex(), key_id(A).hex()
+    both = {"primary": old, "keys": [old, new]}
+    listing: dict[str, Any] = {
+        "robots": {"r1": both, "r2": {"error": "timed out"}},
+        "not_alive": ["r3"],
+    }
+    with pytest.raises(KeyChangeRefused, match="r2 did not answer"):
+        KeyAdmin._check(listing, "primary", key_id(B))
+    listing["robots"]["r2"] = {"primary": old, "keys": [old]}
+    with pytest.raises(KeyChangeRefused, match="r2 does not hold key"):
+        KeyAdmin._check(listing, "primary", key_id(B))
+    listing["robots"]["r2"] = both
+    KeyAdmin._check(listing, "primary", key_id(B))  # r3 is dead: it cannot be asked
+    with pytest.raises(KeyChangeRefused, match="r1 seals with key"):
+        KeyAdmin._check(listing, "retire", key_id(A))
