@@ -71,6 +71,11 @@ class AgentConfig:
     """debug, info, warning or error."""
     log_format: str = "text"
     """text (human) or json (one object per line)."""
+    discover: bool = False
+    """Find the fleet on the local network by mDNS/DNS-SD (sdrpeer.agent.discovery): advertise
+    this robot's gossip address and join the robots found, no `join` needed. Off by default: it
+    announces the agent to the whole network segment. Discovery finds addresses only; the
+    cluster key still authenticates everything."""
 
     @property
     def launch_policy(self) -> LaunchPolicy:
@@ -196,6 +201,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "priority": _as_priority,
     "log_level": _as_str,
     "log_format": _as_str,
+    "discover": _as_bool,
 }
 _PATH_FIELDS = ("robot_file", "scenario", "key_file", "token_file", "data_dir")
 

@@ -52,6 +52,7 @@ def test_fields_are_the_documented_set() -> None:
         "priority",
         "log_level",
         "log_format",
+        "discover",
     }
 
 

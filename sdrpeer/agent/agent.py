@@ -8,9 +8,11 @@ summary, API address, priority, instances, election, plan). The `Publisher`
 (sdrpeer.monitor.publish) decides whether the sample makes a new record (spread to every robot), a
 vitals revision (carried on our probes) or nothing. Everything the API shows comes from the gossip
 core's view plus the records decoded here, each with its newest vitals laid over it (the views
-of AgentView are methods here: they read the agent's own state). `reload_keys` (SIGHUP) hands a
-new keyring to every part that holds a key. SIGINT/SIGTERM: graceful leave; a second signal:
-immediate exit.
+of AgentView are methods here: they read the agent's own state). `reload_keys` (SIGHUP) and the
+key commands (`keys`, sdrpeer.agent.keyadmin) hand a new keyring to every part that holds a key
+(`use_keyring`), which saves it in the data directory (sdrpeer.keys.store). With `discover`
+the agent also joins what mDNS finds (`discovery`, sdrpeer.agent.discovery). SIGINT/SIGTERM:
+graceful leave; a second signal: immediate exit.
 """
 
 from __future__ import annotations
@@ -28,7 +30,10 @@ from typing import TYPE_CHECKING, Any
 from sdrpeer import __version__
 from sdrpeer.agent import files as agent_files
 from sdrpeer.agent.files import load_token, write_agent_json
+from sdrpeer.agent.keyadmin import KeyAdmin
+from sdrpeer.agent.keyroutes import ROUTES as KEY_ROUTES
 from sdrpeer.agent.tuning import Tuning, preset
+from sdrpeer.api import peer_client
 from sdrpeer.api.server import BoundedSite, serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
@@ -50,6 +55,7 @@ from sdrpeer.gossip.events import (
 from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.gossip.wire import REASONS, Codec, Keyring
 from sdrpeer.keys.derive import data_keys, peer_token, peer_tokens
+from sdrpeer.keys.store import load_ring, save_ring
 from sdrpeer.monitor.links import LinkTable, distance
 from sdrpeer.monitor.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.monitor.publish import (
@@ -83,6 +89,7 @@ from sdrpeer.vocabulary import LifecycleState, MemberState
 if TYPE_CHECKING:
     from aiohttp.web import AppRunner
 
+    from sdrpeer.agent.discovery import Discovery
     from sdrpeer.deploy.coordinator import Coordinator
     from sdrpeer.monitor.scenario import Scenario
     from sdrpeer.monitor.virtual import VirtualRobot
@@ -164,6 +171,17 @@ class Agent:
         self.events.listeners.append(self.recovery.count)
         self.priority = config.priority
         """Election priority: --priority / the config file, else the robot file's `priority:`."""
+        self.discovery: Discovery | None = None
+        """mDNS discovery of the fleet (`discover: true`; sdrpeer.agent.discovery)."""
+        self.keys = KeyAdmin(
+            config.name,
+            lambda: self.keyring,
+            self.use_keyring,
+            self._key_peers,
+            peer_client.call,
+            lambda: peer_token(self.keyring.signing_key if self.keyring else None),
+        )
+        """The key commands (`sdrpeer key ...`): this robot's side and the fleet's."""
 
     @property
     def name(self) -> str:
@@ -183,7 +201,9 @@ class Agent:
             log.warning(INSECURE_WARNING, cfg.bind)
         else:
             assert cfg.key_file is not None
-            self.keyring = Keyring.from_file(cfg.key_file)
+            self.keyring, source = load_ring(cfg.key_file, cfg.data_dir)
+            if source != cfg.key_file:
+                log.info("keys from %s (newer than %s)", source, cfg.key_file)
         self.peer_tokens[:] = peer_tokens(self.keyring.keys if self.keyring else ())
         token = load_token(cfg.data_dir, cfg.token_file)
         if cfg.robot_file is not None:
@@ -236,6 +256,8 @@ class Agent:
         seeds = [parse_hostport(s) for s in cfg.join]
         if seeds:
             self.shell.join(seeds)
+        if cfg.discover:
+            await self._start_discovery(host, addr[1])
         self._tasks.append(asyncio.create_task(self._metrics_loop()))
         self._tasks.append(asyncio.create_task(self.dashboard.run()))
         self._stack = asyncio.create_task(self._start_stack())
@@ -249,6 +271,34 @@ class Agent:
             self.api_url,
             cfg.preset,
         )
+
+    async def _start_discovery(self, host: str, port: int) -> None:
+        """Announce this agent and join what mDNS finds; a failure is logged, not fatal (the
+        robot may still be found by others, or be given `join` addresses)."""
+        from sdrpeer.agent.discovery import Discovery  # noqa: PLC0415 - only with discover on
+
+        self.discovery = Discovery(host, port, self._on_discovered)
+        try:
+            await self.discovery.start()
+        except (OSError, ImportError) as exc:
+            log.error("discovery is on but cannot start: %r", exc)
+            self.discovery = None
+
+    def _on_discovered(self, host: str, port: int) -> None:
+        """An agent found by discovery: join what was found while this robot is alone (a robot
+        in the fleet leaves the joining to the newcomer, which is alone: the core keeps its join
+        addresses as reconnect targets, and one that never answers, an agent of another fleet,
+        would take a share of the anti-entropy rounds for good)."""
+        if self.shell is None or self.core is None or self.discovery is None:
+            return
+        alive = {m.addr for m in self.core.members() if m.state == MemberState.ALIVE}
+        alive.discard(self.core.addr)
+        if alive:
+            return
+        configured = [parse_hostport(s) for s in self.config.join]
+        found = [a for a in self.discovery.found.values() if a not in configured]
+        log.info("discovery: found %s:%d, joining", host, port)
+        self.shell.join([*configured, *found])
 
     async def _start_stack(self) -> None:
         """The deployment stack: its modules load in a worker thread while the loop serves the
@@ -316,6 +366,9 @@ class Agent:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._stack
         self.dashboard.close()
+        if self.discovery is not None:
+            self.stopping = "discovery"
+            await self.discovery.stop()
         if self.coordinator is not None:
             self.stopping = "the coordinator"
             if leave:
@@ -354,7 +407,7 @@ class Agent:
             token,
             host,
             port,
-            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES, *PORT_ROUTES],
+            extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES, *PORT_ROUTES, *KEY_ROUTES],
             peer_tokens=self.peer_tokens,
         )
         self.api_url = self.api_site.name
@@ -494,22 +547,30 @@ class Agent:
 
     # ----------------------------------------------------------------- component instances
     def reload_keys(self) -> bool:
-        """Read the key file again (SIGHUP) and use its keys, True when they are in use: the first
-        seals, all open. On each reload the gossip codec takes the new keyring, the API accepts the
-        peer token of every key in it, the agent presents the token of the sealing key, and every
-        component host gets the new data keys (sdrpeer.dataplane.auth). A file that cannot be read
+        """Read the keys again (SIGHUP) and use them, True when they are in use: the newer of the
+        key file and the ring saved in the data directory (sdrpeer.keys.store), so a hand-edited
+        key file wins and a rotation done with `sdrpeer key` is kept. A file that cannot be read
         changes nothing (`keys.reload_failed` in the event log). docs/security.md tells the
-        procedure: add the new key second everywhere, put it first, remove the old one."""
+        procedure by hand: add the new key second everywhere, put it first, remove the old one."""
         key_file = self.config.key_file
         if self.keyring is None or key_file is None:
             log.warning("key reload asked, but this agent runs without a key file")
             return False
         try:
-            ring = Keyring.from_file(key_file)
+            ring, source = load_ring(key_file, self.config.data_dir)
         except (ConfigError, OSError, ValueError) as exc:
             log.error("key reload failed, the old keys stay: %s", exc)
             self.events.add(time.time(), EventKind.KEYS_RELOAD_FAILED, self.name, error=str(exc))
             return False
+        self.use_keyring(ring, f"reload of {source}")
+        return True
+
+    def use_keyring(self, ring: Keyring, why: str) -> None:
+        """Use `ring` from now on, the first key sealing and all opening: the gossip codec takes
+        it, the API accepts the peer token of every key in it, the agent presents the token of the
+        sealing key, every component host gets the new data keys (sdrpeer.dataplane.auth); and it
+        is saved to DATA_DIR/keyring so a restart keeps it (a failed save is logged: the ring is
+        in use all the same)."""
         self.keyring = ring
         if self.shell is not None:
             self.shell.codec.keyring = ring
@@ -518,10 +579,20 @@ class Agent:
             self.coordinator.set_token(peer_token(ring.signing_key))
         if self.instances is not None:  # else the stack takes the new ring's keys when it starts
             self.instances.set_data_keys(data_keys(ring.keys))
+        try:
+            save_ring(self.config.data_dir, ring)
+        except ConfigError as exc:
+            log.error("%s (a restart will not keep these keys)", exc)
         ids = [k.hex() for k in ring.key_ids]
-        log.info("keys reloaded: %d key(s), signing with %s", len(ids), ids[0])
-        self.events.add(time.time(), EventKind.KEYS_RELOADED, self.name, key_ids=ids)
-        return True
+        log.info("keys in use (%s): %d key(s), signing with %s", why, len(ids), ids[0])
+        self.events.add(time.time(), EventKind.KEYS_RELOADED, self.name, key_ids=ids, why=why)
+
+    def _key_peers(self) -> tuple[dict[str, str | None], list[str]]:
+        """The other alive robots' API addresses, and the members that are not alive."""
+        state = self._cluster_state()
+        apis = {n: r.api for n, r in state.alive.items() if n != self.name}
+        missed = sorted(state.members - set(state.alive))
+        return apis, missed
 
     def _on_fault(self, name: str, kind: str, detail: str) -> None:
         """A component fault, an instance in ERROR, or a host that died: to local recovery."""

@@ -71,6 +71,12 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--priority", type=_priority, metavar="N", help="election priority (default 0)")
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default info")
     p.add_argument("--log-format", choices=LOG_FORMATS, help="default text")
+    p.add_argument(
+        "--discover",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="find the fleet on the local network by mDNS (default off; the key still rules)",
+    )
 
 
 def agent_flag_values(args: argparse.Namespace) -> dict[str, Any]:

@@ -47,6 +47,11 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     up.add_argument(
         "--netns", action="store_true", help="each robot in its own network namespace (root)"
     )
+    up.add_argument(
+        "--discover",
+        action="store_true",
+        help="robots find each other by mDNS, no --join (with --netns: loopback has no multicast)",
+    )
     up.set_defaults(func=cmd_lab_up)
     down = lab_sub.add_parser("down", parents=[where], help="stop the lab's agents")
     down.add_argument(
@@ -183,6 +188,7 @@ def cmd_lab_up(args: argparse.Namespace) -> int:
         scenario=args.scenario,
         timeout=args.timeout,
         netns=args.netns,
+        discover=args.discover,
     )
     return run_lab(options, detach=args.detach, seconds=args.seconds)
 

@@ -99,9 +99,11 @@ def build_parser() -> argparse.ArgumentParser:
     """The whole `sdrpeer` argument parser."""
     from sdrpeer.cli.deploy import add_deploy_parsers  # noqa: PLC0415 - only when parsing
     from sdrpeer.cli.instances import add_instance_parsers  # noqa: PLC0415
+    from sdrpeer.cli.keys import add_key_parsers  # noqa: PLC0415
     from sdrpeer.cli.lab import add_lab_parsers  # noqa: PLC0415
     from sdrpeer.cli.port import add_port_parsers  # noqa: PLC0415
     from sdrpeer.cli.profile import add_profile_parser  # noqa: PLC0415 - heavy
+    from sdrpeer.cli.service import add_service_parser  # noqa: PLC0415
     from sdrpeer.cli.system import add_system_parser  # noqa: PLC0415
     from sdrpeer.cli.top import add_top_parser  # noqa: PLC0415
 
@@ -133,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_lab_parsers(sub)
     add_top_parser(sub, client)
     add_profile_parser(sub)
+    add_key_parsers(sub, client, as_json)
+    add_service_parser(sub)
     return parser
 
 

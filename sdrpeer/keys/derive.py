@@ -9,6 +9,8 @@ way, so no secret of one use opens another:
   one of its own that no other agent takes, so no token is a public constant;
 - `data_key(s)`: what component hosts authenticate their data connections with (BLAKE2b with a
   fixed personalisation), so a host never holds a cluster key and a data key cannot seal gossip;
+- `transport_key`: what a new cluster key is sealed with when one agent hands it to another
+  (`sdrpeer key add`, sdrpeer.keys.transport: HKDF-SHA256, `TRANSPORT_INFO`);
 - `stream_keys`: the two keys of one encrypted data connection (HKDF-SHA256 of the data key both
   ends proved, salted with both handshake nonces and bound to the connection's names), so no two
   connections or directions share a key.
@@ -31,12 +33,14 @@ __all__ = [
     "peer_token",
     "peer_tokens",
     "stream_keys",
+    "transport_key",
 ]
 
 GOSSIP_INFO: Final = b"sdrpeer gossip aes-256-gcm v1"
 _PEER_LABEL: Final = b"sdrpeer peer api v1"
 _DATA_PERSON: Final = b"sdrpeer-data-v1"
 _STREAM_INFO: Final = b"sdrpeer data stream aes-256-gcm v1"
+TRANSPORT_INFO: Final = b"sdrpeer key transport aes-256-gcm v1"
 
 
 @functools.cache
@@ -64,6 +68,11 @@ def _hkdf(key: bytes, length: int, salt: bytes | None, info: bytes) -> bytes:
 def gossip_key(cluster_key: bytes) -> bytes:
     """The AES-256-GCM key gossip is sealed with under `cluster_key`."""
     return _hkdf(cluster_key, 32, None, GOSSIP_INFO)
+
+
+def transport_key(cluster_key: bytes) -> bytes:
+    """The AES-256-GCM key a cluster key seals a new cluster key with, agent to agent."""
+    return _hkdf(cluster_key, 32, None, TRANSPORT_INFO)
 
 
 def peer_token(signing_key: bytes | None) -> str:

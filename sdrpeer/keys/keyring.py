@@ -6,9 +6,11 @@ its SHA-256 (the key id). Gossip is sealed with AES-256-GCM (authenticated encry
 does), under a key derived from each cluster key with HKDF-SHA256 (`GOSSIP_INFO`), from the
 `cryptography` package: `Keyring.seal` uses the first key, `Keyring.open` looks the key up by id
 (two keys whose ids collide are both tried). Rotation: add the new key second everywhere (both
-open), move it first everywhere (it seals, the old one still opens), then remove the old. Key
-files hold one key a line, hex or base64 (a `hex:`/`base64:` prefix says which), `#` comments.
-`cryptography` is imported only when a keyring first seals or opens.
+open), move it first everywhere (it seals, the old one still opens), then remove the old
+(`with_key`, `with_primary`, `without` make each step's ring; `sdrpeer key add|primary|retire`
+spreads one to the fleet, sdrpeer.agent.keyadmin). Key files hold one key a line, hex or base64
+(a `hex:`/`base64:` prefix says which), `#` comments. `cryptography` is imported only when a
+keyring first seals or opens.
 """
 
 from __future__ import annotations
@@ -40,6 +42,14 @@ _HEX = re.compile(r"(?:[0-9a-fA-F]{2})+")
 def key_id(key: bytes) -> bytes:
     """The 4-byte id of `key` sent in every datagram it seals: sha256(key)[:4]."""
     return hashlib.sha256(key).digest()[:KEY_ID_SIZE]
+
+
+def parse_key_id(text: str) -> bytes:
+    """A key id as printed (8 hex digits); ValueError saying what is expected."""
+    text = text.strip().lower()
+    if len(text) != 2 * KEY_ID_SIZE or not _HEX.fullmatch(text):
+        raise ValueError(f"{text!r} is not a key id (8 hex digits, as `sdrpeer key list` shows)")
+    return bytes.fromhex(text)
 
 
 def format_key(key: bytes) -> str:
@@ -131,6 +141,40 @@ class Keyring:
                 continue
             return data
         return None
+
+    def find(self, kid: bytes) -> bytes | None:
+        """The first key of the ring with id `kid`, or None."""
+        for i, known in enumerate(self._ids):
+            if known == kid:
+                return self._keys[i]
+        return None
+
+    def with_key(self, key: bytes) -> Keyring:
+        """This ring with `key` added last (it opens, it does not seal); the same keys when it
+        is in already."""
+        return Keyring([*self._keys, key])
+
+    def with_primary(self, kid: bytes) -> Keyring:
+        """This ring with the key of id `kid` first (it seals); ConfigError when no key has it."""
+        key = self.find(kid)
+        if key is None:
+            raise ConfigError(f"keyring: no key with id {kid.hex()} (install it first)")
+        return Keyring([key, *(k for k in self._keys if k != key)])
+
+    def without(self, kid: bytes) -> Keyring:
+        """This ring without the key(s) of id `kid` (the same ring when none has it);
+        ConfigError for the sealing key (make another one primary first)."""
+        if kid == self._ids[0]:
+            raise ConfigError(
+                f"keyring: key {kid.hex()} is the primary (it seals): make another key primary "
+                "before retiring it"
+            )
+        return Keyring([k for k, i in zip(self._keys, self._ids, strict=True) if i != kid])
+
+    def to_text(self, comment: str = "") -> str:
+        """The ring as a key file (the primary first), with `comment` lines on top."""
+        head = "".join(f"# {line}\n" for line in comment.splitlines())
+        return head + "".join(format_key(k) + "\n" for k in self._keys)
 
     @staticmethod
     def generate() -> bytes:

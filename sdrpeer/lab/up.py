@@ -60,6 +60,9 @@ class UpOptions:
     timeout: float = 20.0
     netns: bool = False
     """Each robot in its own network namespace on a private bridge (root; sdrpeer.netlab)."""
+    discover: bool = False
+    """Robots find each other by mDNS (`--discover`) instead of joining robot-1 (a namespace
+    lab: multicast needs a network segment, loopback has none)."""
 
 
 @dataclass(slots=True)
@@ -175,7 +178,9 @@ def agent_command(
     ]
     if options.scenario is not None:
         command += ["--scenario", str(options.scenario.resolve())]
-    if join is not None:
+    if options.discover:
+        command.append("--discover")
+    elif join is not None:
         command += ["--join", join]
     return command
 
@@ -281,6 +286,8 @@ def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> Running
     """Start the lab's agents and wait until all of them see every robot alive."""
     if options.robots < 1:
         raise SdrpeerError(f"--robots must be at least 1, got {options.robots}")
+    if options.discover and not options.netns:
+        raise SdrpeerError("--discover needs --netns: loopback carries no multicast")
     lab = _prepare(options)
     running = RunningLab(options.lab_dir, lab, options=options)
     key_file = Path(lab.key_file)
