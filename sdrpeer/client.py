@@ -1,34 +1,36 @@
-"""A small synchronous client for an agent's HTTP API (urllib; used by the CLI and the lab).
+"""A small synchronous client for an agent's HTTP API (http.client; the CLI, the lab, tools).
 
 Finding the agent: `--api URL`, else `$SDRPEER_API`, else the lab file (first robot). The token:
 `--token`, else `$SDRPEER_TOKEN`, else the lab robot whose API URL matches. Every failure is an
 `ApiError` whose message names the agent and says what to do.
+
+This module is what `sdrpeer members|status|instances` load besides the parser, so it stays
+light: a JSON call is one `http.client` connection (urllib's opener machinery is loaded only by
+the streaming calls of the port tools), and its records are NamedTuples (`dataclasses` loads
+`inspect`, tens of milliseconds per command).
 """
 
 from __future__ import annotations
 
+import http.client
 import json
 import socket
 import time
-import urllib.error
 import urllib.parse
-import urllib.request
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
-
-import msgpack
+from typing import Any, NamedTuple, TypeVar
 
 from sdrpeer.errors import ApiError, SdrpeerError
 
 T = TypeVar("T")
 
 DEFAULT_TIMEOUT = 5.0
+LAB_DIR = Path(".sdrpeer-lab")
+"""Where a client command looks for `lab.json` unless told (`sdrpeer.lab.files.DEFAULT_DIR`)."""
 
 
-@dataclass(frozen=True, slots=True)
-class AgentClient:
+class AgentClient(NamedTuple):
     """Calls one agent's API at `base` (e.g. "http://127.0.0.1:8080")."""
 
     base: str
@@ -47,7 +49,7 @@ class AgentClient:
 
     def request(self, method: str, path: str, body: Any = None) -> Any:
         """One HTTP call; raises ApiError with a message meant for a person."""
-        url = self.base.rstrip("/") + path
+        url = urllib.parse.urlsplit(self.base.rstrip("/") + path)
         headers = {"Accept": "application/json"}
         data = None
         if body is not None:
@@ -55,17 +57,22 @@ class AgentClient:
             headers["Content-Type"] = "application/json"
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
-        req = urllib.request.Request(url, data=data, headers=headers, method=method)
-        try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as response:
+        https = url.scheme == "https"
+        kind = http.client.HTTPSConnection if https else http.client.HTTPConnection
+        target = url.path + (f"?{url.query}" if url.query else "")
+        try:  # a bad port in the URL is a ValueError of `url.port`
+            conn = kind(url.hostname or "", url.port, timeout=self.timeout)
+            try:
+                conn.request(method, target, data, headers)
+                response = conn.getresponse()
                 raw = response.read()
-        except urllib.error.HTTPError as exc:
-            message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
-            raise ApiError(message, exc.code) from None
-        except urllib.error.URLError as exc:
-            raise ApiError(unreachable_message(self.base, exc.reason)) from None
-        except (TimeoutError, ConnectionError) as exc:
+            finally:
+                conn.close()
+        except (OSError, ValueError, http.client.HTTPException) as exc:  # refused, timed out, ...
             raise ApiError(unreachable_message(self.base, exc)) from None
+        if not 200 <= response.status < 300:
+            message = f"agent at {self.base} answered {response.status}: "
+            raise ApiError(message + _error_text(raw, response.reason), response.status)
         try:
             return json.loads(raw) if raw else None
         except json.JSONDecodeError:
@@ -74,6 +81,8 @@ class AgentClient:
     def stream(self, path: str, body: Any) -> Iterator[Any]:
         """POST a JSON body and read the answer as a stream of msgpack values, yielding each as
         it arrives (a port tap); no time limit while it lasts (the agent ends it)."""
+        import msgpack  # noqa: PLC0415 - only the port tools read msgpack; the CLI starts light
+
         data = json.dumps(body).encode()
         headers = {"Content-Type": "application/json", "Accept": "application/x-msgpack"}
         with self._open("POST", path, data, headers, None) as response:
@@ -101,6 +110,9 @@ class AgentClient:
         headers: dict[str, str],
         timeout: float | None,
     ) -> Any:
+        import urllib.error  # noqa: PLC0415 - streams (chunked uploads) only: the CLI starts light
+        import urllib.request  # noqa: PLC0415
+
         url = self.base.rstrip("/") + path
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
@@ -108,7 +120,11 @@ class AgentClient:
         try:
             return urllib.request.urlopen(req, timeout=timeout)
         except urllib.error.HTTPError as exc:
-            message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
+            try:
+                raw = exc.read()
+            except OSError:
+                raw = b""
+            message = f"agent at {self.base} answered {exc.code}: {_error_text(raw, exc.reason)}"
             raise ApiError(message, exc.code) from None
         except urllib.error.URLError as exc:
             raise ApiError(unreachable_message(self.base, exc.reason)) from None
@@ -128,14 +144,15 @@ class AgentClient:
         return list(self.get("/v1/events", since=since, limit=limit))
 
 
-def _error_text(exc: urllib.error.HTTPError) -> str:
+def _error_text(raw: bytes, reason: object) -> str:
+    """What an error answer says: its JSON `error`, else the HTTP reason."""
     try:
-        body = json.loads(exc.read() or b"{}")
-    except (json.JSONDecodeError, OSError):
+        body = json.loads(raw or b"{}")
+    except (json.JSONDecodeError, UnicodeDecodeError):
         body = {}
     if isinstance(body, dict) and "error" in body:
         return str(body["error"])
-    return str(exc.reason)
+    return str(reason)
 
 
 def unreachable_message(base: str, reason: object) -> str:
@@ -157,8 +174,7 @@ def normalize_api(text: str) -> str:
     return text if "://" in text else f"http://{text}"
 
 
-@dataclass(frozen=True, slots=True)
-class Endpoint:
+class Endpoint(NamedTuple):
     """Where the CLI sends its calls, and how it found out (for error messages)."""
 
     api: str
