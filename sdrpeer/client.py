@@ -1,18 +1,20 @@
-"""A small synchronous client for an agent's HTTP API (http.client; the CLI, the lab, tools).
+"""A small synchronous client for an agent's HTTP API (the CLI, the lab, the tools).
 
 Finding the agent: `--api URL`, else `$SDRPEER_API`, else the lab file (first robot). The token:
 `--token`, else `$SDRPEER_TOKEN`, else the lab robot whose API URL matches. Every failure is an
 `ApiError` whose message names the agent and says what to do.
 
 This module is what `sdrpeer members|status|instances` load besides the parser, so it stays
-light: a JSON call is one `http.client` connection (urllib's opener machinery is loaded only by
-the streaming calls of the port tools), and its records are NamedTuples (`dataclasses` loads
-`inspect`, tens of milliseconds per command).
+light. A JSON call is one HTTP/1.1 exchange on a plain socket (`_exchange`: the request with
+`Connection: close`, the answer read to the end, its status, Content-Length or chunks): the
+agent's API is a JSON API on loopback or the robots' network, and `http.client` would cost half of
+such a command's CPU (it loads the `email` parser and `ssl`). An `https://` address goes through
+`http.client`; the port tools' streams through urllib. The records are NamedTuples
+(`dataclasses` loads `inspect`).
 """
 
 from __future__ import annotations
 
-import http.client
 import json
 import socket
 import time
@@ -57,22 +59,16 @@ class AgentClient(NamedTuple):
             headers["Content-Type"] = "application/json"
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
-        https = url.scheme == "https"
-        kind = http.client.HTTPSConnection if https else http.client.HTTPConnection
-        target = url.path + (f"?{url.query}" if url.query else "")
-        try:  # a bad port in the URL is a ValueError of `url.port`
-            conn = kind(url.hostname or "", url.port, timeout=self.timeout)
-            try:
-                conn.request(method, target, data, headers)
-                response = conn.getresponse()
-                raw = response.read()
-            finally:
-                conn.close()
-        except (OSError, ValueError, http.client.HTTPException) as exc:  # refused, timed out, ...
+        exchange = _exchange_tls if url.scheme == "https" else _exchange
+        try:
+            status, reason, raw = exchange(url, method, data, headers, self.timeout)
+        except OSError as exc:  # refused, timed out, unknown host, reset
             raise ApiError(unreachable_message(self.base, exc)) from None
-        if not 200 <= response.status < 300:
-            message = f"agent at {self.base} answered {response.status}: "
-            raise ApiError(message + _error_text(raw, response.reason), response.status)
+        except ValueError as exc:  # a bad port in the URL, an answer that is not HTTP
+            raise ApiError(f"agent at {self.base}: {exc}") from None
+        if not 200 <= status < 300:
+            message = f"agent at {self.base} answered {status}: "
+            raise ApiError(message + _error_text(raw, reason), status)
         try:
             return json.loads(raw) if raw else None
         except json.JSONDecodeError:
@@ -142,6 +138,89 @@ class AgentClient(NamedTuple):
     def events(self, since: int = 0, limit: int = 500) -> list[dict[str, Any]]:
         """GET /v1/events?since=&limit=."""
         return list(self.get("/v1/events", since=since, limit=limit))
+
+
+MAX_ANSWER = 256 * 1024 * 1024
+"""Bytes of an answer read at most (a status of a large fleet is megabytes, not more)."""
+
+
+def _exchange(
+    url: urllib.parse.SplitResult,
+    method: str,
+    data: bytes | None,
+    headers: dict[str, str],
+    timeout: float,
+) -> tuple[int, str, bytes]:
+    """One HTTP/1.1 request on its own connection, `Connection: close`, and the answer read to
+    its end: (status, reason, body). OSError when the agent cannot be reached, ValueError when
+    what comes back is not an HTTP answer."""
+    target = (url.path or "/") + (f"?{url.query}" if url.query else "")
+    lines = [f"{method} {target} HTTP/1.1", f"Host: {url.netloc}", "Connection: close"]
+    lines += [f"{k}: {v}" for k, v in headers.items()]
+    if data is not None:
+        lines.append(f"Content-Length: {len(data)}")
+    request = ("\r\n".join(lines) + "\r\n\r\n").encode("latin-1") + (data or b"")
+    chunks: list[bytes] = []
+    size = 0
+    with socket.create_connection((url.hostname or "", url.port or 80), timeout) as sock:
+        sock.sendall(request)
+        while chunk := sock.recv(1 << 16):
+            chunks.append(chunk)
+            size += len(chunk)
+            if size > MAX_ANSWER:
+                raise ValueError(f"answered more than {MAX_ANSWER} bytes")
+    head, sep, body = b"".join(chunks).partition(b"\r\n\r\n")
+    status_line, *fields = head.decode("latin-1").split("\r\n")
+    version, _, rest = status_line.partition(" ")
+    code, _, reason = rest.partition(" ")
+    if not sep or not version.startswith("HTTP/") or not code.isdigit():
+        raise ValueError(f"the answer is not HTTP: {status_line[:80]!r}")
+    header = {k.strip().lower(): v.strip() for k, _, v in (f.partition(":") for f in fields)}
+    if header.get("transfer-encoding", "").lower() == "chunked":
+        body = _dechunk(body)
+    elif header.get("content-length", "").isdigit():
+        body = body[: int(header["content-length"])]
+    return int(code), reason, body
+
+
+def _dechunk(body: bytes) -> bytes:
+    """The data of a chunked body (RFC 9112, 7.1); ValueError when it is cut or malformed."""
+    out: list[bytes] = []
+    at = 0
+    while True:
+        end = body.find(b"\r\n", at)
+        if end < 0:
+            raise ValueError("a chunked answer ended early")
+        size = int(body[at:end].split(b";")[0], 16)
+        if size == 0:
+            return b"".join(out)
+        start = end + 2
+        if start + size > len(body):
+            raise ValueError("a chunked answer ended early")
+        out.append(body[start : start + size])
+        at = start + size + 2
+
+
+def _exchange_tls(
+    url: urllib.parse.SplitResult,
+    method: str,
+    data: bytes | None,
+    headers: dict[str, str],
+    timeout: float,
+) -> tuple[int, str, bytes]:
+    """`_exchange` for an https:// agent, with `http.client` (TLS, certificates)."""
+    import http.client  # noqa: PLC0415 - only an https:// address needs it
+
+    target = (url.path or "/") + (f"?{url.query}" if url.query else "")
+    conn = http.client.HTTPSConnection(url.hostname or "", url.port, timeout=timeout)
+    try:
+        conn.request(method, target, data, headers)
+        response = conn.getresponse()
+        return response.status, response.reason, response.read()
+    except http.client.HTTPException as exc:
+        raise ValueError(f"the answer is not HTTP: {exc}") from None
+    finally:
+        conn.close()
 
 
 def _error_text(raw: bytes, reason: object) -> str:
