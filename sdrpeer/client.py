@@ -1,8 +1,16 @@
-"""A small synchronous client for an agent's HTTP API (urllib; used by the CLI and the lab).
+"""A small synchronous client for an agent's HTTP API (the CLI, the lab, the tools).
 
 Finding the agent: `--api URL`, else `$SDRPEER_API`, else the lab file (first robot). The token:
 `--token`, else `$SDRPEER_TOKEN`, else the lab robot whose API URL matches. Every failure is an
 `ApiError` whose message names the agent and says what to do.
+
+This module is what `sdrpeer members|status|instances` load besides the parser, so it stays
+light. A JSON call is one HTTP/1.1 exchange on a plain socket (`_exchange`: the request with
+`Connection: close`, the answer read to the end, its status, Content-Length or chunks): the
+agent's API is a JSON API on loopback or the robots' network, and `http.client` would cost half of
+such a command's CPU (it loads the `email` parser and `ssl`). An `https://` address goes through
+`http.client`; the port tools' streams through urllib. The records are NamedTuples
+(`dataclasses` loads `inspect`).
 """
 
 from __future__ import annotations
@@ -10,25 +18,21 @@ from __future__ import annotations
 import json
 import socket
 import time
-import urllib.error
 import urllib.parse
-import urllib.request
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
-
-import msgpack
+from typing import Any, NamedTuple, TypeVar
 
 from sdrpeer.errors import ApiError, SdrpeerError
 
 T = TypeVar("T")
 
 DEFAULT_TIMEOUT = 5.0
+LAB_DIR = Path(".sdrpeer-lab")
+"""Where a client command looks for `lab.json` unless told (`sdrpeer.lab.files.DEFAULT_DIR`)."""
 
 
-@dataclass(frozen=True, slots=True)
-class AgentClient:
+class AgentClient(NamedTuple):
     """Calls one agent's API at `base` (e.g. "http://127.0.0.1:8080")."""
 
     base: str
@@ -47,7 +51,7 @@ class AgentClient:
 
     def request(self, method: str, path: str, body: Any = None) -> Any:
         """One HTTP call; raises ApiError with a message meant for a person."""
-        url = self.base.rstrip("/") + path
+        url = urllib.parse.urlsplit(self.base.rstrip("/") + path)
         headers = {"Accept": "application/json"}
         data = None
         if body is not None:
@@ -55,17 +59,16 @@ class AgentClient:
             headers["Content-Type"] = "application/json"
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
-        req = urllib.request.Request(url, data=data, headers=headers, method=method)
+        exchange = _exchange_tls if url.scheme == "https" else _exchange
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as response:
-                raw = response.read()
-        except urllib.error.HTTPError as exc:
-            message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
-            raise ApiError(message, exc.code) from None
-        except urllib.error.URLError as exc:
-            raise ApiError(unreachable_message(self.base, exc.reason)) from None
-        except (TimeoutError, ConnectionError) as exc:
+            status, reason, raw = exchange(url, method, data, headers, self.timeout)
+        except OSError as exc:  # refused, timed out, unknown host, reset
             raise ApiError(unreachable_message(self.base, exc)) from None
+        except ValueError as exc:  # a bad port in the URL, an answer that is not HTTP
+            raise ApiError(f"agent at {self.base}: {exc}") from None
+        if not 200 <= status < 300:
+            message = f"agent at {self.base} answered {status}: "
+            raise ApiError(message + _error_text(raw, reason), status)
         try:
             return json.loads(raw) if raw else None
         except json.JSONDecodeError:
@@ -74,6 +77,8 @@ class AgentClient:
     def stream(self, path: str, body: Any) -> Iterator[Any]:
         """POST a JSON body and read the answer as a stream of msgpack values, yielding each as
         it arrives (a port tap); no time limit while it lasts (the agent ends it)."""
+        import msgpack  # noqa: PLC0415 - only the port tools read msgpack; the CLI starts light
+
         data = json.dumps(body).encode()
         headers = {"Content-Type": "application/json", "Accept": "application/x-msgpack"}
         with self._open("POST", path, data, headers, None) as response:
@@ -101,6 +106,9 @@ class AgentClient:
         headers: dict[str, str],
         timeout: float | None,
     ) -> Any:
+        import urllib.error  # noqa: PLC0415 - streams (chunked uploads) only: the CLI starts light
+        import urllib.request  # noqa: PLC0415
+
         url = self.base.rstrip("/") + path
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
@@ -108,7 +116,11 @@ class AgentClient:
         try:
             return urllib.request.urlopen(req, timeout=timeout)
         except urllib.error.HTTPError as exc:
-            message = f"agent at {self.base} answered {exc.code}: {_error_text(exc)}"
+            try:
+                raw = exc.read()
+            except OSError:
+                raw = b""
+            message = f"agent at {self.base} answered {exc.code}: {_error_text(raw, exc.reason)}"
             raise ApiError(message, exc.code) from None
         except urllib.error.URLError as exc:
             raise ApiError(unreachable_message(self.base, exc.reason)) from None
@@ -128,14 +140,98 @@ class AgentClient:
         return list(self.get("/v1/events", since=since, limit=limit))
 
 
-def _error_text(exc: urllib.error.HTTPError) -> str:
+MAX_ANSWER = 256 * 1024 * 1024
+"""Bytes of an answer read at most (a status of a large fleet is megabytes, not more)."""
+
+
+def _exchange(
+    url: urllib.parse.SplitResult,
+    method: str,
+    data: bytes | None,
+    headers: dict[str, str],
+    timeout: float,
+) -> tuple[int, str, bytes]:
+    """One HTTP/1.1 request on its own connection, `Connection: close`, and the answer read to
+    its end: (status, reason, body). OSError when the agent cannot be reached, ValueError when
+    what comes back is not an HTTP answer."""
+    target = (url.path or "/") + (f"?{url.query}" if url.query else "")
+    lines = [f"{method} {target} HTTP/1.1", f"Host: {url.netloc}", "Connection: close"]
+    lines += [f"{k}: {v}" for k, v in headers.items()]
+    if data is not None:
+        lines.append(f"Content-Length: {len(data)}")
+    request = ("\r\n".join(lines) + "\r\n\r\n").encode("latin-1") + (data or b"")
+    chunks: list[bytes] = []
+    size = 0
+    with socket.create_connection((url.hostname or "", url.port or 80), timeout) as sock:
+        sock.sendall(request)
+        while chunk := sock.recv(1 << 16):
+            chunks.append(chunk)
+            size += len(chunk)
+            if size > MAX_ANSWER:
+                raise ValueError(f"answered more than {MAX_ANSWER} bytes")
+    head, sep, body = b"".join(chunks).partition(b"\r\n\r\n")
+    status_line, *fields = head.decode("latin-1").split("\r\n")
+    version, _, rest = status_line.partition(" ")
+    code, _, reason = rest.partition(" ")
+    if not sep or not version.startswith("HTTP/") or not code.isdigit():
+        raise ValueError(f"the answer is not HTTP: {status_line[:80]!r}")
+    header = {k.strip().lower(): v.strip() for k, _, v in (f.partition(":") for f in fields)}
+    if header.get("transfer-encoding", "").lower() == "chunked":
+        body = _dechunk(body)
+    elif header.get("content-length", "").isdigit():
+        body = body[: int(header["content-length"])]
+    return int(code), reason, body
+
+
+def _dechunk(body: bytes) -> bytes:
+    """The data of a chunked body (RFC 9112, 7.1); ValueError when it is cut or malformed."""
+    out: list[bytes] = []
+    at = 0
+    while True:
+        end = body.find(b"\r\n", at)
+        if end < 0:
+            raise ValueError("a chunked answer ended early")
+        size = int(body[at:end].split(b";")[0], 16)
+        if size == 0:
+            return b"".join(out)
+        start = end + 2
+        if start + size > len(body):
+            raise ValueError("a chunked answer ended early")
+        out.append(body[start : start + size])
+        at = start + size + 2
+
+
+def _exchange_tls(
+    url: urllib.parse.SplitResult,
+    method: str,
+    data: bytes | None,
+    headers: dict[str, str],
+    timeout: float,
+) -> tuple[int, str, bytes]:
+    """`_exchange` for an https:// agent, with `http.client` (TLS, certificates)."""
+    import http.client  # noqa: PLC0415 - only an https:// address needs it
+
+    target = (url.path or "/") + (f"?{url.query}" if url.query else "")
+    conn = http.client.HTTPSConnection(url.hostname or "", url.port, timeout=timeout)
     try:
-        body = json.loads(exc.read() or b"{}")
-    except (json.JSONDecodeError, OSError):
+        conn.request(method, target, data, headers)
+        response = conn.getresponse()
+        return response.status, response.reason, response.read()
+    except http.client.HTTPException as exc:
+        raise ValueError(f"the answer is not HTTP: {exc}") from None
+    finally:
+        conn.close()
+
+
+def _error_text(raw: bytes, reason: object) -> str:
+    """What an error answer says: its JSON `error`, else the HTTP reason."""
+    try:
+        body = json.loads(raw or b"{}")
+    except (json.JSONDecodeError, UnicodeDecodeError):
         body = {}
     if isinstance(body, dict) and "error" in body:
         return str(body["error"])
-    return str(exc.reason)
+    return str(reason)
 
 
 def unreachable_message(base: str, reason: object) -> str:
@@ -157,8 +253,7 @@ def normalize_api(text: str) -> str:
     return text if "://" in text else f"http://{text}"
 
 
-@dataclass(frozen=True, slots=True)
-class Endpoint:
+class Endpoint(NamedTuple):
     """Where the CLI sends its calls, and how it found out (for error messages)."""
 
     api: str

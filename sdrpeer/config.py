@@ -20,9 +20,29 @@ from sdrpeer.launch.policy import DEFAULT_TARGETS, LaunchPolicy
 from sdrpeer.record.limits import check_int
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
-PRESET_NAMES = ("lan", "fast_test")
+PRESETS_SAID = {
+    "lan": "robots on one Wi-Fi network: sub-2-second failure detection, tolerant of 30 % loss",
+    "fast_test": "loopback tests: fast timers, short reaping; a busy machine makes it flap",
+    "lab": "many agents sharing a few busy cores (sdrpeer lab up): slower, no false deaths",
+}
+"""What each preset is for, in one line (the `--help` of `sdrpeer agent` and `lab up`, without
+loading the tree; a test holds each to the first line of its `sdrpeer.agent.tuning` function)."""
+PRESET_NAMES = tuple(PRESETS_SAID)
 """The presets `--preset` takes: each names one tree of every timer and size of the agent and its
 parts (`sdrpeer.agent.tuning.PRESETS`, which builds one for each of these names)."""
+AGENT_PRESET = "lan"
+"""The preset an agent runs with unless its flags or file name another (`AgentConfig.preset`)."""
+LAB_PRESET = "lab"
+"""The preset `sdrpeer lab up` gives its agents unless told otherwise."""
+
+
+def presets_epilog(default: str) -> str:
+    """The presets, one line each, for a parser's epilog (RawDescriptionHelpFormatter)."""
+    lines = [f"presets (--preset; default {default}):"]
+    lines += [f"  {name:<10} {said}" for name, said in PRESETS_SAID.items()]
+    return "\n".join(lines)
+
+
 LOG_LEVELS = ("debug", "info", "warning", "error")
 LOG_FORMATS = ("text", "json")
 NO_KEY_MESSAGE = (
@@ -58,9 +78,10 @@ class AgentConfig:
     """Shell patterns a python target (package.module:Class) must match one of."""
     token_file: Path | None = None
     """API bearer token file; None = the agent generates one into data_dir/token (mode 0600)."""
-    preset: str = "lan"
+    preset: str = AGENT_PRESET
     """The preset of every timer and size of the agent and its parts (`sdrpeer.agent.tuning`):
-    lan (robots on one Wi-Fi network) or fast_test (loopback tests and the local lab)."""
+    lan (robots on one Wi-Fi network), lab (many agents on one busy machine: `sdrpeer lab up`'s
+    default) or fast_test (loopback tests); `PRESETS_SAID` says each in one line."""
     data_dir: Path = Path("~/.local/share/sdrpeer/{name}")
     """Directory for the token, agent.json and logs; `~` and `{name}` are expanded."""
     metrics_interval: float = 1.0

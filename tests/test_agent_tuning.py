@@ -18,10 +18,12 @@ from sdrpeer.agent import tuning
 from sdrpeer.agent.agent import Agent
 from sdrpeer.cli.agent import add_agent_parser, agent_flag_values
 from sdrpeer.cli.main import build_parser
-from sdrpeer.config import PRESET_NAMES, build_config
+from sdrpeer.config import LAB_PRESET, PRESET_NAMES, PRESETS_SAID, build_config
 from sdrpeer.deploy import config as deploy
 from sdrpeer.election import config as election
 from sdrpeer.gossip import config as gossip
+from sdrpeer.gossip.formulas import suspicion_min_timeout
+from sdrpeer.lab.up import UpOptions
 from sdrpeer.recovery import config as recovery
 from sdrpeer.runtime import config as runtime
 from sdrpeer.runtime.backoff import RestartConfig
@@ -69,8 +71,48 @@ def test_fast_test_is_faster_where_loopback_allows() -> None:
     assert fast.agent == lan.agent
 
 
+@pytest.mark.parametrize(("n", "lab_at_least"), [(5, 1.9), (20, 2.5)])
+def test_the_lab_preset_suspects_a_silent_robot_only_after_seconds(
+    n: int, lab_at_least: float
+) -> None:
+    """What a stalled process trips (a suspicion timing out unrefuted, a hung host's silence)
+    lasts longer in `lab` than in `lan`, and far longer than in `fast_test`."""
+
+    def min_suspicion(tree: tuning.Tuning) -> float:
+        g = tree.gossip
+        return suspicion_min_timeout(g.suspicion_mult, n, g.probe_interval)
+
+    lab, lan, fast = tuning.lab(), tuning.lan(), tuning.fast_test()
+    assert min_suspicion(lab) >= lab_at_least
+    assert min_suspicion(lab) > 3 * min_suspicion(lan) > 3 * min_suspicion(fast)
+    assert lab.gossip.probe_timeout > 3 * lan.gossip.probe_timeout
+    assert lab.supervisor.heartbeat_timeout > lan.supervisor.heartbeat_timeout
+    assert lab.election.grace > lan.election.grace
+    # what no stall trips is lan's
+    assert (lab.recovery, lab.deploy, lab.agent) == (lan.recovery, lan.deploy, lan.agent)
+    assert lab.gossip.with_(probe_interval=0.15, probe_timeout=0.075, suspicion_mult=3.2) == (
+        lan.gossip
+    )
+
+
+@pytest.mark.parametrize("name", list(tuning.PRESETS))
+def test_each_preset_is_said_in_one_line_where_the_help_lists_it(name: str) -> None:
+    doc = tuning.PRESETS[name].__doc__ or ""
+    assert doc.splitlines()[0] == PRESETS_SAID[name][0].upper() + PRESETS_SAID[name][1:] + "."
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    lab = next(a for a in sub.choices["lab"]._actions if isinstance(a, argparse._SubParsersAction))
+    for command in (sub.choices["agent"], lab.choices["up"]):
+        assert f"  {name:<10} {PRESETS_SAID[name]}\n" in command.format_help()
+
+
+def test_lab_up_defaults_to_the_lab_preset() -> None:
+    assert build_parser().parse_args(["lab", "up"]).preset == LAB_PRESET == "lab"
+    assert UpOptions(robots=1, lab_dir=Path("lab")).preset == LAB_PRESET
+
+
 def test_an_unknown_preset_names_the_known_ones() -> None:
-    with pytest.raises(ValueError, match=r"unknown preset 'wan' \(known: lan, fast_test\)"):
+    with pytest.raises(ValueError, match=r"unknown preset 'wan' \(known: lan, fast_test, lab\)"):
         tuning.preset("wan")
 
 

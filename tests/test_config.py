@@ -166,7 +166,7 @@ def test_missing_file(tmp_path: Path) -> None:
         ({"api": ":80"}, "--api: api: ':80' is not HOST:PORT (bad host ''"),
         ({"api": "h:http"}, "--api: api: 'h:http' is not HOST:PORT (port 'http' is not a number)"),
         ({"join": ["h:0"]}, "--join: join: 'h:0': port must be in 1..65535"),
-        ({"preset": "wan"}, "--preset: preset: unknown preset 'wan' (known: lan, fast_test)"),
+        ({"preset": "wan"}, "--preset: preset: unknown preset 'wan' (known: lan, fast_test, lab)"),
         ({"log_level": "loud"}, "--log-level: log-level: must be one of debug, info, warning"),
         ({"log_format": "xml"}, "--log-format: log-format: must be one of text, json"),
         ({"metrics_interval": 0.0}, "--metrics-interval: metrics-interval: must be > 0 seconds"),
@@ -201,7 +201,7 @@ def test_an_unknown_preset_in_a_file_names_file_line_and_field(tmp_path: Path) -
     path = write(tmp_path, "name: robot-1\ninsecure: true\npreset: wan\n")
     with pytest.raises(ConfigError) as info:
         build_config(load_agent_config(path), {})
-    assert str(info.value) == f"{path}:3: preset: unknown preset 'wan' (known: lan, fast_test)"
+    assert str(info.value) == f"{path}:3: preset: unknown preset 'wan' (known: lan, fast_test, lab)"
 
 
 def test_refuses_without_key_unless_insecure(key: Path) -> None:

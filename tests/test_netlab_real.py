@@ -53,7 +53,10 @@ def text_of(path: Path) -> str:
 
 @pytest.fixture
 def lab(tmp_path: Path) -> Iterator[RunningLab]:
-    running = start_lab(UpOptions(3, tmp_path / "lab", netns=True, timeout=30), say=lambda _: None)
+    running = start_lab(
+        UpOptions(3, tmp_path / "lab", preset="fast_test", netns=True, timeout=30),
+        say=lambda _: None,
+    )
     try:
         yield running
     finally:

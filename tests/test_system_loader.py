@@ -261,6 +261,8 @@ def test_recovery_rules_replace_the_defaults(tmp_path: Path) -> None:
 
 
 def test_other_launchers_take_their_ports_on_trust(tmp_path: Path) -> None:
+    (tmp_path / "nodes").mkdir()
+    (tmp_path / "nodes" / "viewer.py").write_text("# the viewer\n")
     s = load(
         tmp_path,
         """\
@@ -274,7 +276,7 @@ def test_other_launchers_take_their_ports_on_trust(tmp_path: Path) -> None:
     )
     assert s.component("Tool").target == ("/usr/bin/tool", "--fast")
     assert s.component("Tool").params == (("level", 3),)
-    assert s.component("Script").target == "nodes/viewer.py:Viewer"
+    assert s.component("Script").target == f"{tmp_path.resolve()}/nodes/viewer.py:Viewer"
     assert s.connections[0].id == "Tool.anything->Script.whatever"
 
 

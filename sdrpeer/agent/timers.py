@@ -40,6 +40,11 @@ def lan() -> AgentTimers:
     return AgentTimers()
 
 
+def lab() -> AgentTimers:
+    """Many agents on one busy machine: the `lan` timers."""
+    return AgentTimers()
+
+
 def fast_test() -> AgentTimers:
     """Loopback tests and the local lab: so far the `lan` timers (a leave still needs a few
     rounds to spread, and a stop the same time to finish)."""

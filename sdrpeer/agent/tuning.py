@@ -1,4 +1,4 @@
-"""Every timer and size of an agent as one tree, with its presets (`lan`, `fast_test`).
+"""Every timer and size of an agent as one tree, with its presets (`lan`, `fast_test`, `lab`).
 
 How it works: each part keeps its own configuration dataclass and presets, declared and documented
 next to the code that reads them: `sdrpeer.gossip.config`, `sdrpeer.election.config`,
@@ -57,7 +57,9 @@ class Tuning:
 
 
 def lan() -> Tuning:
-    """Robots on one Wi-Fi network: every part's `lan()`."""
+    """Robots on one Wi-Fi network: sub-2-second failure detection, tolerant of 30 % loss.
+
+    Every part's `lan()`."""
     return Tuning(
         "lan",
         gossip=gossip.lan(),
@@ -70,7 +72,11 @@ def lan() -> Tuning:
 
 
 def fast_test() -> Tuning:
-    """Loopback tests and the local lab: every part's `fast_test()`."""
+    """Loopback tests: fast timers, short reaping; a busy machine makes it flap.
+
+    Every part's `fast_test()`: a probe missed for 0.3 s to 0.9 s declares a robot dead, which
+    a loaded machine's scheduler can cause on its own (a 5-robot lab on two busy cores declared
+    a healthy robot dead and moved the allocator four times); tests that want it say so."""
     return Tuning(
         "fast_test",
         gossip=gossip.fast_test(),
@@ -82,7 +88,26 @@ def fast_test() -> Tuning:
     )
 
 
-PRESETS: dict[str, Callable[[], Tuning]] = {"lan": lan, "fast_test": fast_test}
+def lab() -> Tuning:
+    """Many agents sharing a few busy cores (sdrpeer lab up): slower, no false deaths.
+
+    Every part's `lab()`: the `lan` tree with the timeouts that a stalled process (not a lost
+    packet) trips made long enough that the scheduler of a loaded machine does not: a robot
+    must miss its probes for about 2 s (up to 6 s) before it is declared dead, a vacant
+    allocator role waits 2 s per robot ranked above, and a host may be silent 5 s before it is
+    killed as hung. Deaths are found in about 3 s instead of 1-2 s."""
+    return Tuning(
+        "lab",
+        gossip=gossip.lab(),
+        election=election.lab(),
+        recovery=recovery.lab(),
+        supervisor=runtime.lab(),
+        deploy=deploy.lab(),
+        agent=agent_timers.lab(),
+    )
+
+
+PRESETS: dict[str, Callable[[], Tuning]] = {"lan": lan, "fast_test": fast_test, "lab": lab}
 """Every preset of the tree, by the name `--preset` takes (`sdrpeer.config.PRESET_NAMES`)."""
 
 

@@ -16,19 +16,27 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.config import (
+    AGENT_PRESET,
     FIELDS,
     LOG_FORMATS,
     LOG_LEVELS,
     PRESET_NAMES,
     build_config,
     load_agent_config,
+    presets_epilog,
 )
 from sdrpeer.errors import ConfigError
 
 
 def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """`sdrpeer agent`: one flag per AgentConfig field."""
-    p = sub.add_parser("agent", help="run the agent of one robot", description=__doc__)
+    p = sub.add_parser(
+        "agent",
+        help="run the agent of one robot",
+        description=__doc__,
+        epilog=presets_epilog(AGENT_PRESET),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.set_defaults(func=cmd_agent)
     p.add_argument("--config", type=Path, metavar="FILE", help="agent config file (YAML)")
     p.add_argument("--name", help="this robot's name ([A-Za-z0-9_.-]+)")
@@ -64,7 +72,7 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument(
         "--preset",
         choices=PRESET_NAMES,
-        help="every timer's preset: lan (default; robots on Wi-Fi) or fast_test (loopback tests)",
+        help=f"every timer's preset (default {AGENT_PRESET}; the list below)",
     )
     p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")
     p.add_argument("--metrics-interval", type=float, metavar="SECONDS", help="metrics period")

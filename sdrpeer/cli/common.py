@@ -8,9 +8,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.client import AgentClient, Endpoint, resolve_endpoint
+from sdrpeer.client import LAB_DIR, AgentClient, Endpoint, resolve_endpoint
 from sdrpeer.errors import ConfigError, SdrpeerError
-from sdrpeer.lab.files import DEFAULT_DIR, read_lab
 
 
 def client_options() -> argparse.ArgumentParser:
@@ -18,7 +17,7 @@ def client_options() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument("--api", metavar="URL", help="agent API (default $SDRPEER_API, else the lab)")
     p.add_argument("--token", help="API token (default $SDRPEER_TOKEN, else the lab file)")
-    p.add_argument("--lab-dir", type=Path, default=DEFAULT_DIR, metavar="DIR", help="lab directory")
+    p.add_argument("--lab-dir", type=Path, default=LAB_DIR, metavar="DIR", help="lab directory")
     return p
 
 
@@ -59,6 +58,8 @@ def parse_assignment(text: str) -> tuple[str, Any]:
 
 def robot_client(args: argparse.Namespace) -> AgentClient:
     """The client for the robot named by args.robot: its lab entry, else its `api` member field."""
+    from sdrpeer.lab.files import read_lab  # noqa: PLC0415 - the watching commands do without
+
     lab = None if (args.api or os.environ.get("SDRPEER_API")) else read_lab(args.lab_dir)
     entry = lab.robot(args.robot) if lab else None
     if entry is not None and entry.api:

@@ -15,8 +15,10 @@ import json
 import shutil
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from sdrpeer.demo.experiment import RunOptions, RunResult, run
+if TYPE_CHECKING:
+    from sdrpeer.demo.experiment import RunOptions, RunResult
 
 PAPER = {
     "deploy_to_active_s": "~16 s",
@@ -48,6 +50,8 @@ def add_demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def options(out: Path, allocator_on: str, *, fast: bool) -> RunOptions:
     """The run's options (full: the paper's 500 MB and 6 s)."""
+    from sdrpeer.demo.experiment import RunOptions  # noqa: PLC0415 - a lab, the loader: only here
+
     if fast:
         return RunOptions(out, allocator_on, reserve_mb=50, sustain_s=2.0, drop_at=12.0, after_s=3)
     return RunOptions(out, allocator_on)
@@ -74,6 +78,8 @@ def table(results: dict[str, RunResult]) -> str:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Run the experiment and print the comparison."""
+    from sdrpeer.demo.experiment import run  # noqa: PLC0415 - only here
+
     runs = {"first": "robot-2", "second": "robot-1"}
     chosen = list(runs) if args.runs == "both" else [args.runs]
     results: dict[str, RunResult] = {}

@@ -21,11 +21,8 @@ from typing import Any
 
 from sdrpeer.cli.common import client_for
 from sdrpeer.cli.format import want_color
-from sdrpeer.cli.status import format_status
 from sdrpeer.client import ELECTION_WAIT, AgentClient, post_when_elected
-from sdrpeer.deploy.status import all_active
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.record.robot import state_to_wire
 from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 WAIT_POLL = 0.1
@@ -89,6 +86,9 @@ def _wait(
     client: AgentClient, t0: float, timeout: float, key: tuple[int, int], *, json_out: bool
 ) -> int:
     """Poll status until the deployed plan (or a newer one) is all ACTIVE."""
+    from sdrpeer.deploy.status import all_active  # noqa: PLC0415 - the parser stays light
+    from sdrpeer.record.robot import state_to_wire  # noqa: PLC0415
+
     seen: dict[str, tuple[Any, Any]] = {}
     doc: dict[str, Any] = {}
     while time.monotonic() - t0 < timeout:
@@ -124,6 +124,8 @@ def cmd_status(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(doc, indent=2, sort_keys=True))
     else:
+        from sdrpeer.cli.status import format_status  # noqa: PLC0415 - the table only
+
         print(format_status(doc, color=want_color(sys.stdout.isatty(), os.environ)))
     return 0
 
@@ -138,6 +140,8 @@ def cmd_undeploy(args: argparse.Namespace) -> int:
 
 def cmd_move(args: argparse.Namespace) -> int:
     """Ask for a planned move; with --wait, poll until the component is ACTIVE there."""
+    from sdrpeer.record.robot import state_to_wire  # noqa: PLC0415 - the parser stays light
+
     client = _client(args)
     t0 = time.monotonic()
     body = {"component": args.component, **({"to": args.to} if args.to else {})}

@@ -22,8 +22,11 @@ from sdrpeer.cli.common import client_for, endpoint, parse_assignment, print_jso
 from sdrpeer.cli.format import format_instances, want_color
 from sdrpeer.client import unreachable_message
 from sdrpeer.errors import ApiError
-from sdrpeer.runtime.spec import LAUNCHERS, InstanceSpec, desired_to_json
 from sdrpeer.vocabulary import LifecycleState
+
+LAUNCHER_HELP = "python (default), script, exec, composite or a plugin"
+"""`--launcher`'s help: the built-in launchers (`sdrpeer.runtime.spec.LAUNCHERS`, held to it by
+tests/test_cli_fast.py) without importing the instance specs to say it."""
 
 
 def cmd_instances(args: argparse.Namespace) -> int:
@@ -59,6 +62,8 @@ def cmd_logs(args: argparse.Namespace) -> int:
 
 def instance_doc(args: argparse.Namespace) -> dict[str, Any]:
     """The spec JSON that start-instance posts."""
+    from sdrpeer.runtime.spec import InstanceSpec, desired_to_json  # noqa: PLC0415 - not to list
+
     doc: dict[str, Any] = {
         "name": args.name,
         "launcher": args.launcher,
@@ -115,7 +120,7 @@ def add_instance_parsers(
     p = sub.add_parser("start-instance", parents=[client, as_json], help="start one instance")
     p.add_argument("--name", required=True, help="instance name, e.g. Cam1")
     p.add_argument("--target", required=True, help="pkg.mod:Class (exec: a command line)")
-    p.add_argument("--launcher", default="python", help=f"{', '.join(LAUNCHERS)} or a plugin")
+    p.add_argument("--launcher", default="python", help=LAUNCHER_HELP)
     p.add_argument("--component", help="logical component name (default: the class name)")
     p.add_argument("--param", action="append", default=[], metavar="K=V", help="repeatable")
     p.add_argument("--inactive", action="store_true", help="start it but do not activate it")

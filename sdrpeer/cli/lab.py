@@ -16,16 +16,17 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from sdrpeer.cli.format import format_members, render_table, want_color
 from sdrpeer.cli.netlab import add_fault_parsers
 from sdrpeer.client import AgentClient
-from sdrpeer.config import PRESET_NAMES
+from sdrpeer.config import LAB_PRESET, PRESET_NAMES, presets_epilog
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab.files import DEFAULT_DIR, lab_down, lab_status
-from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
-from sdrpeer.netlab import net
+
+if TYPE_CHECKING:
+    from sdrpeer.lab.up import RunningLab, UpOptions
 
 REFRESH = 1.0
 
@@ -36,10 +37,22 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     lab_sub = lab.add_subparsers(dest="lab_command", required=True, metavar="ACTION")
     where = argparse.ArgumentParser(add_help=False)
     where.add_argument("--dir", type=Path, default=DEFAULT_DIR, help="lab directory")
-    up = lab_sub.add_parser("up", parents=[where], help="start a lab")
+    up = lab_sub.add_parser(
+        "up",
+        parents=[where],
+        help="start a lab",
+        description="Start N agents on this machine (one virtual robot each).",
+        epilog=presets_epilog(LAB_PRESET),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     up.add_argument("--robots", type=int, default=3, metavar="N", help="how many (default 3)")
     up.add_argument("--detach", action="store_true", help="leave the agents running and return")
-    up.add_argument("--preset", choices=PRESET_NAMES, default="fast_test")
+    up.add_argument(
+        "--preset",
+        choices=PRESET_NAMES,
+        default=LAB_PRESET,
+        help=f"every agent's timers (default {LAB_PRESET}; the list below)",
+    )
     up.add_argument("--robot-files", type=Path, metavar="DIR", help="robot-K.yaml files")
     up.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for every agent")
     up.add_argument("--seconds", type=float, metavar="S", help="stop after S s (default: Ctrl-C)")
@@ -161,6 +174,8 @@ def run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
 
 
 def _run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
+    from sdrpeer.lab.up import start_lab  # noqa: PLC0415 - the parser stays light
+
     running = start_lab(options, _say)
     print_started(running)
     if detach:
@@ -180,6 +195,8 @@ def _run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
 
 def cmd_lab_up(args: argparse.Namespace) -> int:
     """sdrpeer lab up."""
+    from sdrpeer.lab.up import UpOptions  # noqa: PLC0415 - the parser stays light
+
     options = UpOptions(
         robots=args.robots,
         lab_dir=args.dir,
@@ -195,6 +212,8 @@ def cmd_lab_up(args: argparse.Namespace) -> int:
 
 def cmd_lab_down(args: argparse.Namespace) -> int:
     """sdrpeer lab down."""
+    from sdrpeer.netlab import net  # noqa: PLC0415 - the parser stays light
+
     has_net = (args.dir / net.STATE_FILE).exists()
     try:
         for line in lab_down(args.dir):

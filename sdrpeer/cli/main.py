@@ -4,6 +4,14 @@
 there without loading the rest of the command line, so an agent starts fast. Client commands find
 the agent with `--api`, `$SDRPEER_API` or the lab file, see `sdrpeer.client`.
 Exit codes: 0 ok, 1 an operation failed, 2 bad configuration or usage, 130 interrupted.
+
+How it works: the commands come in groups, each registered by one function (`GROUPS`: the
+command names and the function that adds their parsers, importing its module only then). When
+the first word is a command of a group, `main` builds the parser with that group alone: the
+same parser for that command (the same flags, help and errors), without importing or building
+the forty others (`sdrpeer status --json` is one interpreter start, one request and a print);
+anything else (`--help`, a typo, a command a later feature adds to `build_parser` directly)
+gets the whole parser.
 """
 
 from __future__ import annotations
@@ -13,10 +21,10 @@ import json
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, TypeAlias
 
 from sdrpeer import __version__
-from sdrpeer.cli.agent import add_agent_parser
 from sdrpeer.cli.common import (
     client_for,
     client_options,
@@ -24,14 +32,13 @@ from sdrpeer.cli.common import (
     print_json,
     robot_client,
 )
-from sdrpeer.cli.format import (
-    format_agent,
-    format_event,
-    format_members,
-    format_metrics,
-    want_color,
-)
 from sdrpeer.errors import ApiError, ConfigError, SdrpeerError
+
+if TYPE_CHECKING:
+    Subparsers: TypeAlias = argparse._SubParsersAction[argparse.ArgumentParser]
+    Register: TypeAlias = Callable[
+        [Subparsers, argparse.ArgumentParser, argparse.ArgumentParser], None
+    ]
 
 EVENTS_POLL = 0.5
 
@@ -45,6 +52,8 @@ def cmd_members(args: argparse.Namespace) -> int:
     if args.json:
         print_json(members)
     else:
+        from sdrpeer.cli.format import format_members, want_color  # noqa: PLC0415 - tables only
+
         print(format_members(members, color=want_color(sys.stdout.isatty(), os.environ)))
     return 0
 
@@ -55,12 +64,16 @@ def cmd_agent_info(args: argparse.Namespace) -> int:
     if args.json:
         print_json(agent)
     else:
+        from sdrpeer.cli.format import format_agent  # noqa: PLC0415 - tables only
+
         print(format_agent(agent))
     return 0
 
 
 def cmd_events(args: argparse.Namespace) -> int:
     """Print the event log; with --follow keep polling until Ctrl-C."""
+    from sdrpeer.cli.format import format_event, want_color  # noqa: PLC0415 - not for --help
+
     client = client_for(args)
     color = want_color(sys.stdout.isatty(), os.environ)
     since = args.since
@@ -83,6 +96,8 @@ def cmd_events(args: argparse.Namespace) -> int:
 
 def cmd_robot_set(args: argparse.Namespace) -> int:
     """Change a virtual robot's facts live: sdrpeer robot set robot-1 rssi=-55dBm battery=30%."""
+    from sdrpeer.cli.format import format_metrics  # noqa: PLC0415 - not for --help
+
     changes = dict(parse_assignment(a) for a in args.assignments)
     answer = robot_client(args).post("/v1/robot", changes)
     if args.json:
@@ -95,25 +110,10 @@ def cmd_robot_set(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The whole `sdrpeer` argument parser."""
-    from sdrpeer.cli.deploy import add_deploy_parsers  # noqa: PLC0415 - only when parsing
-    from sdrpeer.cli.instances import add_instance_parsers  # noqa: PLC0415
-    from sdrpeer.cli.keys import add_key_parsers  # noqa: PLC0415
-    from sdrpeer.cli.lab import add_lab_parsers  # noqa: PLC0415
-    from sdrpeer.cli.port import add_port_parsers  # noqa: PLC0415
-    from sdrpeer.cli.profile import add_profile_parser  # noqa: PLC0415 - heavy
-    from sdrpeer.cli.service import add_service_parser  # noqa: PLC0415
-    from sdrpeer.cli.system import add_system_parser  # noqa: PLC0415
-    from sdrpeer.cli.top import add_top_parser  # noqa: PLC0415
-
-    parser = argparse.ArgumentParser(prog="sdrpeer", description="A leaderless robot platform.")
-    parser.add_argument("--version", action="version", version=f"sdrpeer {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_agent_parser(sub)
-    client = client_options()
-    as_json = argparse.ArgumentParser(add_help=False)
-    as_json.add_argument("--json", action="store_true", help="print JSON")
+def add_client_parsers(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    """Register members, agent-info, events and robot (this module's commands)."""
     members = sub.add_parser("members", parents=[client, as_json], help="list the members")
     members.set_defaults(func=cmd_members)
     info = sub.add_parser("agent-info", parents=[client, as_json], help="the agent's counters")
@@ -128,21 +128,129 @@ def build_parser() -> argparse.ArgumentParser:
     robot_set.add_argument("robot", help="robot name, e.g. robot-1")
     robot_set.add_argument("assignments", nargs="+", metavar="KEY=VALUE", help="e.g. battery=30%%")
     robot_set.set_defaults(func=cmd_robot_set)
+
+
+def _agent(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.agent import add_agent_parser  # noqa: PLC0415 - each group when needed
+
+    add_agent_parser(sub)
+
+
+def _instances(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.instances import add_instance_parsers  # noqa: PLC0415
+
     add_instance_parsers(sub, client, as_json)
+
+
+def _deploy(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.deploy import add_deploy_parsers  # noqa: PLC0415
+
     add_deploy_parsers(sub, client, as_json)
+
+
+def _port(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.port import add_port_parsers  # noqa: PLC0415
+
     add_port_parsers(sub, client, as_json)
+
+
+def _system(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.system import add_system_parser  # noqa: PLC0415
+
     add_system_parser(sub)
+
+
+def _lab(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.lab import add_lab_parsers  # noqa: PLC0415 - lab and demo
+
     add_lab_parsers(sub)
+
+
+def _top(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.top import add_top_parser  # noqa: PLC0415
+
     add_top_parser(sub, client)
+
+
+def _profile(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.profile import add_profile_parser  # noqa: PLC0415
+
     add_profile_parser(sub)
+
+
+def _keys(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.keys import add_key_parsers  # noqa: PLC0415
+
     add_key_parsers(sub, client, as_json)
+
+
+def _service(
+    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+) -> None:
+    from sdrpeer.cli.service import add_service_parser  # noqa: PLC0415
+
     add_service_parser(sub)
+
+
+GROUPS: tuple[tuple[tuple[str, ...], Register], ...] = (
+    (("agent",), _agent),
+    (("members", "agent-info", "events", "robot"), add_client_parsers),
+    (("instances", "logs", "start-instance", "run"), _instances),
+    (("deploy", "status", "undeploy", "move"), _deploy),
+    (("port",), _port),
+    (("system",), _system),
+    (("lab", "demo"), _lab),
+    (("top",), _top),
+    (("profile",), _profile),
+    (("keygen", "key"), _keys),
+    (("systemd-unit",), _service),
+)
+"""Every command, in `sdrpeer --help` order, by the function that registers it and its group
+(tests/test_cli_fast.py holds each group to the commands its function adds)."""
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The `sdrpeer` argument parser: every command, or only the group of `command`."""
+    parser = argparse.ArgumentParser(prog="sdrpeer", description="A leaderless robot platform.")
+    parser.add_argument("--version", action="version", version=f"sdrpeer {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    client = client_options()
+    as_json = argparse.ArgumentParser(add_help=False)
+    as_json.add_argument("--json", action="store_true", help="print JSON")
+    for names, register in GROUPS:
+        if command is None or command in names:
+            register(sub, client, as_json)
     return parser
+
+
+def _group_of(argv: Sequence[str]) -> str | None:
+    """The command `argv` starts with when a group registers it, else None (whole parser)."""
+    first = argv[0] if argv else None
+    return first if any(first in names for names, _ in GROUPS) else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `sdrpeer` console script."""
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser(_group_of(argv)).parse_args(argv)
     try:
         return int(args.func(args))
     except ConfigError as exc:

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sdrpeer.errors import SdrpeerError
-from sdrpeer.netlab import net
-from sdrpeer.netlab.plan import NetPlan
 from sdrpeer.units import parse_percent
+
+if TYPE_CHECKING:
+    from sdrpeer.netlab.plan import NetPlan
 
 
 def add_fault_parsers(lab_sub: Any, where: argparse.ArgumentParser) -> None:
@@ -37,6 +38,8 @@ def add_fault_parsers(lab_sub: Any, where: argparse.ArgumentParser) -> None:
 
 
 def _plan(lab_dir: Path) -> NetPlan:
+    from sdrpeer.netlab import net  # noqa: PLC0415 - the parser stays light
+
     plan = net.load(lab_dir)
     if plan is None:
         raise SdrpeerError(f"{lab_dir} has no namespace lab (start one: sdrpeer lab up --netns)")
@@ -58,6 +61,8 @@ def parse_groups(words: list[str]) -> list[list[str]]:
 
 def cmd_fault(args: argparse.Namespace) -> int:
     """sdrpeer lab fault ROBOT loss P | bandwidth R | clear."""
+    from sdrpeer.netlab import net  # noqa: PLC0415 - the parser stays light
+
     plan = _plan(args.dir)
     try:
         if args.kind == "clear":
@@ -80,6 +85,8 @@ def cmd_fault(args: argparse.Namespace) -> int:
 
 def cmd_partition(args: argparse.Namespace) -> int:
     """sdrpeer lab partition A,B / C."""
+    from sdrpeer.netlab import net  # noqa: PLC0415 - the parser stays light
+
     plan = _plan(args.dir)
     groups = parse_groups(args.groups)
     try:
@@ -92,6 +99,8 @@ def cmd_partition(args: argparse.Namespace) -> int:
 
 def cmd_heal(args: argparse.Namespace) -> int:
     """sdrpeer lab heal."""
+    from sdrpeer.netlab import net  # noqa: PLC0415 - the parser stays light
+
     net.run(_plan(args.dir).heal(), check=False)
     print("healed: no partition, no fault")
     return 0

@@ -21,9 +21,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import msgpack
-import yaml
-
 from sdrpeer.cli.common import client_for, parse_assignment, print_json
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError, ConfigError, SdrpeerError
@@ -155,6 +152,8 @@ def cmd_print(args: argparse.Namespace) -> int:
 
 def cmd_inject(args: argparse.Namespace) -> int:
     """Send a value (JSON or YAML; a typed port's as a map of its fields) to an InPort."""
+    import yaml  # noqa: PLC0415 - the parser stays light (sdrpeer.cli.main)
+
     try:
         value = yaml.safe_load(args.value)
     except yaml.YAMLError as e:
@@ -173,6 +172,8 @@ def record(
     """Tap `ports` (the tap's `body`: count, duration, policy) and write what comes to an MCAP
     file at `path`; what was recorded: frames, bytes, seconds, the first and last log times,
     the end map (why it ended, dropped)."""
+    import msgpack  # noqa: PLC0415 - the parser stays light (sdrpeer.cli.main)
+
     from sdrpeer.ports.mcapfile import RecordingWriter, publish_ns  # noqa: PLC0415 - loads mcap
 
     stream = client.stream("/v1/ports/tap", {"ports": ports, **body})
@@ -243,6 +244,8 @@ def replay_chunks(
 ) -> Iterator[bytes]:
     """The feed's body: `[index, value]` per recorded message (its bytes as recorded), each
     yielded at its recorded time scaled by `speed` (0: at once); `counts` counts them."""
+    import msgpack  # noqa: PLC0415 - the parser stays light (sdrpeer.cli.main)
+
     from sdrpeer.ports.mcapfile import read_recording  # noqa: PLC0415 - loads mcap
 
     while True:

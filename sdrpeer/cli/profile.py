@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 from pathlib import Path
 
 from sdrpeer.errors import ConfigError
 from sdrpeer.profiling.inputs import GENERATORS
-from sdrpeer.profiling.measure import ProfileRequest, run_profile, write_profile
 
 
 def _pairs(items: list[str], flag: str) -> dict[str, str]:
@@ -42,6 +40,14 @@ def add_profile_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
 
 def cmd_profile(args: argparse.Namespace) -> int:
     """Run `sdrpeer profile`."""
+    import asyncio  # noqa: PLC0415 - the profiler runs a host: only this command loads it
+
+    from sdrpeer.profiling.measure import (  # noqa: PLC0415
+        ProfileRequest,
+        run_profile,
+        write_profile,
+    )
+
     req = ProfileRequest(
         target=args.target,
         seconds=args.seconds,

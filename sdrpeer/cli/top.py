@@ -22,7 +22,6 @@ from typing import IO, Any
 
 from sdrpeer.cli.common import endpoint
 from sdrpeer.cli.format import want_color
-from sdrpeer.cli.status import format_top
 from sdrpeer.client import unreachable_message
 from sdrpeer.errors import ApiError
 
@@ -67,6 +66,8 @@ def samples(api: str, reconnect_s: float) -> Iterator[dict[str, Any]]:
 
 def run_top(api: str, iterations: int | None, reconnect_s: float, out: IO[str]) -> int:
     """Draw screens until `iterations` (None: until interrupted)."""
+    from sdrpeer.cli.status import format_top  # noqa: PLC0415 - the parser stays light
+
     color = want_color(out.isatty(), os.environ)
     for shown, sample in enumerate(samples(api, reconnect_s), start=1):
         screen = format_top(sample, color=color)

@@ -56,6 +56,11 @@ def lan() -> DeployConfig:
     return DeployConfig()
 
 
+def lab() -> DeployConfig:
+    """Many agents on one busy machine: the `lan` timers."""
+    return DeployConfig()
+
+
 def fast_test() -> DeployConfig:
     """Loopback tests and the local lab: so far the `lan` timers."""
     return DeployConfig()

@@ -27,13 +27,16 @@ import signal
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import psutil
-
+from sdrpeer.client import LAB_DIR
 from sdrpeer.errors import SdrpeerError
 
-DEFAULT_DIR = Path(".sdrpeer-lab")
+if TYPE_CHECKING:
+    import psutil
+
+DEFAULT_DIR = LAB_DIR
+"""The lab directory (`.sdrpeer-lab`), where the client commands look for lab.json."""
 LAB_FILE = "lab.json"
 KEY_FILE = "cluster.key"
 
@@ -153,6 +156,8 @@ def write_robot_file(data_dir: Path, index: int, robot_files: Path | None) -> Pa
 
 def is_agent_process(pid: int, robot: LabRobot) -> bool:
     """True if `pid` runs `sdrpeer agent` for this robot (same --data-dir); False otherwise."""
+    import psutil  # noqa: PLC0415 - client commands read lab.json without it
+
     try:
         proc = psutil.Process(pid)
         if proc.status() == psutil.STATUS_ZOMBIE:
@@ -177,6 +182,8 @@ def running_pids(lab: Lab) -> dict[str, int]:
 
 def _kill_group(proc: psutil.Process) -> None:
     """SIGKILL a hung agent, and its process group (its components) when it leads one."""
+    import psutil  # noqa: PLC0415 - client commands read lab.json without it
+
     with contextlib.suppress(psutil.NoSuchProcess, ProcessLookupError, PermissionError):
         if os.getpgid(proc.pid) == proc.pid:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -189,6 +196,8 @@ def stop_processes(lab: Lab, *, grace: float = 5.0) -> list[str]:
 
     Returns one line per robot saying what happened (for the user).
     """
+    import psutil  # noqa: PLC0415 - client commands read lab.json without it
+
     report: list[str] = []
     procs: dict[str, psutil.Process] = {}
     for robot in lab.robots:

@@ -23,6 +23,7 @@ from typing import Any
 
 import sdrpeer
 from sdrpeer.client import AgentClient
+from sdrpeer.config import LAB_PRESET
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab.files import (
     Lab,
@@ -53,7 +54,9 @@ class UpOptions:
 
     robots: int
     lab_dir: Path
-    preset: str = "fast_test"
+    preset: str = LAB_PRESET
+    """Every agent's timers (`sdrpeer.agent.tuning`): `lab` holds on a busy machine; tests
+    that want quick verdicts pass `fast_test`."""
     robot_files: Path | None = None
     """Where robot-K.yaml files are taken from (None = examples/robots, when there is one)."""
     scenario: Path | None = None

@@ -40,6 +40,11 @@ def lan() -> RecoveryConfig:
     return RecoveryConfig()
 
 
+def lab() -> RecoveryConfig:
+    """Many agents on one busy machine: the `lan` values."""
+    return RecoveryConfig()
+
+
 def fast_test() -> RecoveryConfig:
     """Loopback tests and the local lab: a step's effect is judged after 1 s, not 10 s."""
     return RecoveryConfig(settle_s=1.0)

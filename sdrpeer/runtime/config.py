@@ -53,6 +53,12 @@ def lan() -> SupervisorConfig:
     return SupervisorConfig()
 
 
+def lab() -> SupervisorConfig:
+    """Many agents on one busy machine: `lan`, but a host may be silent 5 s (not 2 s) before it
+    is killed as hung (a host not scheduled for 2 s is no hung host)."""
+    return SupervisorConfig(heartbeat_timeout=5.0)
+
+
 def fast_test() -> SupervisorConfig:
     """Tests and the local lab: short restart backoff (0.05 s doubling to at most 0.4 s, stable
     after 2 s, given up after 4 fast failures) and short command, hello and stop timeouts."""

@@ -4,9 +4,11 @@ How it works: each item is read field by field through `Problems`, so every wron
 component is reported. Names, launchers and targets go through the same checks as an agent's
 instance specs (sdrpeer.runtime.spec), so a system that loads can be deployed. For a `python`
 target the class is imported (sdrpeer.system.classes) and the params are converted by the class's
-own declarations. Requirements come from `profile:` (a file written by `sdrpeer profile`, path
-relative to the system file) and/or `requires:` (inline); an inline value wins over the profile's,
-and inline `traffic:` rates are merged over the profiled out-port rates.
+own declarations. A `script` file and an `exec` program given by a relative path resolve against
+the system file's directory and must exist (sdrpeer.system.paths). Requirements come from
+`profile:` (a file written by `sdrpeer profile`, path relative to the system file) and/or
+`requires:` (inline); an inline value wins over the profile's, and inline `traffic:` rates are
+merged over the profiled out-port rates.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from sdrpeer.system.model import (
     Requirements,
     StandbySpec,
 )
+from sdrpeer.system.paths import resolve_exec_target, resolve_script_target
 from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.profiles import ProfileFigures, read_profile
 from sdrpeer.system.values import (
@@ -99,15 +102,27 @@ def read_components(p: Problems, node: yaml.Node, base_dir: Path) -> dict[str, C
 
 
 def read_component(
-    p: Problems, fields: dict[str, yaml.Node], node: yaml.Node, where: str, base_dir: Path
+    p: Problems,
+    fields: dict[str, yaml.Node],
+    node: yaml.Node,
+    where: str,
+    base_dir: Path,
+    *,
+    files: bool = True,
 ) -> tuple[str, ComponentEntry]:
-    """One component's fields (already checked for unknown keys) -> its name and entry."""
+    """One component's fields (already checked for unknown keys) -> its name and entry.
+    `files`: resolve and check the file a `script` or `exec` target names (a composite's member
+    runs no file: its launcher is refused instead)."""
     errors_before = len(p.items)
     name = _spec_field(p, fields, "name", where, _name)
     launcher = _spec_field(p, fields, "launcher", where, _launcher, default="python")
     target: Any = MISSING
     if launcher and "target" in fields:
         target = _spec_field(p, fields, "target", where, lambda v, w: _target(launcher, v, w))
+    if target and files:
+        target = _resolve_paths(
+            p, fields["target"], f"{where}.target", (launcher, target), base_dir
+        )
     info: ClassInfo | None = None
     if target:
         with p.guard():
@@ -142,6 +157,24 @@ def read_component(
         raw = p.f.value(fields["name"])
         name = raw if isinstance(raw, str) else MISSING
     return name, ComponentEntry(node, where, info, definition)
+
+
+def _resolve_paths(
+    p: Problems, node: yaml.Node, where: str, spec: tuple[str, Any], base_dir: Path
+) -> Any:
+    """A `script` or `exec` target with the file it names made absolute against the system
+    file's directory (sdrpeer.system.paths); MISSING, with the problem recorded, when that file
+    does not exist."""
+    launcher, target = spec
+    try:
+        if launcher == "script" and isinstance(target, str):
+            return resolve_script_target(base_dir, target)
+        if launcher == "exec" and isinstance(target, tuple):
+            return resolve_exec_target(base_dir, target)
+    except ValueError as e:
+        p.add(node, where, str(e))
+        return MISSING
+    return target
 
 
 def _watchdog(value: object) -> float:

@@ -138,7 +138,7 @@ def _members(p: Problems, node: yaml.Node | None, where: str, *, base_dir: Path)
         fields = p.mapping(item, at, MEMBER_KEYS, ("name", "target"))
         if fields is None:
             continue
-        name, entry = read_component(p, fields, item, at, base_dir)
+        name, entry = read_component(p, fields, item, at, base_dir, files=False)
         if name:
             out.append((name, entry, fields))
     return out

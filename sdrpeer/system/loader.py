@@ -60,13 +60,15 @@ def schema_path() -> Path:
 
 
 def load_system(path: Path | str) -> SystemDef:
-    """Read and validate a system file; profile paths are relative to its directory."""
+    """Read and validate a system file; the paths it names (profiles, `script` files, `exec`
+    programs) are relative to its directory (sdrpeer.system.paths)."""
     f = YamlFile.read(path, SystemFileError)
     return _build(f, Path(path).parent)
 
 
 def parse_system(text: str, name: str, *, base_dir: Path | str | None = None) -> SystemDef:
-    """Validate system-file text; `name` is used in messages (and its directory for profiles)."""
+    """Validate system-file text; `name` is used in messages (and its directory, unless
+    `base_dir` is given, is where relative paths start)."""
     f = YamlFile(text, name, SystemFileError)
     return _build(f, Path(base_dir) if base_dir is not None else Path(name).parent)
 
