@@ -8,6 +8,12 @@ the next version (`plan.version + 1` under the same epoch, else 1), the allocati
 reason asks for (`_ask`), `place`, an `allocation.infeasible` log when nothing fits, and the log
 lines of the new plan. The caller (`sdrpeer.deploy.core`) publishes what comes out.
 
+Every new plan's explanation (`Plan.why`, made by the allocation core) is stamped here with the
+reason and the plan that decided it (`explained`); a placement the allocation kept where it was
+keeps the explanation of the plan that decided it, with this plan as the one that checked it
+again, so `sdrpeer describe` tells why a component first went to its robot, not only that it
+stayed.
+
 What differs by reason:
 - `Deploy`: the system as given, the robot that received it tried first, no robot left out;
 - `Reissue`: the held plan, smallest change, `held` components kept where they are; with
@@ -155,7 +161,7 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             assert plan is not None
             if plan.epoch == epoch and plan.allocator == me:
                 return Change(None, logs)  # nothing better to issue: keep the plan we hold
-            new = Plan(epoch, version, plan.system, plan.placements, me)
+            new = Plan(epoch, version, plan.system, plan.placements, me, why=plan.why)
         elif isinstance(reason, Reissue):
             assert plan is not None
             if result.placements == plan.placements and plan.epoch == epoch:
@@ -165,7 +171,50 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             new = result
     if isinstance(reason, Move) and plan is not None:
         new = replace(new, system=plan.system)  # the pin is for this allocation only
+    left = sorted(ctx.state.alive.keys() - {r.name for r in ask.view.robots})
+    new = explained(new, plan, _reason_text(reason, plan), left)
     return Change(new, logs + _logs(reason, plan, new, epoch))
+
+
+EXCLUDED = "excluded: a robot-wide recovery condition holds on it, or it is within its dwell"
+"""Why an alive robot the allocation left out of its view refused an instance."""
+
+
+def explained(new: Plan, old: Plan | None, reason: str, excluded: Collection[str] = ()) -> Plan:
+    """`new` with every explanation the allocation just made stamped with `reason` and `new`'s
+    (epoch, version); a placement kept where `old` had it keeps `old`'s explanation of it. A
+    standby left out also names the alive robots the allocation did not consider (`excluded`:
+    degraded, or within their dwell)."""
+    here = (new.epoch, new.version)
+    before = {} if old is None else {w.instance: w for w in old.why}
+    out = []
+    for w in new.why:
+        if w.decided_in != (0, 0):
+            out.append(w)  # a plan re-issued as it was: its explanations stand
+            continue
+        prior = before.get(w.instance)
+        if w.how == "kept" and prior is not None and prior.robot == w.robot:
+            out.append(replace(prior, checked_in=here))
+        else:
+            ruled_out = w.ruled_out
+            if w.robot is None:
+                ruled_out += tuple((r, EXCLUDED) for r in excluded)
+            stamped = replace(w, reason=reason, decided_in=here, checked_in=here)
+            out.append(replace(stamped, ruled_out=ruled_out))
+    return replace(new, why=tuple(out))
+
+
+def _reason_text(reason: Reason, plan: Plan | None) -> str:
+    """What the allocator allocated for, in a person's words."""
+    if isinstance(reason, Deploy):
+        return "deploy"
+    if isinstance(reason, Reissue):
+        return reason.why
+    if isinstance(reason, Recover):
+        return f"recovery: {reason.action} for {reason.instance} on {reason.robot}"
+    active = None if plan is None else plan.active_of(reason.component)
+    origin = "" if active is None else f" from {active.robot}"
+    return f"move {reason.component}{origin}" + (f" to {reason.to}" if reason.to else "")
 
 
 def _ask(reason: Reason, plan: Plan | None, ctx: Context) -> _Ask | Infeasible:
