@@ -305,3 +305,42 @@ def test_the_highest_priority_robot_is_elected_when_it_starts_last(tmp_path: Pat
             assert doc["allocator"]["epoch"] == 1  # the first claim, not a later preemption
     finally:
         lab.close()
+
+
+def test_a_higher_priority_robot_started_after_the_election_takes_the_role_once(
+    tmp_path: Path,
+) -> None:
+    """Priority counts at start (`ElectionConfig.priority_window`): robot-3 (priority 10) starts
+    after robot-1 and robot-2 have elected one of them; within its first seconds it takes the
+    role, once, at the next epoch, and every robot follows it; the old allocator stepped down
+    outranked."""
+    lab = RealCluster(tmp_path / "net", preset="lan")
+    try:
+        for name in ("robot-1", "robot-2"):
+            lab.robot_file(name)
+        top = lab.robot_file("robot-3")
+        top.write_text(top.read_text() + "priority: 10\n")
+        one = lab.start("robot-1")
+        two = lab.start("robot-2", join=[one])
+        first = lab.wait_until(
+            lambda: (one.get("/v1/status")["allocator"], two.get("/v1/status")["allocator"]),
+            lambda pair: pair[0]["name"] is not None and pair[0] == pair[1],
+            "one allocator both know",
+            30,
+        )[0]
+        old = {"robot-1": one, "robot-2": two}[first["name"]]
+        three = lab.start("robot-3", join=[one])
+        for agent in (one, two, three):
+            doc = lab.wait_until(
+                partial(agent.get, "/v1/status"),
+                lambda d: d["allocator"]["name"] == "robot-3",
+                "robot-3 took the role",
+                30,
+            )
+            assert doc["allocator"]["epoch"] == first["epoch"] + 1, (agent.name, doc)
+        stepped = [e for e in old.events() if e["kind"] == "election.stepped_down"]
+        assert [e["detail"]["reason"] for e in stepped] == ["outranked"]
+        claims = [e for e in three.events() if e["kind"] == "election.elected"]
+        assert len(claims) == 1
+    finally:
+        lab.close()

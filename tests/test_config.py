@@ -41,6 +41,7 @@ def test_fields_are_the_documented_set() -> None:
         "api",
         "robot_file",
         "scenario",
+        "scenario_start",
         "key_file",
         "insecure",
         "allow_launchers",
@@ -50,6 +51,7 @@ def test_fields_are_the_documented_set() -> None:
         "data_dir",
         "metrics_interval",
         "priority",
+        "preempt",
         "log_level",
         "log_format",
     }
