@@ -135,7 +135,8 @@ class _Allocation:
         if how == "held":
             self.explain.held(comp, name, role, self.robots[i].name)
         else:
-            self.explain.placed(comp, name, role, i, cold=cold, how=how, peers=self._peers(comp))
+            peers = self._peers(comp)
+            self.explain.placed(comp, name, role, i, cold=cold, how=how, peers=peers)
         need = self.check.need(comp, name, cold, i)
         load = self.loads[i]
         load.cpu_pct += need.cpu_pct
