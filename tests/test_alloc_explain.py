@@ -73,7 +73,8 @@ def test_every_placement_says_which_robots_were_ruled_out_and_by_what() -> None:
     assert {"launch", "memory", "battery"} <= set(det.checked)
     standby = w["Det-s1"]
     assert (standby.robot, standby.how, standby.role) == ("robot-4", "ranked", "standby")
-    assert [r for r, _ in standby.ruled_out] == ["robot-1", "robot-2"]  # robot-3 has the active
+    assert [r for r, _ in standby.ruled_out] == ["robot-1", "robot-2", "robot-3"]
+    assert standby.ruled_out[2] == ("robot-3", "already holds Det")  # another robot than its active
     assert (det.decided_in, det.reason) == ((0, 0), "")  # stamped by the deployment core
 
 

@@ -161,6 +161,7 @@ class _Allocation:
         held = self.holders[comp.name]
         for i in candidates:
             if i in held:
+                self.explain.tried(name, i, f"already holds {held[i]}")
                 continue
             why = self.check.reason(comp, name, cold, i, peers)
             if why is None:
