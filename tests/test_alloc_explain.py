@@ -9,7 +9,7 @@ from dataclasses import replace
 
 from sdrpeer.alloc.core import allocate
 from sdrpeer.alloc.view import ClusterView, RobotView
-from sdrpeer.deploy.plan_change import Context, Deploy, Reissue, change
+from sdrpeer.deploy.plan_change import EXCLUDED, Context, Deploy, Reissue, change
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.plan import Plan, Why, plan_from_json
 from sdrpeer.record.robot import LinkStats, LinkSummary, Metrics, RobotRecord
@@ -178,3 +178,26 @@ def test_a_kept_placement_keeps_the_explanation_of_the_plan_that_decided_it() ->
     )
     assert moved.ruled_out == (("robot-1", "battery: battery 10% not above 20%"),)
     assert kept == replace(cam, checked_in=(4, 2))
+
+
+def test_robots_the_health_judge_excluded_are_named_in_new_decisions() -> None:
+    s = system(comp("Det", standby=StandbySpec(other_robots=1)))
+    everyone = state(robot("robot-1"), robot("robot-2"), robot("robot-3"))
+    first = change(Deploy(s, "robot-2"), None, Context("robot-2", 1, everyone)).result
+    assert isinstance(first, Plan)
+    assert {p.instance: p.robot for p in first.placements} == {
+        "Det": "robot-2",
+        "Det-s1": "robot-1",
+    }
+    # robot-2 dies while robot-1 is degraded (excluded): Det goes to robot-3, its standby nowhere
+    later = state(robot("robot-1"), robot("robot-3"))
+    ctx = Context("robot-3", 1, later, excluded=frozenset({"robot-1"}))
+    plan = change(Reissue("robots gone: robot-2", recovery=True), first, ctx).result
+    assert isinstance(plan, Plan)
+    det, left = plan.why_of("Det"), plan.why_of("Det-s1")
+    assert det is not None
+    assert left is not None
+    assert (det.robot, det.how) == ("robot-3", "ranked")
+    assert ("robot-1", EXCLUDED) in det.ruled_out
+    assert (left.robot, left.how) == (None, "left_out")
+    assert left.ruled_out == (("robot-3", "already holds Det"), ("robot-1", EXCLUDED))

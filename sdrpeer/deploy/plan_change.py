@@ -31,6 +31,7 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass, field, replace
 
+from sdrpeer.alloc.core import NOT_IN_VIEW
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy.effects import Log
 from sdrpeer.deploy.move import move_inputs, swap_to_standby
@@ -183,8 +184,8 @@ EXCLUDED = "excluded: a robot-wide recovery condition holds on it, or it is with
 def explained(new: Plan, old: Plan | None, reason: str, excluded: Collection[str] = ()) -> Plan:
     """`new` with every explanation the allocation just made stamped with `reason` and `new`'s
     (epoch, version); a placement kept where `old` had it keeps `old`'s explanation of it. A
-    standby left out also names the alive robots the allocation did not consider (`excluded`:
-    degraded, or within their dwell)."""
+    placement the strategy's order chose, and a standby left out, also name the alive robots the
+    allocation did not consider (`excluded`: degraded, or within their dwell)."""
     here = (new.epoch, new.version)
     before = {} if old is None else {w.instance: w for w in old.why}
     out = []
@@ -197,11 +198,21 @@ def explained(new: Plan, old: Plan | None, reason: str, excluded: Collection[str
             out.append(replace(prior, checked_in=here))
         else:
             ruled_out = w.ruled_out
-            if w.robot is None:
-                ruled_out += tuple((r, EXCLUDED) for r in excluded)
+            if w.how in ("ranked", "preferred", "left_out"):  # robots it could have gone to
+                ruled_out = _with_excluded(ruled_out, excluded)
             stamped = replace(w, reason=reason, decided_in=here, checked_in=here)
             out.append(replace(stamped, ruled_out=ruled_out))
     return replace(new, why=tuple(out))
+
+
+def _with_excluded(
+    ruled_out: tuple[tuple[str, str], ...], excluded: Collection[str]
+) -> tuple[tuple[str, str], ...]:
+    """`ruled_out` naming each excluded robot once, as excluded (the allocation saw it as not
+    in its view: it is alive, but the health judge kept it out)."""
+    out = [(r, EXCLUDED if r in excluded and why == NOT_IN_VIEW else why) for r, why in ruled_out]
+    listed = {r for r, _ in out}
+    return tuple(out + [(r, EXCLUDED) for r in excluded if r not in listed])
 
 
 def _reason_text(reason: Reason, plan: Plan | None) -> str:
