@@ -67,6 +67,10 @@ class AgentConfig:
     """YAML file with this virtual robot's hardware facts; None = read the real sources."""
     scenario: Path | None = None
     """YAML scenario that changes the virtual robot's facts over time."""
+    scenario_start: float | None = None
+    """Unix time of the scenario's time 0 (None: this agent's start). The lab gives every agent
+    its own start time, so the agents' steps and the lab's (deaths, partitions) share one clock
+    and a restarted agent goes on with the scenario where it is instead of starting it over."""
     key_file: Path | None = None
     """Cluster key (hex) used to sign every datagram; required unless `insecure`."""
     insecure: bool = False
@@ -87,7 +91,12 @@ class AgentConfig:
     metrics_interval: float = 1.0
     """Seconds between two samples of this robot's metrics."""
     priority: int = 0
-    """Election priority: higher wins among equally healthy robots."""
+    """Election priority: higher wins among equally healthy robots; at start (a robot's first
+    seconds) a higher priority also takes the role from an allocator that claimed first
+    (`ElectionConfig.priority_window`)."""
+    preempt: bool = False
+    """Take the allocator role from any healthy allocator ranked below this robot, at any time
+    (not only at start); the system file's `allocation.preempt` does it for the whole fleet."""
     log_level: str = "info"
     """debug, info, warning or error."""
     log_format: str = "text"
@@ -211,6 +220,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "api": _as_str,
     "robot_file": _as_path,
     "scenario": _as_path,
+    "scenario_start": _as_float,
     "key_file": _as_path,
     "insecure": _as_bool,
     "allow_launchers": _as_names,
@@ -220,6 +230,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "data_dir": _as_path,
     "metrics_interval": _as_float,
     "priority": _as_priority,
+    "preempt": _as_bool,
     "log_level": _as_str,
     "log_format": _as_str,
     "discover": _as_bool,

@@ -3,8 +3,10 @@ and the kinds of its entries (`EventKind`)."""
 
 from __future__ import annotations
 
+import json
+import re
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from enum import StrEnum
 from typing import Any
 
@@ -142,6 +144,23 @@ class EventLog:
 
     def __len__(self) -> int:
         return len(self._entries)
+
+
+def naming(names: Iterable[str]) -> Callable[[Mapping[str, Any]], bool]:
+    """A test of whether an entry names any of `names` as a whole word: as its robot, or
+    anywhere in its detail (`CamA` names neither `CamA-s1` nor `x.CamA2`)."""
+    words = [n for n in names if n]
+    alternatives = "|".join(re.escape(n) for n in words)
+    pattern = re.compile(r"(?<![\w.-])(?:" + alternatives + r")(?![\w-])")
+
+    def names_it(entry: Mapping[str, Any]) -> bool:
+        if not words:
+            return False
+        if str(entry.get("robot", "")) in words:
+            return True
+        return bool(pattern.search(json.dumps(entry.get("detail", {}), sort_keys=True)))
+
+    return names_it
 
 
 class RecoveryTally:

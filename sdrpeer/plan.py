@@ -5,11 +5,17 @@ with the system they came from, the allocator's `epoch` and a `version` that gro
 plan that epoch issues. Robots order plans by `(epoch, allocator, version)` and ignore anything
 older than what they hold (fencing): a stale allocator cannot undo a newer plan.
 `to_json`/`plan_from_json` are the form plans travel in between agents.
+
+A plan also carries why each instance is where it is (`Why`, one per placement and one per
+standby no robot took): the allocator's explanation of its placement travels with the plan, so
+every robot that holds the plan can answer `sdrpeer describe`, and a new allocator that re-issues
+the plan keeps it. A placement kept from an earlier plan keeps the explanation of the plan that
+decided it, with the plan that last re-checked it (`checked_in`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from sdrpeer.system.model import SystemDef, system_from_json
@@ -32,6 +38,97 @@ class Placement:
     """For standbys: hot (started, INACTIVE) or cold (placed, launched only when needed)."""
 
 
+HOW = (
+    "kept",
+    "pinned",
+    "standby_promoted",
+    "preferred",
+    "ranked",
+    "same_robot",
+    "held",
+    "left_out",
+)
+"""How an instance came to its robot (`Why.how`):
+kept: it stays where the previous plan or a running instance had it (still passing every
+constraint); pinned: the component's `pin`; standby_promoted: a running standby of the component
+became its active; preferred: the first robot of its `prefer` list that passed; ranked: the first
+robot in the strategy's order that passed; same_robot: a standby on its active's robot; held: the
+disconnect policy keeps it where it was (its robot is lost); left_out: no robot took it."""
+MAX_RULED_OUT = 12
+"""Robots listed in one `Why.ruled_out` (the rest are counted in `more_ruled_out`)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Why:
+    """Why one instance is on its robot, or on none (the allocator's explanation)."""
+
+    component: str
+    instance: str
+    role: InstanceRole
+    robot: str | None
+    """Its robot; None when no robot took it (a standby left out)."""
+    how: str
+    """One of `HOW`."""
+    checked: tuple[str, ...] = ()
+    """The constraints its robot passed: Table I by name (memory, cpu, battery, launch, ...) and
+    Table II as `link to PEER on ROBOT: delay, loss, ...` for each connected component placed on
+    another robot."""
+    ruled_out: tuple[tuple[str, str], ...] = ()
+    """(robot, the first constraint it failed) for the robots tried before its robot, in the
+    order tried; for an instance no robot took, every robot in view."""
+    more_ruled_out: int = 0
+    """Robots ruled out beyond the `MAX_RULED_OUT` listed."""
+    scores: tuple[tuple[str, float], ...] = ()
+    """(robot, weighted score) of the robots tried, under the objective strategy."""
+    reason: str = ""
+    """Why the allocator allocated when it decided this (deploy, robots gone: ..., a move)."""
+    decided_in: tuple[int, int] = (0, 0)
+    """(epoch, version) of the plan that decided it."""
+    checked_in: tuple[int, int] = (0, 0)
+    """(epoch, version) of the newest plan that checked it again and kept it."""
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON form (`why_from_json` inverts it)."""
+        return {
+            "component": self.component,
+            "instance": self.instance,
+            "role": str(self.role),
+            "robot": self.robot,
+            "how": self.how,
+            "checked": list(self.checked),
+            "ruled_out": [list(r) for r in self.ruled_out],
+            "more_ruled_out": self.more_ruled_out,
+            "scores": [[r, s] for r, s in self.scores],
+            "reason": self.reason,
+            "decided_in": list(self.decided_in),
+            "checked_in": list(self.checked_in),
+        }
+
+
+def why_from_json(doc: Any) -> Why:
+    """Rebuild a Why; KeyError, TypeError or ValueError on anything malformed."""
+    robot = doc["robot"]
+    how = str(doc["how"])
+    if how not in HOW:
+        raise ValueError(f"unknown how {how!r}")
+    epoch, version = doc["decided_in"]
+    c_epoch, c_version = doc["checked_in"]
+    return Why(
+        component=str(doc["component"]),
+        instance=str(doc["instance"]),
+        role=_role(doc["role"]),
+        robot=None if robot is None else str(robot),
+        how=how,
+        checked=tuple(str(c) for c in doc["checked"]),
+        ruled_out=tuple((str(r), str(w)) for r, w in doc["ruled_out"]),
+        more_ruled_out=int(doc["more_ruled_out"]),
+        scores=tuple((str(r), float(s)) for r, s in doc["scores"]),
+        reason=str(doc["reason"]),
+        decided_in=(int(epoch), int(version)),
+        checked_in=(int(c_epoch), int(c_version)),
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class Plan:
     """Everything robots need to converge on a system, fenced by the allocator's epoch."""
@@ -47,6 +144,16 @@ class Plan:
     """(component, robot) for each `reconcile: keep_original` component the fleet replaced off
     a robot it lost: whichever robot holds the allocator role moves it back when that robot
     returns (kept in the plan, so a change of allocator forgets nothing)."""
+    why: tuple[Why, ...] = field(default=(), compare=False)
+    """The allocator's explanation: one `Why` per placement, and one per standby no robot took
+    (not part of the plan's identity: two plans that place alike are equal)."""
+
+    def why_of(self, instance: str) -> Why | None:
+        """The explanation of one instance, if the plan has one."""
+        for w in self.why:
+            if w.instance == instance:
+                return w
+        return None
 
     @property
     def key(self) -> tuple[int, str, int]:
@@ -93,6 +200,7 @@ class Plan:
                 [p.component, p.instance, p.robot, p.role, p.mode] for p in self.placements
             ],
             "origins": [list(o) for o in self.origins],
+            "why": [w.to_json() for w in self.why],
         }
 
 
@@ -111,6 +219,7 @@ def plan_from_json(doc: Any) -> Plan:
             placements=placements,
             allocator=str(doc.get("allocator", "")),
             origins=tuple((str(c), str(r)) for c, r in doc.get("origins", ())),
+            why=tuple(why_from_json(w) for w in doc.get("why", ())),
         )
     except _UnknownRole:
         raise ValueError("malformed plan: unknown role") from None

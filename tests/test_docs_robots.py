@@ -1,5 +1,6 @@
 """docs/robots.md's examples are what the loaders accept: its robot file gives the values its
-table describes, and its scenario runs against robot files of the three robots it names."""
+table describes, its scenario runs against robot files of the three robots it names, and its lab
+steps parse to the deaths, restarts, partition and heal it shows."""
 
 from __future__ import annotations
 
@@ -35,3 +36,16 @@ def test_the_scenario_example_runs_as_documented() -> None:
     expected = (walked * 5 / 34**0.5, walked * 3 / 34**0.5)
     assert scenario.value_at("robot-3", "pos", 25.0) == pytest.approx(expected)
     assert scenario.end() == pytest.approx(112.0)
+
+
+def test_the_lab_steps_example_loads_as_documented() -> None:
+    scenario = Scenario.parse(yaml_blocks()[2], "docs/robots.md")
+    steps = [(s.at, s.kind, s.robot, s.values) for s in scenario.lab_steps()]
+    assert steps == [
+        (60.0, "agent", "robot-1", {"agent": "kill"}),
+        (90.0, "agent", "robot-1", {"agent": "restart"}),
+        (100.0, "agent", "robot-3", {"agent": "stop"}),
+        (120.0, "partition", "", {"groups": (("robot-1", "robot-2"), ("robot-4", "robot-5"))}),
+        (150.0, "heal", "", {}),
+    ]
+    assert scenario.changes_for("robot-4", 39.0, 40.0) == {"drain": pytest.approx(1.0)}

@@ -1,5 +1,5 @@
 """The election rules with literal times: claims, grace periods, abdication, preemption,
-conflicting claims and re-claims past a newer epoch."""
+conflicting claims, re-claims past a newer epoch, and priority at start (the priority window)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,9 @@ from sdrpeer.election import (
 )
 from sdrpeer.election.rules import TRANSITIONS, next_role
 
-CONFIG = ElectionConfig(grace=1.0, startup_grace=0.0, rejoin_grace=0.0)
+CONFIG = ElectionConfig(grace=1.0, startup_grace=0.0, rejoin_grace=0.0, priority_window=0.0)
+"""The rules without the priority window (its own tests below give it one)."""
+WINDOW = CONFIG.with_(startup_grace=1.5, priority_window=6.0)
 
 
 def cand(
@@ -364,3 +366,85 @@ def test_at_boot_the_lower_ranked_waits_grace_after_the_startup_grace() -> None:
     low.handle_timer(2.5)
     assert not low.is_leader
     assert low.leader == "a-high"
+
+
+# -- priority at start: the priority window ---------------------------------------------------
+
+
+def test_a_fresh_robot_of_higher_priority_takes_the_role_after_its_startup_grace() -> None:
+    new = Election("b", WINDOW, 10.0)  # started after "a" claimed
+    view = {"a": cand(priority=1, state=claim(1, "a")), "b": cand(priority=5)}
+    new.update(10.0, view)
+    assert new.leader == "a"
+    assert new.role is Role.WAITING
+    assert new.next_timer() == 11.5  # it hears the fleet first (startup grace)
+    new.handle_timer(11.5)
+    assert new.state() == claim(2, "b")
+    old = Election("a", WINDOW, 0.0)
+    old.update(0.0, {"a": cand(priority=1)})
+    old.handle_timer(1.5)
+    assert old.state() == claim(1, "a")
+    drain(old)
+    old.update(11.6, {"a": cand(priority=1), "b": cand(priority=5, state=new.state())})
+    assert old.state() == follows(2, "b")
+    assert drain(old) == [SteppedDown(1, "outranked", 11.6), LeaderChanged(2, "b", "a", 11.6)]
+
+
+def test_a_lone_robot_claims_as_soon_as_without_the_window() -> None:
+    for config in (WINDOW, WINDOW.with_(priority_window=0.0)):
+        e = Election("a", config, 0.0)
+        e.update(0.0, {"a": cand(priority=7)})
+        assert e.next_timer() == 1.5
+        e.handle_timer(1.5)
+        assert e.state() == claim(1, "a")
+
+
+def test_the_window_shuts_after_priority_window_seconds() -> None:
+    late = Election("b", WINDOW, 0.0)
+    view = {"a": cand(priority=1, state=claim(1, "a")), "b": cand(priority=5)}
+    late.update(6.0, view)  # heard the allocator only when the window shut
+    assert late.role is Role.FOLLOWER
+    late.handle_timer(100.0)
+    assert late.state() == follows(1, "a")
+
+
+def test_a_countdown_that_ends_after_the_window_settles_without_claiming() -> None:
+    config = WINDOW.with_(priority_window=3.0)
+    e = Election("b", config, 0.0)
+    view = {
+        "a": cand(priority=1, state=claim(1, "a")),
+        "b": cand(priority=5),
+        "c": cand(priority=6),
+        "d": cand(priority=7),
+    }
+    e.update(0.0, view)  # c and d rank above b: b's turn comes at 1.5 + 2 * 1.0 = 3.5
+    assert e.next_timer() == 3.5
+    e.handle_timer(3.5)
+    assert e.role is Role.FOLLOWER
+    assert e.state() == follows(1, "a")
+
+
+def test_equal_priority_never_preempts_health_and_name_do_not_count() -> None:
+    e = Election("z", WINDOW, 0.0)
+    view = {"a": cand(priority=3, health=0, state=claim(1, "a")), "z": cand(priority=3, health=3)}
+    e.update(0.0, view)
+    e.handle_timer(2.0)
+    assert e.role is Role.FOLLOWER
+    assert e.state() == follows(1, "a")
+
+
+def test_a_robot_restarted_into_its_fleet_does_not_preempt() -> None:
+    back = Election("b", WINDOW, 50.0, known_epoch=4)
+    view = {"a": cand(priority=1, state=claim(4, "a")), "b": cand(priority=9)}
+    back.update(50.0, view)
+    back.handle_timer(60.0)
+    assert back.state() == follows(4, "a")
+
+
+def test_the_deployed_systems_preempt_lets_a_higher_robot_take_the_role_at_any_time() -> None:
+    e = Election("b", CONFIG, 0.0)
+    view = {"a": cand(priority=1, state=claim(3, "a")), "b": cand(priority=5)}
+    e.update(100.0, view)
+    assert e.state() == follows(3, "a")
+    e.update(101.0, view, preempt=True)
+    assert e.state() == claim(4, "b")

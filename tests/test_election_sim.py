@@ -93,6 +93,45 @@ def test_a_returning_higher_robot_takes_the_role_only_with_preempt(preempt: bool
     assert sim.plans.violations == []
 
 
+@pytest.mark.parametrize("window", [True, False])
+def test_a_higher_priority_robot_started_last_takes_the_role_within_its_window(
+    window: bool,
+) -> None:
+    """5 robots, all priority 0 but r0002 (10), which boots 3 s after the others (a fleet started
+    one robot after the other): the first allocator is r0004 (the highest name); r0002 takes
+    the role from it once, at a higher epoch, and the fleet stays with it. Without the window
+    (priority_window 0) r0004 keeps the role (the behaviour before)."""
+    config = election_fast() if window else election_fast().with_(priority_window=0.0)
+    cluster = Cluster(5, fast_test(), seed=6, count_bytes=False)
+    sim = ElectionSim(cluster, config, priorities={"r0002": 10})
+    cluster.start(spread=0.0)
+    cluster.kill("r0002")  # booted with the others, gone before it heard anything
+    cluster.run_for(3.0)
+    assert run_until_settled(sim, SETTLE) is not None, sim.describe()
+    first, epoch = allocator(sim)
+    assert first == "r0004"
+    started = cluster.now
+    cluster.restart("r0002")  # its fence knows no epoch: a fresh start
+    cluster.converge(30.0)
+    cluster.run_for(config.startup_grace + 1.0)
+    assert run_until_settled(sim, SETTLE) is not None, sim.describe()
+    now, epoch2 = allocator(sim)
+    if window:
+        assert (now, epoch2) == ("r0002", epoch + 1)
+        assert any(
+            isinstance(e, SteppedDown) and n == "r0004" and e.reason == "outranked"
+            for t, n, e in sim.log
+            if t >= started
+        )
+    else:
+        assert (now, epoch2) == ("r0004", epoch)
+    settled_at = cluster.now
+    cluster.run_for(10.0)  # once the window is shut, nobody claims again
+    assert not any(isinstance(e, Elected) for t, _, e in sim.log if t > settled_at)
+    assert allocator(sim) == (now, epoch2)
+    assert sim.plans.violations == []
+
+
 def test_partition_each_side_elects_and_after_the_heal_the_higher_epoch_wins() -> None:
     cluster, sim = booted(20, seed=4, spread=0.0)
     assert allocator(sim)[0] == "r0019"

@@ -1,4 +1,5 @@
-"""Scenarios: validation with file:line:field errors, and the pure changes_for timeline."""
+"""Scenarios: validation with file:line:field errors, the pure changes_for timeline, and the lab
+steps (agent kill/stop/restart, partition, heal) with the lab's pure script and checks."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.errors import ScenarioError
+from sdrpeer.lab.script import LabScript, check
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
 
@@ -180,3 +182,92 @@ def test_a_fleet_scenario_is_read_by_each_robot_with_its_own_file(tmp_path: Path
     two = Scenario.load(path, robots=[ROBOTS[1]], fleet=True)
     assert two.changes_for("robot-2", 0.0, 10.0) == {"battery": 10.0}
     assert two.changes_for("robot-1", 0.0, 10.0) == {"rssi": -55.0}
+
+
+LAB = """\
+steps:
+  - {at: 5s, robot: robot-2, set: {drain: 60%/min}}
+  - {at: 30s, robot: robot-3, agent: kill}
+  - {at: 20s, partition: [[robot-1, robot-2], [robot-3]]}
+  - {at: 45s, robot: robot-3, agent: restart}
+  - {at: 40s, heal: true}
+"""
+
+
+def test_lab_steps_are_listed_in_time_order_and_change_no_robot_fact() -> None:
+    s = scenario(LAB)
+    steps = s.lab_steps()
+    assert [(st.at, st.kind, st.robot) for st in steps] == [
+        (20.0, "partition", ""),
+        (30.0, "agent", "robot-3"),
+        (40.0, "heal", ""),
+        (45.0, "agent", "robot-3"),
+    ]
+    assert steps[0].values == {"groups": (("robot-1", "robot-2"), ("robot-3",))}
+    assert [st.values.get("agent") for st in steps[1::2]] == ["kill", "restart"]
+    assert steps[1].line == 3
+    assert s.changes_for("robot-3", -INF, 100.0) == {}
+    assert s.changes_for("robot-2", -INF, 100.0) == {"drain": pytest.approx(1.0)}
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            "steps:\n  - {at: 5s, robot: robot-1, agent: reboot}\n",
+            "scenarios/s.yaml:2: field 'agent': expected one of kill, stop, restart, got 'reboot'",
+        ),
+        (
+            "steps:\n  - {at: 5s, agent: kill}\n",
+            "scenarios/s.yaml:2: field 'robot': missing (required)",
+        ),
+        (
+            "steps:\n  - {at: 5s, robot: robot-1, heal: true}\n",
+            "scenarios/s.yaml:2: field 'robot': a heal step is for the whole lab: no robot",
+        ),
+        (
+            "steps:\n  - {at: 5s, heal: yes please}\n",
+            "scenarios/s.yaml:2: field 'heal': write heal: true",
+        ),
+        (
+            "steps:\n  - {at: 5s, partition: [[robot-1, robot-2]]}\n",
+            "scenarios/s.yaml:2: field 'partition': needs at least two groups",
+        ),
+        (
+            "steps:\n  - at: 5s\n    partition:\n      - [robot-1]\n      - [robot-9]\n",
+            "scenarios/s.yaml:5: field 'partition[1]': unknown robot 'robot-9'",
+        ),
+        (
+            "steps:\n  - {at: 5s, partition: [[robot-1], [robot-2, robot-1]]}\n",
+            "scenarios/s.yaml:2: field 'partition[1]': robot-1 is in two groups",
+        ),
+        (
+            "steps:\n  - {at: 5s, partition: [[robot-1], []]}\n",
+            "scenarios/s.yaml:2: field 'partition[1]': an empty group",
+        ),
+    ],
+)
+def test_lab_step_errors_name_file_line_field(text: str, message: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        scenario(text)
+    assert str(info.value).startswith(message), str(info.value)
+
+
+def test_the_lab_script_hands_out_each_step_once_when_due() -> None:
+    script = LabScript(scenario(LAB).lab_steps())
+    assert script.next_at() == 20.0
+    assert script.due(19.9) == []
+    assert [s.kind for s in script.due(35.0)] == ["partition", "agent"]
+    assert script.due(35.0) == []
+    assert script.next_at() == 40.0
+    assert [s.kind for s in script.due(1000.0)] == ["heal", "agent"]
+    assert script.next_at() is None
+
+
+def test_a_lab_refuses_steps_it_cannot_carry_out() -> None:
+    steps = scenario(LAB).lab_steps()
+    with pytest.raises(ScenarioError, match=r"lab.yaml:4: partition: needs the namespace lab"):
+        check(steps, 3, netns=False, where="lab.yaml")
+    check(steps, 3, netns=True, where="lab.yaml")
+    with pytest.raises(ScenarioError, match=r"lab.yaml:4: partition: unknown robot .robot-3."):
+        check(steps, 2, netns=True, where="lab.yaml")

@@ -137,6 +137,8 @@ class Agent:
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = time.time()
         self._started = 0.0
+        self._scenario_origin = 0.0
+        """Loop time of the scenario's time 0 (`AgentConfig.scenario_start`, else the start)."""
         self.current: RobotRecord | None = None
         """This robot's latest sample, whatever was published of it."""
         self._state: tuple[RobotRecord | None, ClusterState] | None = None
@@ -196,6 +198,7 @@ class Agent:
         cfg = self.config
         loop = asyncio.get_running_loop()
         self._started = loop.time()
+        self._scenario_origin = self._started
         cfg.data_dir.mkdir(parents=True, exist_ok=True)
         if cfg.insecure:
             log.warning(INSECURE_WARNING, cfg.bind)
@@ -221,6 +224,8 @@ class Agent:
                 self.priority = robot_file.priority
             if cfg.scenario is not None:
                 self.scenario = Scenario.load(cfg.scenario, robots=[robot_file], fleet=True)
+                if cfg.scenario_start is not None:  # the same clock as the lab's (and the fleet's)
+                    self._scenario_origin = self._started - (time.time() - cfg.scenario_start)
         else:
             self.host = HostMetrics()
         gossip = self.tuning.gossip
@@ -331,7 +336,7 @@ class Agent:
             events=self.events,
             on_change=lambda: self._publish(force=True),
             config=tuning.deploy,
-            election=tuning.election,
+            election=tuning.election.with_(preempt=True) if cfg.preempt else tuning.election,
             recovery=tuning.recovery,
         )
         self.instances = instances
@@ -421,7 +426,7 @@ class Agent:
             await asyncio.sleep(interval)
             now = loop.time()
             if self.scenario is not None and self.robot is not None:
-                t = now - self._started
+                t = now - self._scenario_origin
                 changes = self.scenario.changes_for(self.name, t_prev, t)
                 t_prev = t
                 if changes:

@@ -27,6 +27,9 @@ How it works (pure: no I/O, no clock; `allocate` is the whole API):
 7. `held` components keep the previous plan's placements as they are, also on robots not in the
    view (the disconnect policy: the fleet does not replace them yet); what they hold on robots in
    the view still counts against those robots.
+8. Every decision is explained as it is made (`explain.py`): the plan carries one `Why` per
+   placement and per standby left out (the robots tried and what ruled each out, how the robot
+   was chosen, the constraints it passed, the objective's scores).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from __future__ import annotations
 from collections.abc import Collection, Iterable, Mapping, Sequence
 
 from sdrpeer.alloc.constraints import RobotLoad
+from sdrpeer.alloc.explain import Explainer
 from sdrpeer.alloc.feasibility import Feasibility
 from sdrpeer.alloc.order import adjacency, component_order
 from sdrpeer.alloc.result import AllocationResult, Infeasible, Unplaced
@@ -107,6 +111,7 @@ class _Allocation:
         self.order = component_order(system, self.adj)
         strategy = STRATEGIES.get(system.allocation.strategy)
         self.ranker = strategy.ranker(Context(self.robots, self.loads, system.allocation))
+        self.explain = Explainer(self.robots, self.check, self.ranker)
         self.previous: dict[str, list[Placement]] = {}
         for p in previous.placements if previous is not None else ():
             self.previous.setdefault(p.component, []).append(p)
@@ -124,7 +129,14 @@ class _Allocation:
 
     # -- placing --------------------------------------------------------------------------
 
-    def _place(self, comp: ComponentDef, name: str, role: InstanceRole, cold: bool, i: int) -> None:
+    def _place(
+        self, comp: ComponentDef, name: str, role: InstanceRole, cold: bool, i: int, *, how: str
+    ) -> None:
+        if how == "held":
+            self.explain.held(comp, name, role, self.robots[i].name)
+        else:
+            peers = self._peers(comp)
+            self.explain.placed(comp, name, role, i, cold=cold, how=how, peers=peers)
         need = self.check.need(comp, name, cold, i)
         load = self.loads[i]
         load.cpu_pct += need.cpu_pct
@@ -148,8 +160,13 @@ class _Allocation:
         """The first candidate robot (not holding this component yet) that takes the instance."""
         held = self.holders[comp.name]
         for i in candidates:
-            if i not in held and self.check.reason(comp, name, cold, i, peers) is None:
+            if i in held:
+                self.explain.tried(name, i, f"already holds {held[i]}")
+                continue
+            why = self.check.reason(comp, name, cold, i, peers)
+            if why is None:
                 return i
+            self.explain.tried(name, i, why)
         return None
 
     def _sticky(self, comp: ComponentDef, name: str) -> list[int]:
@@ -179,6 +196,14 @@ class _Allocation:
         self, comp: ComponentDef, name: str, role: InstanceRole, cold: bool, only: int | None
     ) -> None:
         """Record that the instance found no robot, with every robot's reason."""
+        self.unplaced.append(
+            Unplaced(comp.name, name, role, self._reasons(comp, name, role, cold, only))
+        )
+
+    def _reasons(
+        self, comp: ComponentDef, name: str, role: InstanceRole, cold: bool, only: int | None
+    ) -> tuple[tuple[str, str], ...]:
+        """Why each robot (or only robot `only`) cannot take the instance."""
         peers = self._peers(comp)
         held = self.holders[comp.name]
         reasons: list[tuple[str, str]] = []
@@ -196,7 +221,7 @@ class _Allocation:
         for robot in dict.fromkeys(missing):
             if robot not in self.index:
                 reasons.append((robot, NOT_IN_VIEW))
-        self.unplaced.append(Unplaced(comp.name, name, role, tuple(reasons)))
+        return tuple(reasons)
 
     def _fresh_name(self, comp: ComponentDef) -> str:
         """`<component>-s<k>` with the smallest k not used by this component."""
@@ -217,10 +242,12 @@ class _Allocation:
             for i in self._sticky(comp, names[comp.name]):
                 if comp.pin not in (None, self.robots[i].name):
                     continue
-                if self.check.reason(comp, names[comp.name], False, i, peers) is None:
-                    self._place(comp, names[comp.name], InstanceRole.ACTIVE, False, i)
+                why = self.check.reason(comp, names[comp.name], False, i, peers)
+                if why is None:
+                    self._place(comp, names[comp.name], InstanceRole.ACTIVE, False, i, how="kept")
                     self.kept += 1
                     break
+                self.explain.tried(names[comp.name], i, f"was here; now {why}")
         rest = [c for c in self.order if c.name not in self.active_at and c.name not in self.held]
         for comp in sorted(rest, key=lambda c: c.pin is None):
             name = names[comp.name]
@@ -231,25 +258,33 @@ class _Allocation:
                         comp, name, InstanceRole.ACTIVE, False, pin if pin is not None else -1
                     )
                 else:
-                    self._place(comp, name, InstanceRole.ACTIVE, False, pin)
+                    self._place(comp, name, InstanceRole.ACTIVE, False, pin, how="pinned")
                 continue
-            if self._adopt(comp):
+            if self._adopt(comp, name):
                 continue
             got = self._first(comp, name, False, self._candidates(comp), self._peers(comp))
             if got is None:
                 self._fail(comp, name, InstanceRole.ACTIVE, False, None)
             else:
-                self._place(comp, name, InstanceRole.ACTIVE, False, got)
+                self._place(comp, name, InstanceRole.ACTIVE, False, got, how=self._how(comp, got))
 
-    def _adopt(self, comp: ComponentDef) -> bool:
-        """Make a running standby of `comp` its active, if one fits (it keeps its name)."""
+    def _adopt(self, comp: ComponentDef, name: str) -> bool:
+        """Make a running standby of `comp` its active, if one fits (it keeps its name; what
+        ruled out the robots tried for the active `name` goes with it)."""
         peers = self._peers(comp)
         for i, inst in self.running_standbys.get(comp.name, ()):
-            if self.check.reason(comp, inst.name, False, i, peers) is None:
-                self._place(comp, inst.name, InstanceRole.ACTIVE, False, i)
+            why = self.check.reason(comp, inst.name, False, i, peers)
+            if why is None:
+                self.explain.carry(name, inst.name)
+                self._place(comp, inst.name, InstanceRole.ACTIVE, False, i, how="standby_promoted")
                 self.kept += 1
                 return True
+            self.explain.tried(inst.name, i, f"runs a standby; {why}")
         return False
+
+    def _how(self, comp: ComponentDef, i: int) -> str:
+        """preferred when robot i is in the component's `prefer` list, else ranked."""
+        return "preferred" if self.robots[i].name in comp.prefer else "ranked"
 
     def _standbys(self) -> None:
         """Place every standby (module docstring, point 2)."""
@@ -270,7 +305,7 @@ class _Allocation:
                     other += 1
                 else:
                     continue
-                self._place(comp, name, InstanceRole.STANDBY, cold, i)
+                self._place(comp, name, InstanceRole.STANDBY, cold, i, how="kept")
                 self.kept += 1
             todo.append((comp, spec.same_robot - same, spec.other_robots - other))
         for comp, same, other in todo:
@@ -285,18 +320,24 @@ class _Allocation:
                 else:
                     got = self._first(comp, name, cold, self._candidates(comp), peers)
                 if got is None and self.standbys_optional:
+                    reasons = self._reasons(comp, name, InstanceRole.STANDBY, cold, only)
+                    self.explain.left_out(comp, name, InstanceRole.STANDBY, list(reasons))
                     continue
                 if got is None:
                     self._fail(comp, name, InstanceRole.STANDBY, cold, only)
                     self.names[comp.name].add(name)
                 else:
-                    self._place(comp, name, InstanceRole.STANDBY, cold, got)
+                    how = "same_robot" if only is not None else self._how(comp, got)
+                    self._place(comp, name, InstanceRole.STANDBY, cold, got, how=how)
 
     def _first_same(
         self, comp: ComponentDef, name: str, cold: bool, at: int, peers: Sequence[Peer]
     ) -> int | None:
         """The active's robot, if it also takes this same-robot standby."""
-        return at if self.check.reason(comp, name, cold, at, peers) is None else None
+        why = self.check.reason(comp, name, cold, at, peers)
+        if why is not None:
+            self.explain.tried(name, at, why)
+        return at if why is None else None
 
     def _pool(self, comp: ComponentDef) -> list[tuple[str, int]]:
         """Standbys that exist already: the previous plan's, then running ones, by name."""
@@ -319,8 +360,9 @@ class _Allocation:
                 if i is None:
                     self.placements.append(p)
                     self.names[comp.name].add(p.instance)
+                    self.explain.held(comp, p.instance, p.role, p.robot)
                 else:
-                    self._place(comp, p.instance, p.role, p.mode == "cold", i)
+                    self._place(comp, p.instance, p.role, p.mode == "cold", i, how="held")
                     self.kept += 1
 
     def run(self, epoch: int, version: int, allocator: str) -> AllocationResult:
@@ -342,5 +384,10 @@ class _Allocation:
                 p.instance,
             ),
         )
-        plan = Plan(epoch, version, self.system, tuple(placements), allocator)
+        order = {p.instance: k for k, p in enumerate(placements)}
+        why = sorted(
+            self.explain.whys,
+            key=lambda w: (w.robot is None, order.get(w.instance, 0), declared[w.component]),
+        )
+        plan = Plan(epoch, version, self.system, tuple(placements), allocator, why=tuple(why))
         return AllocationResult(plan=plan, kept=self.kept)

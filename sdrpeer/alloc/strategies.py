@@ -71,6 +71,11 @@ class Ranker:
     def placed(self, robot: int) -> None:
         """An instance was placed on robot `robot` (its load changed)."""
 
+    def score(self, component: ComponentDef, peers: Sequence[Peer], robot: int) -> float | None:
+        """The score `order` ranks robot `robot` by for this instance now (None: the strategy
+        does not score; the allocation's explanation shows it)."""
+        return None
+
 
 class Strategy:
     """A placement strategy plugin."""
@@ -187,6 +192,20 @@ class _ObjectiveRanker(Ranker):
 
     def placed(self, robot: int) -> None:
         self.base[robot] = self._base(robot)
+
+    def score(self, component: ComponentDef, peers: Sequence[Peer], robot: int) -> float:
+        """`order`'s score of one robot (the instance's own need left out: it shifts every
+        robot alike), from the same memoised parts."""
+        out = self.base[robot]
+        wd = self.w["distance"]
+        if peers and wd:
+            out += wd / len(peers) * sum(self._row(p.robot)[robot] for p in peers)
+        total = sum(p.traffic for p in peers)
+        wt = self.w["traffic_local"]
+        if total > 0 and wt:
+            local = (p for p in peers if p.robot == robot)
+            out += wt * sum(traffic_local_score(p.traffic, total) for p in local)
+        return out
 
     def _row(self, q: int) -> list[float]:
         """Closeness of every robot to robot `q` (memoised)."""

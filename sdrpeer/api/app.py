@@ -22,6 +22,7 @@ from aiohttp import web
 
 from sdrpeer.api.view import AgentView, InstancesView
 from sdrpeer.errors import CommandError, ConfigError, LaunchRefused
+from sdrpeer.eventlog import naming
 from sdrpeer.runtime import logfile
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec
 
@@ -37,6 +38,9 @@ REGISTRY_KEY = web.AppKey("registry", list[Any])
 then, not at start)."""
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 MAX_EVENTS_LIMIT = 10_000
+MAX_ABOUT = 64
+"""Names one `GET /v1/events?about=` may ask for."""
+MAX_NAME = 200
 _TOKEN_ATTR = "_sdrpeer_requires_token"
 
 
@@ -155,10 +159,18 @@ async def get_agent(request: web.Request) -> web.Response:
 
 
 async def get_events(request: web.Request) -> web.Response:
-    """GET /v1/events?since=N&limit=M: event log entries with id > since."""
+    """GET /v1/events?since=N&limit=M[&about=NAME...]: event log entries with id > since;
+    with `about`, only those naming one of the names (`eventlog.naming`), the newest `limit`."""
     since = _int_param(request, "since", 0, 0, 2**63 - 1)
     limit = _int_param(request, "limit", 500, 1, MAX_EVENTS_LIMIT)
-    return web.json_response(view_of(request).events_view(since=since, limit=limit))
+    about = request.query.getall("about", [])
+    if not about:
+        return web.json_response(view_of(request).events_view(since=since, limit=limit))
+    if len(about) > MAX_ABOUT or any(len(a) > MAX_NAME for a in about):
+        raise _bad(f"about: at most {MAX_ABOUT} names of at most {MAX_NAME} characters")
+    entries = view_of(request).events_view(since=since, limit=MAX_EVENTS_LIMIT)
+    names_it = naming(about)
+    return web.json_response([e for e in entries if names_it(e)][-limit:])
 
 
 async def get_metrics(request: web.Request) -> web.Response:

@@ -76,7 +76,19 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     )
     p.add_argument("--data-dir", type=Path, metavar="DIR", help="state directory")
     p.add_argument("--metrics-interval", type=float, metavar="SECONDS", help="metrics period")
+    p.add_argument(
+        "--scenario-start",
+        type=float,
+        metavar="UNIX_TIME",
+        help="the scenario's time 0 (default: this agent's start; the lab passes its own)",
+    )
     p.add_argument("--priority", type=_priority, metavar="N", help="election priority (default 0)")
+    p.add_argument(
+        "--preempt",
+        action="store_true",
+        default=None,
+        help="take the allocator role from a lower-ranked allocator at any time, not only at start",
+    )
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default info")
     p.add_argument("--log-format", choices=LOG_FORMATS, help="default text")
     p.add_argument(

@@ -1,4 +1,5 @@
-"""`sdrpeer deploy FILE [--wait]`, `status [--json]`, `undeploy`, `move COMPONENT [--to ROBOT]`.
+"""`sdrpeer deploy FILE [--wait]`, `status [--json]`, `undeploy`, `move COMPONENT [--to ROBOT]`,
+`describe COMPONENT|ROBOT`.
 
 How it works: `deploy` loads and validates the system file here first (every problem with
 file:line; nothing is sent when one is found), then posts the system to an agent, which hands
@@ -6,7 +7,8 @@ it to the allocator. `--wait` polls `GET /v1/status` on the same agent and print
 a component's robot or state until all are ACTIVE, or fails after `--timeout` naming the ones
 that are not. `move` asks the allocator for a planned move of one component's active instance
 (the old instance hands its state and its untaken frames to the new one) and, with `--wait`,
-returns once the component is ACTIVE on its new robot.
+returns once the component is ACTIVE on its new robot. `describe` prints one
+`GET /v1/describe/{name}` (`sdrpeer.cli.describe` lays it out).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import json
 import os
 import sys
 import time
+import urllib.parse
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +53,11 @@ def add_deploy_parsers(
     move.add_argument("--wait", action="store_true", help="return when ACTIVE there")
     move.add_argument("--timeout", type=float, default=60.0, metavar="S", help="for --wait")
     move.set_defaults(func=cmd_move)
+    describe = sub.add_parser(
+        "describe", parents=[client, as_json], help="where a component runs and why, or a robot"
+    )
+    describe.add_argument("name", help="a component, an instance or a robot")
+    describe.set_defaults(func=cmd_describe)
 
 
 def _client(args: argparse.Namespace) -> AgentClient:
@@ -127,6 +135,18 @@ def cmd_status(args: argparse.Namespace) -> int:
         from sdrpeer.cli.status import format_status  # noqa: PLC0415 - the table only
 
         print(format_status(doc, color=want_color(sys.stdout.isatty(), os.environ)))
+    return 0
+
+
+def cmd_describe(args: argparse.Namespace) -> int:
+    """Print why a component is where it is (or what a robot hosts and how it fares)."""
+    from sdrpeer.cli.describe import format_describe  # noqa: PLC0415 - only this command
+
+    doc = _client(args).get(f"/v1/describe/{urllib.parse.quote(args.name, safe='')}")
+    if args.json:
+        print(json.dumps(doc, indent=2, sort_keys=True))
+    else:
+        print(format_describe(doc, color=want_color(sys.stdout.isatty(), os.environ)))
     return 0
 
 

@@ -2,7 +2,9 @@
 
 Without `--detach`, `lab up` stays in the foreground and redraws the members table once a second
 (in place on a terminal, appended when piped) until `--seconds` pass or Ctrl-C, then stops every
-agent. `demo` (the paper's experiment) lives in `sdrpeer.cli.demo`.
+agent; it also carries out the scenario's lab steps (agent kill, stop, restart, partition, heal:
+`sdrpeer.lab.script`) on time, so a scenario with such steps refuses `--detach` (nobody would be
+left to run them). `demo` (the paper's experiment) lives in `sdrpeer.cli.demo`.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, TextIO
@@ -28,7 +30,12 @@ from sdrpeer.lab.files import DEFAULT_DIR, lab_down, lab_status
 if TYPE_CHECKING:
     from sdrpeer.lab.up import RunningLab, UpOptions
 
+if TYPE_CHECKING:  # the scenario parser loads only for a lab that has a scenario
+    from sdrpeer.lab.script import Conductor
+
 REFRESH = 1.0
+STEPS_SHOWN = 5
+"""Scenario steps carried out that a frame lists (the last ones)."""
 
 
 def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -54,7 +61,12 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help=f"every agent's timers (default {LAB_PRESET}; the list below)",
     )
     up.add_argument("--robot-files", type=Path, metavar="DIR", help="robot-K.yaml files")
-    up.add_argument("--scenario", type=Path, metavar="FILE", help="scenario for every agent")
+    up.add_argument(
+        "--scenario",
+        type=Path,
+        metavar="FILE",
+        help="scenario for every agent; its agent/partition/heal steps run here (no --detach)",
+    )
     up.add_argument("--seconds", type=float, metavar="S", help="stop after S s (default: Ctrl-C)")
     up.add_argument("--timeout", type=float, default=20.0, metavar="S", help="start timeout")
     up.add_argument(
@@ -103,8 +115,15 @@ def print_started(running: RunningLab) -> None:
     _say(render_table(["ROBOT", "API", "GOSSIP", "PID", "LOG"], rows))
 
 
-def frame(running: RunningLab, elapsed: float, seconds: float | None, color: bool) -> str:
-    """One screenful: a header, the members table (from the first agent that answers), problems."""
+def frame(
+    running: RunningLab,
+    elapsed: float,
+    seconds: float | None,
+    color: bool,
+    steps: Sequence[tuple[float, str]] = (),
+) -> str:
+    """One screenful: a header, the members table (from the first agent that answers), problems,
+    the last scenario steps carried out."""
     limit = f" of {seconds:g}" if seconds is not None else ""
     lines = [
         f"lab {running.lab_dir}: {len(running.lab.robots)} robots, "
@@ -124,6 +143,7 @@ def frame(running: RunningLab, elapsed: float, seconds: float | None, color: boo
     else:
         lines.append(error)
     lines += running.problems()
+    lines += [f"scenario {t:.1f}s: {what}" for t, what in steps[-STEPS_SHOWN:]]
     return "\n".join(lines)
 
 
@@ -134,8 +154,10 @@ def watch(
     *,
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
+    conductor: Conductor | None = None,
 ) -> None:
-    """Redraw the frame every REFRESH s (in place on a TTY) until `seconds` pass or Ctrl-C."""
+    """Redraw the frame every REFRESH s (in place on a TTY) until `seconds` pass or Ctrl-C; the
+    `conductor`'s due scenario steps run before each frame, and no later than they are due."""
     tty = out.isatty()
     color = want_color(tty, os.environ)
     start = clock()
@@ -143,7 +165,10 @@ def watch(
     try:
         while True:
             elapsed = clock() - start
-            text = frame(running, elapsed, seconds, color)
+            if conductor is not None:
+                conductor.tick()
+            steps = () if conductor is None else conductor.done
+            text = frame(running, elapsed, seconds, color, steps)
             if tty and drawn:
                 out.write(f"\x1b[{drawn}F\x1b[J")
             elif drawn:
@@ -154,6 +179,9 @@ def watch(
             if seconds is not None and elapsed >= seconds:
                 return
             remaining = REFRESH if seconds is None else min(REFRESH, seconds - elapsed)
+            step_in = None if conductor is None else conductor.next_in()
+            if step_in is not None:
+                remaining = min(remaining, step_in)
             sleep(max(remaining, 0.0))
     except KeyboardInterrupt:
         out.write("\n")
@@ -174,8 +202,18 @@ def run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
 
 
 def _run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
+    from sdrpeer.lab import script  # noqa: PLC0415 - YAML and the scenario parser: only here
     from sdrpeer.lab.up import start_lab  # noqa: PLC0415 - the parser stays light
 
+    steps = [] if options.scenario is None else script.lab_steps(options.scenario)
+    if steps:
+        where = str(options.scenario)
+        script.check(steps, options.robots, netns=options.netns, where=where)
+        if detach:
+            raise SdrpeerError(
+                f"{where}: its agent/partition/heal steps run in the lab command: "
+                "leave out --detach (add --seconds S to stop after S s)"
+            )
     running = start_lab(options, _say)
     print_started(running)
     if detach:
@@ -184,8 +222,9 @@ def _run_lab(options: UpOptions, *, detach: bool, seconds: float | None) -> int:
             f"stop them with: sdrpeer lab down --dir {options.lab_dir}"
         )
         return 0
+    conductor = script.Conductor(running, steps, say=lambda _: None) if steps else None
     try:
-        watch(running, seconds, sys.stdout)
+        watch(running, seconds, sys.stdout, conductor=conductor)
     finally:
         _say("stopping the lab")
         for line in running.stop():

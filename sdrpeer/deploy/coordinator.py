@@ -195,7 +195,8 @@ class Coordinator:
         if not quorum:  # a robot cut off from the fleet neither claims nor keeps the role
             degraded.add(self.name)
         before = self.election.info()
-        self.election.update(now, state.alive, self._thresholds(), degraded)
+        preempt = plan is not None and plan.system is not None and plan.system.allocation.preempt
+        self.election.update(now, state.alive, self._thresholds(), degraded, preempt=preempt)
         self._log_election()
         info = self.election.info()
         if info != before:

@@ -66,9 +66,12 @@ class ElectionShell:
         alive: Mapping[str, RobotRecord],
         thresholds: Thresholds | None,
         degraded: Collection[str] = (),
+        *,
+        preempt: bool = False,
     ) -> None:
         """Feed the current view; runs a due timer too. `degraded` robots (a robot-wide recovery
-        condition holds) are not eligible: an allocator on one abdicates before recovery runs."""
+        condition holds) are not eligible: an allocator on one abdicates before recovery runs.
+        `preempt`: the deployed system's `allocation.preempt`."""
         if self.core is None:
             self.core = Election(self.name, self.config, now, known_epoch=self.known_epoch)
         t = thresholds or Thresholds()
@@ -78,7 +81,7 @@ class ElectionShell:
         }
         for gone in self._candidates.keys() - alive.keys():
             del self._candidates[gone]
-        self.core.update(now, view)
+        self.core.update(now, view, preempt=preempt)
         if self.core.next_timer() <= now:
             self.core.handle_timer(now)
         while (event := self.core.next_event()) is not None:

@@ -8,6 +8,12 @@ the next version (`plan.version + 1` under the same epoch, else 1), the allocati
 reason asks for (`_ask`), `place`, an `allocation.infeasible` log when nothing fits, and the log
 lines of the new plan. The caller (`sdrpeer.deploy.core`) publishes what comes out.
 
+Every new plan's explanation (`Plan.why`, made by the allocation core) is stamped here with the
+reason and the plan that decided it (`explained`); a placement the allocation kept where it was
+keeps the explanation of the plan that decided it, with this plan as the one that checked it
+again, so `sdrpeer describe` tells why a component first went to its robot, not only that it
+stayed.
+
 What differs by reason:
 - `Deploy`: the system as given, the robot that received it tried first, no robot left out;
 - `Reissue`: the held plan, smallest change, `held` components kept where they are; with
@@ -25,6 +31,7 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass, field, replace
 
+from sdrpeer.alloc.core import NOT_IN_VIEW
 from sdrpeer.alloc.view import ClusterView, RobotView
 from sdrpeer.deploy.effects import Log
 from sdrpeer.deploy.move import move_inputs, swap_to_standby
@@ -155,7 +162,7 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             assert plan is not None
             if plan.epoch == epoch and plan.allocator == me:
                 return Change(None, logs)  # nothing better to issue: keep the plan we hold
-            new = Plan(epoch, version, plan.system, plan.placements, me)
+            new = Plan(epoch, version, plan.system, plan.placements, me, why=plan.why)
         elif isinstance(reason, Reissue):
             assert plan is not None
             if result.placements == plan.placements and plan.epoch == epoch:
@@ -165,7 +172,60 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             new = result
     if isinstance(reason, Move) and plan is not None:
         new = replace(new, system=plan.system)  # the pin is for this allocation only
+    left = sorted(ctx.state.alive.keys() - {r.name for r in ask.view.robots})
+    new = explained(new, plan, _reason_text(reason, plan), left)
     return Change(new, logs + _logs(reason, plan, new, epoch))
+
+
+EXCLUDED = "excluded: a robot-wide recovery condition holds on it, or it is within its dwell"
+"""Why an alive robot the allocation left out of its view refused an instance."""
+
+
+def explained(new: Plan, old: Plan | None, reason: str, excluded: Collection[str] = ()) -> Plan:
+    """`new` with every explanation the allocation just made stamped with `reason` and `new`'s
+    (epoch, version); a placement kept where `old` had it keeps `old`'s explanation of it. A
+    placement the strategy's order chose, and a standby left out, also name the alive robots the
+    allocation did not consider (`excluded`: degraded, or within their dwell)."""
+    here = (new.epoch, new.version)
+    before = {} if old is None else {w.instance: w for w in old.why}
+    out = []
+    for w in new.why:
+        if w.decided_in != (0, 0):
+            out.append(w)  # a plan re-issued as it was: its explanations stand
+            continue
+        prior = before.get(w.instance)
+        if w.how == "kept" and prior is not None and prior.robot == w.robot:
+            out.append(replace(prior, checked_in=here))
+        else:
+            ruled_out = w.ruled_out
+            if w.how in ("ranked", "preferred", "left_out"):  # robots it could have gone to
+                ruled_out = _with_excluded(ruled_out, excluded)
+            stamped = replace(w, reason=reason, decided_in=here, checked_in=here)
+            out.append(replace(stamped, ruled_out=ruled_out))
+    return replace(new, why=tuple(out))
+
+
+def _with_excluded(
+    ruled_out: tuple[tuple[str, str], ...], excluded: Collection[str]
+) -> tuple[tuple[str, str], ...]:
+    """`ruled_out` naming each excluded robot once, as excluded (the allocation saw it as not
+    in its view: it is alive, but the health judge kept it out)."""
+    out = [(r, EXCLUDED if r in excluded and why == NOT_IN_VIEW else why) for r, why in ruled_out]
+    listed = {r for r, _ in out}
+    return tuple(out + [(r, EXCLUDED) for r in excluded if r not in listed])
+
+
+def _reason_text(reason: Reason, plan: Plan | None) -> str:
+    """What the allocator allocated for, in a person's words."""
+    if isinstance(reason, Deploy):
+        return "deploy"
+    if isinstance(reason, Reissue):
+        return reason.why
+    if isinstance(reason, Recover):
+        return f"recovery: {reason.action} for {reason.instance} on {reason.robot}"
+    active = None if plan is None else plan.active_of(reason.component)
+    origin = "" if active is None else f" from {active.robot}"
+    return f"move {reason.component}{origin}" + (f" to {reason.to}" if reason.to else "")
 
 
 def _ask(reason: Reason, plan: Plan | None, ctx: Context) -> _Ask | Infeasible:

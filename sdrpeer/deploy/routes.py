@@ -7,7 +7,11 @@ answer is the plan (200), an infeasible report (409: which constraint ruled out 
 503 when no allocator is known yet or when the allocator hears robots whose records have not
 arrived (an agent that just joined: the answer may change in a moment, so the CLI retries).
 `GET/POST /v1/plan` are how agents fetch and push plans; `POST /v1/move` asks the allocator for a
-planned move of one component (sdrpeer.deploy.move).
+planned move of one component (sdrpeer.deploy.move). `GET /v1/describe/{name}` answers
+`sdrpeer describe` from the plan this robot holds (its explanation travels with it), the status,
+the members and the events naming the subject in this agent's log and in those of the robots
+concerned (its robots and the allocator, asked at once with `about=`; one that does not answer
+within `DESCRIBE_ASK_S` is listed as unreachable).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import time
 from typing import TYPE_CHECKING, Any
+from urllib.parse import quote
 
 from aiohttp import web
 
@@ -22,6 +27,13 @@ from sdrpeer.alloc.result import Infeasible
 from sdrpeer.api.app import Route, json_error, json_object, require_token, view_of
 from sdrpeer.api.peer_client import call
 from sdrpeer.config import NAME_RE
+from sdrpeer.deploy.describe import (
+    concerned_robots,
+    describe_component,
+    describe_robot,
+    subject_kind,
+    subject_names,
+)
 from sdrpeer.deploy.handoff_rules import APPLY, HOLD, StateMsg
 from sdrpeer.errors import ApiError, MoveError, NotAllocator
 from sdrpeer.plan import plan_from_json
@@ -42,6 +54,58 @@ def _coord(request: web.Request) -> Coordinator:
     if coord is None:
         raise web.HTTPNotFound(reason="this agent does not deploy systems")
     return coord
+
+
+DESCRIBE_ASK_S = 2.0
+"""How long `GET /v1/describe` waits for another robot's events."""
+
+
+async def get_describe(request: web.Request) -> web.Response:
+    """GET /v1/describe/{name}: a component (or instance) or a robot: where, why, events,
+    warnings (`sdrpeer.deploy.describe`)."""
+    coord = _coord(request)
+    view = view_of(request)
+    name = request.match_info["name"]
+    plan = coord.store.plan
+    members = view.members_view()
+    kind = subject_kind(name, plan, members)
+    if kind is None:
+        comps = [] if plan is None or plan.system is None else plan.system.components
+        known = ", ".join([c.name for c in comps] + [str(m.get("name")) for m in members])
+        return json_error(404, f"no component, instance or robot called {name!r} (known: {known})")
+    names = subject_names(name, kind, plan)
+    local = view.events_view(since=0, limit=10_000)
+    asked = sorted(concerned_robots(name, kind, plan) - {coord.name})
+    answers = await asyncio.gather(*(_events_of(coord, robot, names) for robot in asked))
+    events = list(local)
+    unreachable = []
+    for robot, got in zip(asked, answers, strict=True):
+        if got is None:
+            unreachable.append(robot)
+        else:
+            events += got
+    status = coord.status(time.time())
+    if kind == "component":
+        assert plan is not None
+        doc = describe_component(name, plan, status, members, events)
+    else:
+        doc = describe_robot(name, plan, status, members, events)
+    doc["asked"] = {"robots": [coord.name, *asked], "unreachable": unreachable}
+    return web.json_response(doc)
+
+
+async def _events_of(coord: Coordinator, robot: str, names: list[str]) -> list[Any] | None:
+    """The events naming `names` in `robot`'s log, None when it cannot tell us in time."""
+    rec = coord.cluster().alive.get(robot)
+    if rec is None or rec.api is None:
+        return None
+    query = "&".join(f"about={quote(n)}" for n in names)
+    try:
+        async with asyncio.timeout(DESCRIBE_ASK_S):
+            status, doc = await call(rec.api, "GET", f"/v1/events?limit=200&{query}", coord.token)
+    except (ApiError, TimeoutError):
+        return None
+    return doc if status == 200 and isinstance(doc, list) else None
 
 
 RECOVERY_STEPS = tuple(a for a in ACTIONS if a != "restart")
@@ -224,6 +288,7 @@ ROUTES = [
     Route("POST", "/v1/deploy", post_deploy),
     Route("POST", "/v1/undeploy", post_undeploy),
     Route("GET", "/v1/status", get_status),
+    Route("GET", "/v1/describe/{name}", get_describe),
     Route("GET", "/v1/plan", get_plan),
     Route("POST", "/v1/plan", post_plan),
     Route("POST", "/v1/recovery", post_recovery),

@@ -30,13 +30,25 @@ class ElectionConfig:
     reshuffled the standbys of the whole fleet (seen in the 10-robot chaos soak)."""
     preempt: bool = False
     """When True, an alive, eligible robot ranked above the current allocator takes the role from
-    it (with a higher epoch). When False (the default) a healthy allocator keeps the role."""
+    it (with a higher epoch). When False (the default) a healthy allocator keeps the role (but see
+    `priority_window`). The agent's `preempt` setting and the system file's `allocation.preempt`
+    turn it on too."""
+    priority_window: float = 6.0
+    """Priority counts at start: for this long after a fresh start (no epoch known from before),
+    a robot whose priority is strictly higher than the allocator's takes the role from it, once it
+    has heard the fleet (`startup_grace`). A fleet started one robot after the other so ends with
+    its highest-priority robot as allocator, whichever robot claimed first, and a lone robot claims
+    as soon as before. Equal priorities never preempt (health and name do not count here), and a
+    robot restarted into its fleet (it knows an epoch) does not: only `preempt` does that. It
+    must exceed `startup_grace` by the time a fleet's records take to arrive (a few gossip
+    rounds on a busy machine); 0 turns it off."""
 
     def __post_init__(self) -> None:
-        if self.grace < 0 or self.startup_grace < 0 or self.rejoin_grace < 0:
+        if min(self.grace, self.startup_grace, self.rejoin_grace, self.priority_window) < 0:
             raise ValueError(
                 f"election grace periods must be >= 0 (grace={self.grace}, "
-                f"startup_grace={self.startup_grace}, rejoin_grace={self.rejoin_grace})"
+                f"startup_grace={self.startup_grace}, rejoin_grace={self.rejoin_grace}, "
+                f"priority_window={self.priority_window})"
             )
 
     def with_(self, **changes: Any) -> ElectionConfig:
@@ -57,4 +69,4 @@ def lab() -> ElectionConfig:
 
 def fast_test() -> ElectionConfig:
     """Loopback tests and the simulator with the `fast_test` gossip preset (0.05 s rounds)."""
-    return ElectionConfig(grace=0.25, startup_grace=0.75, rejoin_grace=1.5)
+    return ElectionConfig(grace=0.25, startup_grace=0.75, rejoin_grace=1.5, priority_window=4.0)

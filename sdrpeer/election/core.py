@@ -19,8 +19,12 @@ How it works:
   only heard of do not count: right after a heal they arrive before the other side's claim, and
   re-claiming past them would let the stale side win. Every epoch heard of still raises the
   next claim, so a new claim passes the fence of every robot whose record it has heard;
-- without `preempt`, a valid allocator keeps the role whoever returns; with it, a robot ranked
-  above the allocator starts the same grace countdown and claims at a higher epoch;
+- without `preempt`, a valid allocator keeps the role whoever returns; with it (the config's, or
+  the deployed system's passed to `update`), a robot ranked above the allocator starts the same
+  grace countdown and claims at a higher epoch;
+- priority counts at start: for `priority_window` seconds after a fresh start (`known_epoch` 0),
+  a robot of strictly higher *priority* than the allocator contends the same way, so the first
+  robot to claim does not keep the role from a higher-priority robot started a moment later;
 - `state()` is what to publish in the robot's gossip record; `next_event()` drains what changed.
 The core never reads a clock: every time is passed in.
 """
@@ -52,6 +56,10 @@ class Election:
         """FOLLOWER, WAITING or LEADER (see `rules.py`)."""
         self._started = now
         self._startup = config.rejoin_grace if known_epoch > 0 else config.startup_grace
+        self._window_end = now + config.priority_window if known_epoch == 0 else -math.inf
+        """Until when priority alone lets this robot take the role (a fresh start only)."""
+        self._preempt = config.preempt
+        """Whether a higher-ranked robot takes the role (config, or the deployed system)."""
         self._max_epoch = known_epoch
         self._adopted = known_epoch
         self._claim_epoch = 0
@@ -64,10 +72,12 @@ class Election:
 
     # -- inputs -------------------------------------------------------------------------------
 
-    def update(self, now: float, view: Mapping[str, Candidate]) -> None:
+    def update(self, now: float, view: Mapping[str, Candidate], *, preempt: bool = False) -> None:
         """The gossip view changed: `view` maps every known robot (this one included) to what
-        gossip tells of it. The mapping is read now and on later timers, not copied."""
+        gossip tells of it. The mapping is read now and on later timers, not copied.
+        `preempt`: the deployed system asks for preemption (on top of the config's)."""
         self._view = view
+        self._preempt = self.config.preempt or preempt
         self._evaluate(now)
 
     def handle_timer(self, now: float) -> None:
@@ -156,7 +166,7 @@ class Election:
         if self.role is not Role.LEADER:
             self._leader = best
             self._deadline = math.inf
-            if able and me is not None and self._may_claim(me):
+            if able and me is not None and self._may_claim(now, me):
                 self._contend(now, me)
             elif self.role is Role.WAITING:
                 self._move("settled")
@@ -168,14 +178,17 @@ class Election:
             previous = None if before is None else before[1]
             self._events.append(LeaderChanged(epoch, leader, previous, now))
 
-    def _may_claim(self, me: Candidate) -> bool:
-        """No valid claim, or preempt and we rank above the allocator."""
+    def _may_claim(self, now: float, me: Candidate) -> bool:
+        """No valid claim; or preempt and we rank above the allocator; or, within the priority
+        window of a fresh start, our priority is above the allocator's."""
         if self._leader is None:
             return True
-        if not self.config.preempt:
-            return False
         holder = self._view.get(self._leader[1])
-        return holder is None or rank(self._leader[1], holder) < rank(self.name, me)
+        if self._preempt:
+            return holder is None or rank(self._leader[1], holder) < rank(self.name, me)
+        # a fresh start's priority window: checked at every evaluation (a countdown that ends
+        # after the window finds it shut and settles)
+        return now < self._window_end and holder is not None and holder.priority < me.priority
 
     def _contend(self, now: float, me: Candidate) -> None:
         """Wait for the robots ranked above us (k * grace), then claim."""

@@ -90,11 +90,29 @@ class RunningLab:
             return  # it runs: a second agent for one robot would be left behind at stop
         seeds = [r.gossip for r in self.lab.robots if r.name != name and self._alive(r.name)]
         command = agent_command(
-            robot, self.options, Path(self.lab.key_file), seeds[0] if seeds else None, self.net
+            robot,
+            self.options,
+            Path(self.lab.key_file),
+            seeds[0] if seeds else None,
+            self.net,
+            scenario_start=self.lab.created,
         )
+        (Path(robot.data_dir) / "agent.json").unlink(missing_ok=True)  # the new life writes its own
         self.procs[name] = _spawn(command, Path(robot.log))
         robot.pid = self.procs[name].pid
         write_lab(self.lab_dir, self.lab)
+
+    def wait_started(self, name: str, timeout: float) -> None:
+        """Wait until robot `name`'s agent has written its addresses (after `restart`: a lab on
+        loopback binds new ports) and record them in lab.json; SdrpeerError after `timeout`."""
+        robot = self.lab.robot(name)
+        assert robot is not None
+        _wait_addresses(self, robot, time.monotonic() + timeout)
+        write_lab(self.lab_dir, self.lab)
+
+    def process(self, name: str) -> subprocess.Popen[bytes] | None:
+        """The agent process of robot `name` this command started (None: none)."""
+        return self.procs.get(name)
 
     def _alive(self, name: str) -> bool:
         proc = self.procs.get(name)
@@ -149,9 +167,12 @@ def agent_command(
     key_file: Path,
     join: str | None,
     network: NetPlan | None = None,
+    *,
+    scenario_start: float | None = None,
 ) -> list[str]:
     """The command line that starts one lab agent (inside its namespace in a namespace lab, its
-    gossip, API and component hosts on its bridge address; else on loopback, any free port)."""
+    gossip, API and component hosts on its bridge address; else on loopback, any free port).
+    `scenario_start`: the lab's clock for the scenario (lab.json's `created`)."""
     data_dir = Path(robot.data_dir)
     host = "127.0.0.1" if network is None else network.address(robot.name)
     ports = ("0", "0") if network is None else ("7946", "8080")
@@ -181,6 +202,8 @@ def agent_command(
     ]
     if options.scenario is not None:
         command += ["--scenario", str(options.scenario.resolve())]
+        if scenario_start is not None:
+            command += ["--scenario-start", repr(scenario_start)]
     if options.discover:
         command.append("--discover")
     elif join is not None:
@@ -302,14 +325,17 @@ def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> Running
         first, *others = lab.robots
         say(f"starting {len(lab.robots)} agents in {options.lab_dir} (preset {options.preset})")
         running.procs[first.name] = _spawn(
-            agent_command(first, options, key_file, None, running.net), Path(first.log)
+            agent_command(first, options, key_file, None, running.net, scenario_start=lab.created),
+            Path(first.log),
         )
         first.pid = running.procs[first.name].pid
         write_lab(options.lab_dir, lab)
         _wait_addresses(running, first, deadline)
         write_lab(options.lab_dir, lab)
         for robot in others:
-            command = agent_command(robot, options, key_file, first.gossip, running.net)
+            command = agent_command(
+                robot, options, key_file, first.gossip, running.net, scenario_start=lab.created
+            )
             running.procs[robot.name] = _spawn(command, Path(robot.log))
             robot.pid = running.procs[robot.name].pid
             write_lab(options.lab_dir, lab)

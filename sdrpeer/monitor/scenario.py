@@ -15,6 +15,17 @@ why ramps and moves need the robot files). `changes_for(robot, t_prev, t_now)` i
 `VirtualRobot.set` changes for fields that some step touches in (t_prev, t_now], each with its
 value at t_now (interpolated for ramps and moves). Pass `-math.inf` as t_prev on the first call.
 Live changes made through the API are not seen by the scenario: the next step overrides them.
+
+Lab steps act on robots from outside, so no agent runs them: the lab that started the agents
+does (`sdrpeer.lab.script`), at the same times:
+
+      - {at: 30s, robot: robot-2, agent: kill}       # SIGKILL: the robot dies with its hosts
+      - {at: 45s, robot: robot-2, agent: restart}    # the same agent again (data dir, key)
+      - {at: 50s, robot: robot-4, agent: stop}       # SIGTERM: a graceful leave
+      - {at: 60s, partition: [[robot-1, robot-2], [robot-3, robot-4]]}   # real packet drops
+      - {at: 80s, heal: true}                         # no partition, no fault
+
+`lab_steps()` lists them in time order; `changes_for` never returns anything for them.
 """
 
 from __future__ import annotations
@@ -35,17 +46,25 @@ from sdrpeer.yamlfile import YamlFile, line_of
 
 RAMPABLE = ("rssi", "memory")
 """Fields a ramp may change."""
+AGENT_ACTIONS = ("kill", "stop", "restart")
+"""What an `agent:` step does to a robot's agent: SIGKILL, SIGTERM, start it again."""
+LAB_KINDS = ("agent", "partition", "heal")
+"""Step kinds the lab carries out (the agents never do)."""
+_KINDS = ("set", "ramp", "move", *LAB_KINDS)
 
 
 @dataclass(frozen=True, slots=True)
 class Step:
-    """One scenario step: at `at` s, `kind` ("set", "ramp" or "move") changes `values`."""
+    """One scenario step: at `at` s, `kind` ("set", "ramp" or "move") changes `values`; a lab
+    step ("agent", "partition", "heal") acts on a robot's agent or on the lab's network."""
 
     at: float
     robot: str
+    """The robot concerned ("" for a partition or a heal: the whole lab)."""
     kind: str
     values: dict[str, Any]
-    """Field -> target value (for a move: {"pos": (x, y)})."""
+    """Field -> target value (for a move: {"pos": (x, y)}; an agent step: {"agent": "kill"};
+    a partition: {"groups": (("robot-1", "robot-2"), ("robot-3",))}; a heal: {})."""
     over: float = 0.0
     """Ramp duration in seconds."""
     speed: float = 0.0
@@ -88,6 +107,8 @@ class Scenario:
     def __post_init__(self) -> None:
         self._timelines = {}
         for step in sorted(self.steps, key=lambda s: s.at):
+            if step.kind in LAB_KINDS:
+                continue
             for key, target in step.values.items():
                 self._add(step, key, target)
 
@@ -126,7 +147,15 @@ class Scenario:
 
     def robots(self) -> set[str]:
         """Names of the robots the scenario changes."""
-        return {s.robot for s in self.steps}
+        out = {s.robot for s in self.steps if s.robot}
+        for s in self.steps:
+            out.update(r for group in s.values.get("groups", ()) for r in group)
+        return out
+
+    def lab_steps(self) -> list[Step]:
+        """The steps the lab carries out (agent, partition, heal), by time (file order breaks
+        ties)."""
+        return sorted((s for s in self.steps if s.kind in LAB_KINDS), key=lambda s: s.at)
 
     def end(self) -> float:
         """Time at which the last step is complete."""
@@ -149,19 +178,30 @@ class Scenario:
 
 def _step(doc: YamlFile, node: yaml.Node, known: set[str] | None) -> Step:
     """Validate one step mapping."""
-    keys = doc.mapping(node, None, ("at", "robot", "set", "ramp", "move"), ("at", "robot"))
+    keys = doc.mapping(node, None, ("at", "robot", *_KINDS), ("at",))
     at = doc.parse(keys["at"], "at", units.parse_duration)
+    actions = [k for k in _KINDS if k in keys]
+    if len(actions) != 1:
+        doc.fail(node, None, f"a step needs exactly one of {', '.join(_KINDS)}")
+    kind = actions[0]
+    body = keys[kind]
+    line = line_of(node)
+    if kind in ("partition", "heal"):
+        if "robot" in keys:
+            doc.fail(keys["robot"], "robot", f"a {kind} step is for the whole lab: no robot")
+        return _network_step(doc, kind, body, at, line=line, known=known)
+    if "robot" not in keys:
+        doc.fail(node, "robot", "missing (required)")
     robot = doc.parse(keys["robot"], "robot", parse_name)
     if known is not None and robot not in known:
         doc.fail(
             keys["robot"], "robot", f"unknown robot {robot!r} (known: {', '.join(sorted(known))})"
         )
-    actions = [k for k in ("set", "ramp", "move") if k in keys]
-    if len(actions) != 1:
-        doc.fail(node, None, "a step needs exactly one of set, ramp, move")
-    kind = actions[0]
-    body = keys[kind]
-    line = line_of(node)
+    if kind == "agent":
+        action = doc.value(body)
+        if action not in AGENT_ACTIONS:
+            doc.fail(body, "agent", f"expected one of {', '.join(AGENT_ACTIONS)}, got {action!r}")
+        return Step(at, robot, kind, {"agent": action}, line=line)
     if kind == "set":
         fields = doc.mapping(body, "set", sorted(SETTABLE))
         if not fields:
@@ -179,6 +219,34 @@ def _step(doc: YamlFile, node: yaml.Node, known: set[str] | None) -> Step:
     to = doc.parse(fields["to"], "move.to", parse_position)
     speed = doc.parse(fields["speed"], "move.speed", _positive(units.parse_speed, "0.5m/s"))
     return Step(at, robot, kind, {"pos": to}, speed=speed, line=line)
+
+
+def _network_step(
+    doc: YamlFile, kind: str, body: yaml.Node, at: float, *, line: int, known: set[str] | None
+) -> Step:
+    """A `partition: [[A, B], [C]]` or `heal: true` step."""
+    if kind == "heal":
+        if doc.value(body) is not True:
+            doc.fail(body, "heal", "write heal: true")
+        return Step(at, "", kind, {}, line=line)
+    groups: list[tuple[str, ...]] = []
+    seen: set[str] = set()
+    for k, group in enumerate(doc.sequence(body, "partition")):
+        names = []
+        for item in doc.sequence(group, f"partition[{k}]"):
+            name = doc.parse(item, f"partition[{k}]", parse_name)
+            if known is not None and name not in known:
+                doc.fail(item, f"partition[{k}]", f"unknown robot {name!r}")
+            if name in seen:
+                doc.fail(item, f"partition[{k}]", f"{name} is in two groups")
+            seen.add(name)
+            names.append(name)
+        if not names:
+            doc.fail(group, f"partition[{k}]", "an empty group")
+        groups.append(tuple(names))
+    if len(groups) < 2:
+        doc.fail(body, "partition", "needs at least two groups: [[robot-1, robot-2], [robot-3]]")
+    return Step(at, "", kind, {"groups": tuple(groups)}, line=line)
 
 
 def _positive(parser: Callable[[object], float], example: str) -> Callable[[object], float]:
