@@ -214,7 +214,7 @@ GROUPS: tuple[tuple[tuple[str, ...], Register], ...] = (
     (("agent",), _agent),
     (("members", "agent-info", "events", "robot"), add_client_parsers),
     (("instances", "logs", "start-instance", "run"), _instances),
-    (("deploy", "status", "undeploy", "move"), _deploy),
+    (("deploy", "status", "undeploy", "move", "describe"), _deploy),
     (("port",), _port),
     (("system",), _system),
     (("lab", "demo"), _lab),
