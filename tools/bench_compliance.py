@@ -16,9 +16,11 @@ only compliance acts on the link.
    reaches the bound (polled at 20 Hz from both agents' `/v1/members`: the measurement, which
    lags the fault by the estimator's window); the `compliance.violated` event; Det ACTIVE on the
    other robot. The target is `violated - crossed <= sustain + 1 s`.
-2. Noise (`min_interval: 60s`): robots 2 and 3 drop exactly `--bound` % of what arrives, so the
-   link from robot-1 to wherever Det runs sits at its bound; for `--noisy-minutes` the
-   `compliance.move` events are counted. The target is at most one move per minute.
+2. Noise (`min_interval: 60s`), the worst case for shuffling: whichever robot hosts Det drops
+   exactly `--bound` % of what arrives (its link to Src sits at the bound, in and out of it) and
+   the other robot nothing, so every move lands on a clean link that turns noisy at once; for
+   `--noisy-minutes` the `compliance.move` events are counted (and the violations robot-1
+   reported). The target is at most one move per minute.
 Figures are medians over the trials (and every value), printed as a table; `--json` writes them.
 Measured on whatever machine runs it: on a shared, busy one the estimator and the agents' steps
 are slower than on an idle one.
@@ -120,8 +122,13 @@ def healed(clients: dict[str, AgentClient], host: str, bound: float) -> bool:
 def last_id(clients: dict[str, AgentClient]) -> dict[str, int]:
     out = {}
     for name, c in clients.items():
-        es = c.events(0, 100_000)
-        out[name] = es[-1]["id"] if es else 0
+        last = 0
+        for _ in range(1000):  # pages of at most 10,000 entries
+            page = c.events(last, 10_000)
+            if not page:
+                break
+            last = page[-1]["id"]
+        out[name] = last
     return out
 
 
@@ -173,7 +180,11 @@ def reaction(
                 t_moved = now
             time.sleep(0.05)
         if t_cross is None or t_violated is None or t_moved is None:
-            raise SystemExit(f"trial {k + 1}: no cross/report/move within 120 s")
+            raise SystemExit(
+                f"trial {k + 1} on {host}: within 120 s crossed={t_cross} reported={t_violated} "
+                f"moved={t_moved}; loss now {own_loss(clients, 'robot-1', host)}, "
+                f"status {one.get('/v1/status').get('compliance')}"
+            )
         new_host = det_at(one)
         assert new_host is not None
         row = {
@@ -191,23 +202,32 @@ def reaction(
 def noise(
     running: RunningLab, clients: dict[str, AgentClient], args: argparse.Namespace
 ) -> dict[str, Any]:
+    """The worst case for shuffling: whichever robot hosts Det drops exactly the bound (its link
+    to Src sits at the bound, in and out of it), the other robot none, re-checked every second,
+    so every move lands on a clean link that turns noisy at once."""
     plan = running.net
     assert plan is not None
     one = clients["robot-1"]
     net.run(plan.heal(), check=False)
     deploy(one, system(args.bound, args.sustain, 60.0))
     since = last_id(clients)
-    for robot in ("robot-2", "robot-3"):
-        net.run(plan.loss(robot, args.bound / 100, spare_host=True))
     t0 = time.monotonic()
     samples: list[float] = []
+    noisy: str | None = None
     while time.monotonic() - t0 < args.noisy_minutes * 60:
-        loss = own_loss(clients, "robot-1", det_at(one) or "robot-2")
-        if loss is not None:
-            samples.append(loss)
+        with contextlib.suppress(ApiError):
+            host = det_at(one)
+            if host is not None and host != noisy:
+                net.run(plan.heal(), check=False)
+                net.run(plan.loss(host, args.bound / 100, spare_host=True))
+                noisy = host
+            loss = own_loss(clients, "robot-1", noisy or "robot-2")
+            if loss is not None:
+                samples.append(loss)
         time.sleep(1.0)
+    net.run(plan.heal(), check=False)
     moves = new_events(clients, since, "compliance.move")
-    violations = new_events(clients, since, "compliance.violated")
+    judged = new_events({"robot-1": one}, since, "compliance.violated")
     gaps = [b["ts"] - a["ts"] for a, b in itertools.pairwise(moves)]
     return {
         "minutes": args.noisy_minutes,
@@ -217,7 +237,7 @@ def noise(
         "moves": len(moves),
         "moves_per_minute": round(len(moves) / args.noisy_minutes, 2),
         "min_gap_between_moves_s": round(min(gaps), 1) if gaps else None,
-        "violations_reported": len({(e["detail"]["subject"], e["ts"] // 1) for e in violations}),
+        "violations_reported": len(judged),
     }
 
 
@@ -270,7 +290,8 @@ def table(fig: dict[str, Any]) -> str:
             f"noisy link at the bound ({n['link_loss_pct_set']}% set, measured median "
             f"{n['link_loss_measured_median']}, max {n['link_loss_measured_max']}) for "
             f"{n['minutes']:g} min: {n['moves']} moves ({n['moves_per_minute']}/min, min gap "
-            f"{n['min_gap_between_moves_s']} s), {n['violations_reported']} violations reported"
+            f"{n['min_gap_between_moves_s']} s), {n['violations_reported']} violations reported "
+            "by robot-1"
         )
         lines.append(
             f"target: at most one move per minute: "
