@@ -86,8 +86,10 @@ class Feasibility:
         self.edges = {k: self._intern(t) for k, t in connection_bounds(self.t, connections).items()}
         """(component, component) -> the thresholds id their link must meet (own bounds only)."""
         self._comp_t: dict[str, int] = {}
-        self._static: dict[tuple[int, int], tuple[str | None, str | None]] = {}
-        self._pairs: dict[tuple[int, int], str | None] = {}
+        self._static: dict[int, tuple[str | None, str | None]] = {}
+        """robot index + thresholds id * robots -> (hot, cold) reason."""
+        self._pairs: dict[int, str | None] = {}
+        """pair index + thresholds id * robots^2 -> the first link constraint failed."""
         self.running: dict[tuple[int, str], InstanceInfo] = {}
         """(robot index, instance name) -> the instance running there."""
         self.running_at: dict[str, list[int]] = {}
@@ -122,12 +124,15 @@ class Feasibility:
         """The id of the Table I thresholds `comp` is held to: the fleet's narrowed by its own."""
         got = self._comp_t.get(comp.name)
         if got is None:
-            got = self._comp_t[comp.name] = self._intern(self.t.stricter(comp.thresholds))
+            own = comp.thresholds
+            got = self._fleet if not own.has_any() else self._intern(self.t.stricter(own))
+            self._comp_t[comp.name] = got
         return got
 
     def _static_reason(self, i: int, comp: ComponentDef, cold: bool, tid: int) -> str | None:
         """The first static constraint robot i fails (for hot, or for cold instances)."""
-        cached = self._static.get((i, tid))
+        key = i + tid * len(self.robots)
+        cached = self._static.get(key)
         if cached is None:
             hot: str | None = None
             cold_r: str | None = None
@@ -138,12 +143,13 @@ class Feasibility:
                     hot = hot or f"{c.name}: {why}"
                     if c.cold:
                         cold_r = cold_r or f"{c.name}: {why}"
-            cached = self._static[(i, tid)] = (hot, cold_r)
+            cached = self._static[key] = (hot, cold_r)
         return cached[1] if cold else cached[0]
 
     def _pair(self, i: int, q: int, tid: int) -> str | None:
         """The first link constraint robots i and q fail together under thresholds `tid`."""
-        key = (i * len(self.robots) + q if i < q else q * len(self.robots) + i, tid)
+        n = len(self.robots)
+        key = (i * n + q if i < q else q * n + i) + tid * n * n
         if key in self._pairs:
             return self._pairs[key]
         a, b = self.robots[i], self.robots[q]
@@ -167,7 +173,9 @@ class Feasibility:
         refused = self.robots[i].launch.refusal(comp.launcher, comp.target)
         if refused is not None:
             return f"launch: {refused}"
-        tid = self._comp(comp)
+        tid = self._comp_t.get(comp.name)
+        if tid is None:
+            tid = self._comp(comp)
         why = self._static_reason(i, comp, cold, tid)
         if why is not None:
             return why
@@ -178,9 +186,11 @@ class Feasibility:
             r = c.check(load, need, comp, cs.t)
             if r is not None:
                 return f"{c.name}: {r}"
+        edges, fleet = self.edges, self._fleet
         for p in peers:
             if p.robot != i:
-                r = self._pair(i, p.robot, self.edges.get((comp.name, p.component), self._fleet))
+                link_t = edges.get((comp.name, p.component), fleet) if edges else fleet
+                r = self._pair(i, p.robot, link_t)
                 if r is not None:
                     return f"link to {p.component} on {self.robots[p.robot].name}: {r}"
         return None
