@@ -166,6 +166,15 @@ def test_a_noisy_link_moves_at_most_once_a_minute() -> None:
     assert all(b - a >= 60.0 for a, b in itertools.pairwise(moves))
 
 
+def test_a_link_moves_its_receiver_never_its_sender_instead() -> None:
+    m = ComplianceMonitor(REPLACE, stale_after_s=2.0)
+    both = replace(loss(0.3), movable=("Motor", "Ctrl"))
+    feed(m, [(t, [both]) for t in (0.0, 1.0, 2.0, 3.0)])
+    assert [c for c, _ in m.due_moves(3.0)] == ["Motor"]
+    m.moved(3.0, "Motor")
+    assert m.due_moves(10.0) == []  # Motor within its interval: Ctrl does not move instead
+
+
 def test_report_never_moves() -> None:
     m = ComplianceMonitor(replace(REPLACE, on_violation="report"), stale_after_s=2.0)
     feed(m, [(t, [loss(0.3)]) for t in (0.0, 1.0, 2.0, 3.0)])

@@ -146,18 +146,20 @@ class ComplianceMonitor:
         return [self._readings[k] for k, t in self._trackers.items() if t.fired]
 
     def due_moves(self, now: float) -> list[tuple[str, Reading]]:
-        """(component, reading) to move now under `on_violation: replace`: one per component
-        whose last compliance move is at least `min_interval` ago, the first movable one of each
-        violated reading (nothing under `report`)."""
+        """(component, reading) to move now under `on_violation: replace`: for each violated
+        reading its first movable component (a connection's receiver, unless pinned), when that
+        component's last compliance move is at least `min_interval` ago; nothing under `report`.
+        Never the other end instead: a link would then move two components a minute."""
         if self.policy.on_violation != "replace":
             return []
         out: dict[str, Reading] = {}
         for r in self.violated():
-            for comp in r.movable:
-                last = self._last_move.get(comp, -math.inf)
-                if now - last >= self.policy.min_interval_s and comp not in out:
-                    out[comp] = r
-                    break
+            if not r.movable:
+                continue
+            comp = r.movable[0]
+            last = self._last_move.get(comp, -math.inf)
+            if now - last >= self.policy.min_interval_s and comp not in out:
+                out[comp] = r
         return sorted(out.items())
 
     def rows(self, now: float) -> list[dict[str, Any]]:
