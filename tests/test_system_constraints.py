@@ -4,11 +4,13 @@ section in system files: what loads, and each mistake reported with file:line an
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
 
+from sdrpeer.cli.main import main
 from sdrpeer.errors import SystemFileError
 from sdrpeer.system.loader import TOP_KEYS, parse_system, schema_path
 from sdrpeer.system.model import ComplianceDef, Thresholds, system_from_json
@@ -207,3 +209,33 @@ def test_the_schema_accepts_the_good_file_and_refuses_a_misplaced_key() -> None:
     assert [e.message for e in validator.iter_errors(yaml.safe_load(GOOD))] == []
     bad = yaml.safe_load(CONN + "    constraints: {battery_above: 30%}\n")
     assert list(validator.iter_errors(bad))
+
+
+def test_system_check_shows_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "sys.yaml"
+    path.write_text(GOOD)
+    assert main(["system", "check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "own thresholds {'cpu_below_pct': 50.0, 'mem_free_above_bytes': 800000000, "
+        "'battery_above_pct': 40.0}" in out
+    )
+    assert "Cam.image->Det.image" in out
+    assert "own bounds {'rssi_above_dbm': -60.0, 'jitter_below_ms': 4.0" in out
+    assert "compliance: replace after 3s, clears 15% inside, at most one move per 120s" in out
+
+
+def test_a_composite_takes_its_own_thresholds() -> None:
+    text = f"""name: s
+composites:
+  - name: Vision
+    execution: {{periodic: 10}}
+    members:
+      - {{name: Cam, target: {CAM}}}
+      - {{name: Det, target: {DET}}}
+    constraints: {{battery_above: 30%}}
+components:
+  - {{name: C, target: {CAM}}}
+"""
+    system = parse_system(text, "sys.yaml")
+    assert system.component("Vision").thresholds == Thresholds(battery_above_pct=30.0)
