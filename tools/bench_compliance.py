@@ -309,10 +309,10 @@ def main() -> None:
     ap.add_argument("--noisy-minutes", type=float, default=3.0)
     ap.add_argument("--preset", default="lan")
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--quick", action="store_true", help="2 trials, 1 noisy minute")
+    ap.add_argument("--quick", action="store_true", help="1 trial, 1 noisy minute (tests)")
     args = ap.parse_args()
     if args.quick:
-        args.trials, args.noisy_minutes = 2, 1.0
+        args.trials, args.noisy_minutes = 1, 1.0
     fig = measure(args)
     print(table(fig))
     if args.json is not None:
