@@ -175,6 +175,18 @@ def test_a_link_moves_its_receiver_never_its_sender_instead() -> None:
     assert m.due_moves(10.0) == []  # Motor within its interval: Ctrl does not move instead
 
 
+def test_every_agent_learns_a_move_from_the_placement_changing() -> None:
+    """Not the allocator (no `moved()` call): the violated placement changes in the plan it
+    follows; if it becomes the allocator, it waits out the interval like the one that moved."""
+    m = ComplianceMonitor(REPLACE, stale_after_s=2.0)
+    feed(m, [(t, [loss(0.3)]) for t in (0.0, 1.0, 2.0, 3.0)])
+    there = ("robot-1", "robot-3")
+    feed(m, [(t, [loss(0.3, there)]) for t in (4.0, 5.0, 6.0, 7.0)])
+    assert [r.robots for r in m.violated()] == [there]
+    assert m.due_moves(8.0) == []
+    assert [c for c, _ in m.due_moves(64.0)] == ["Motor"]
+
+
 def test_report_never_moves() -> None:
     m = ComplianceMonitor(replace(REPLACE, on_violation="report"), stale_after_s=2.0)
     feed(m, [(t, [loss(0.3)]) for t in (0.0, 1.0, 2.0, 3.0)])

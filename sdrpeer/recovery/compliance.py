@@ -15,7 +15,9 @@ the system's `compliance:` policy:
 Outputs: `next_event()` drains `Violated` / `Compliant`; `rows(now)` is the compliance table
 (every reading with its value, bound, state and since when); `due_moves(now)` (the allocator,
 `on_violation: replace` only) names the components to move now, each at most once per
-`min_interval`, and the shell reports back with `moved(now, component)`. `next_timer()` is the
+`min_interval`, and the shell reports back with `moved(now, component)`; a violated placement
+that changed counts as a move too, so every agent (a future allocator) knows when a component
+last moved. `next_timer()` is the
 earliest sustain deadline, so a shell wakes when it expires rather than at its next sample.
 """
 
@@ -120,6 +122,9 @@ class ComplianceMonitor:
             self._bad.discard(key)
             if gone.fired:
                 self._events.append(Compliant(reading, now, "placement changed"))
+                if reading.movable:  # every agent learns the move from the plan it follows
+                    comp = reading.movable[0]
+                    self._last_move[comp] = max(self._last_move.get(comp, -math.inf), now)
 
     def handle_timer(self, now: float) -> None:
         """The deadline of `next_timer()` has passed."""
