@@ -68,8 +68,9 @@ def lab(tmp_path: Path) -> Iterator[RunningLab]:
 
 
 def det(status: dict[str, Any]) -> tuple[str | None, str | None]:
-    row = next(c for c in status["components"] if c["component"] == "Det")
-    return row["robot"], row["state"]
+    """Det's robot and state (None, None before robot-1 holds the plan)."""
+    row = next((c for c in status["components"] if c["component"] == "Det"), None)
+    return (None, None) if row is None else (row["robot"], row["state"])
 
 
 def events(clients: dict[str, AgentClient], kind: str) -> list[dict[str, Any]]:
