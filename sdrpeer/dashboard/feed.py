@@ -43,7 +43,6 @@ POKE_KINDS = (
     EventKind.ELECTION,
     "plan.",
     "member.",
-    "compliance.",
     EventKind.RECOVERY_MOVE,
 )
 """Event kinds after which pages get a fresh sample at once."""
