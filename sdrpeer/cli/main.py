@@ -17,6 +17,7 @@ gets the whole parser.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -130,98 +131,38 @@ def add_client_parsers(
     robot_set.set_defaults(func=cmd_robot_set)
 
 
-def _agent(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.agent import add_agent_parser  # noqa: PLC0415 - each group when needed
+def _lazy(module: str, name: str, *parents: str) -> Register:
+    """A group's registration that imports `module` only when the group is asked for, then calls
+    its `name` with the subparsers and the shared parents it takes ("client", "as_json")."""
 
-    add_agent_parser(sub)
+    def register(
+        sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
+    ) -> None:
+        given = {"client": client, "as_json": as_json}
+        add = getattr(importlib.import_module(module), name)
+        add(sub, *(given[p] for p in parents))
 
-
-def _instances(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.instances import add_instance_parsers  # noqa: PLC0415
-
-    add_instance_parsers(sub, client, as_json)
-
-
-def _deploy(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.deploy import add_deploy_parsers  # noqa: PLC0415
-
-    add_deploy_parsers(sub, client, as_json)
-
-
-def _port(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.port import add_port_parsers  # noqa: PLC0415
-
-    add_port_parsers(sub, client, as_json)
-
-
-def _system(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.system import add_system_parser  # noqa: PLC0415
-
-    add_system_parser(sub)
-
-
-def _lab(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.lab import add_lab_parsers  # noqa: PLC0415 - lab and demo
-
-    add_lab_parsers(sub)
-
-
-def _top(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.top import add_top_parser  # noqa: PLC0415
-
-    add_top_parser(sub, client)
-
-
-def _profile(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.profile import add_profile_parser  # noqa: PLC0415
-
-    add_profile_parser(sub)
-
-
-def _keys(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.keys import add_key_parsers  # noqa: PLC0415
-
-    add_key_parsers(sub, client, as_json)
-
-
-def _service(
-    sub: Subparsers, client: argparse.ArgumentParser, as_json: argparse.ArgumentParser
-) -> None:
-    from sdrpeer.cli.service import add_service_parser  # noqa: PLC0415
-
-    add_service_parser(sub)
+    return register
 
 
 GROUPS: tuple[tuple[tuple[str, ...], Register], ...] = (
-    (("agent",), _agent),
+    (("agent",), _lazy("sdrpeer.cli.agent", "add_agent_parser")),
     (("members", "agent-info", "events", "robot"), add_client_parsers),
-    (("instances", "logs", "start-instance", "run"), _instances),
-    (("deploy", "status", "undeploy", "move", "describe"), _deploy),
-    (("port",), _port),
-    (("system",), _system),
-    (("lab", "demo"), _lab),
-    (("top",), _top),
-    (("profile",), _profile),
-    (("keygen", "key"), _keys),
-    (("systemd-unit",), _service),
+    (
+        ("instances", "logs", "start-instance", "run"),
+        _lazy("sdrpeer.cli.instances", "add_instance_parsers", "client", "as_json"),
+    ),
+    (
+        ("deploy", "status", "undeploy", "move", "describe"),
+        _lazy("sdrpeer.cli.deploy", "add_deploy_parsers", "client", "as_json"),
+    ),
+    (("port",), _lazy("sdrpeer.cli.port", "add_port_parsers", "client", "as_json")),
+    (("system",), _lazy("sdrpeer.cli.system", "add_system_parser")),
+    (("lab", "demo"), _lazy("sdrpeer.cli.lab", "add_lab_parsers")),
+    (("top",), _lazy("sdrpeer.cli.top", "add_top_parser", "client")),
+    (("profile",), _lazy("sdrpeer.cli.profile", "add_profile_parser")),
+    (("keygen", "key"), _lazy("sdrpeer.cli.keys", "add_key_parsers", "client", "as_json")),
+    (("systemd-unit",), _lazy("sdrpeer.cli.service", "add_service_parser")),
 )
 """Every command, in `sdrpeer --help` order, by the function that registers it and its group
 (tests/test_cli_fast.py holds each group to the commands its function adds)."""
