@@ -249,65 +249,57 @@ async def test_malformed_requests_are_answered_or_refused_never_a_crash(
     assert await caller.call("echo", "still here", timeout=2) == "still here"
 
 
+@pytest.fixture
+async def silent() -> AsyncIterator[str]:
+    """The address of a TCP listener that accepts and never answers (a dial that hangs)."""
+    accepted: list[asyncio.StreamWriter] = []
+
+    async def never_answer(_: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        accepted.append(writer)
+
+    server = await asyncio.start_server(never_answer, "127.0.0.1", 0)
+    yield f"tcp://127.0.0.1:{server.sockets[0].getsockname()[1]}"
+    for writer in accepted:
+        writer.close()
+    server.close()
+    await server.wait_closed()
+
+
+def caller_dialing(to: str, dial_timeout: float) -> tuple[ServiceCaller, ServiceClient]:
+    """An EchoCaller's `svc` port bound to a client that will dial `to`."""
+    caller = EchoCaller("Caller").consumer("svc")
+    client = ServiceClient(
+        "b1", to, "svc", "Caller.svc", ECHO.id, auth=DataAuth([KEY]), dial_timeout=dial_timeout
+    )
+    caller.bind(client)
+    return caller, client
+
+
 async def test_a_repoint_while_dialing_sends_the_next_call_to_the_new_address(
-    providers: Callable[..., Any],
+    providers: Callable[..., Any], silent: str
 ) -> None:
     new = await providers()
-    accepted: list[asyncio.StreamWriter] = []
-
-    async def never_answer(_: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        accepted.append(writer)
-
-    silent = await asyncio.start_server(never_answer, "127.0.0.1", 0)
-    port = silent.sockets[0].getsockname()[1]
-    caller = EchoCaller("Caller").consumer("svc")
-    client = ServiceClient(
-        "b1", f"tcp://127.0.0.1:{port}", "svc", "Caller.svc", ECHO.id,
-        auth=DataAuth([KEY]), dial_timeout=1.0,
-    )  # fmt: skip
-    caller.bind(client)
-    try:
-        first = asyncio.ensure_future(caller.call("echo", 1, timeout=5))
-        await until_async("the first dial", lambda: client.counters["dials"] == 1)
-        client.repoint(new.tcp)
-        assert await caller.call("echo", 2, timeout=0.9) == 2  # before the old dial gives up
-        with pytest.raises(ServiceUnavailable, match=r"provider at tcp://127\.0\.0\.1:"):
-            await first
-        assert new.port.calls == 1
-    finally:
-        for writer in accepted:
-            writer.close()
-        silent.close()
-        await silent.wait_closed()
+    caller, client = caller_dialing(silent, dial_timeout=1.0)
+    first = asyncio.ensure_future(caller.call("echo", 1, timeout=5))
+    await until_async("the first dial", lambda: client.counters["dials"] == 1)
+    client.repoint(new.tcp)
+    assert await caller.call("echo", 2, timeout=0.9) == 2  # before the old dial gives up
+    with pytest.raises(ServiceUnavailable, match=r"provider at tcp://127\.0\.0\.1:"):
+        await first
+    assert new.port.calls == 1
 
 
-async def test_closing_a_binding_while_it_dials_fails_the_call_as_unavailable() -> None:
+async def test_closing_a_binding_while_it_dials_fails_the_call_as_unavailable(
+    silent: str,
+) -> None:
     """Not a cancel: that would end the caller's execution context without an error."""
-    accepted: list[asyncio.StreamWriter] = []
-
-    async def never_answer(_: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        accepted.append(writer)
-
-    silent = await asyncio.start_server(never_answer, "127.0.0.1", 0)
-    port = silent.sockets[0].getsockname()[1]
-    caller = EchoCaller("Caller").consumer("svc")
-    client = ServiceClient(
-        "b1", f"tcp://127.0.0.1:{port}", "svc", "Caller.svc", ECHO.id,
-        auth=DataAuth([KEY]), dial_timeout=10.0,
-    )  # fmt: skip
-    caller.bind(client)
-    try:
-        call = asyncio.ensure_future(caller.call("echo", 1, timeout=10))
-        await until_async("the dial", lambda: client.counters["dials"] == 1)
-        await client.close()
-        with pytest.raises(ServiceUnavailable, match="closed while connecting"):
-            await call
-        assert caller.unavailable == 1
-    finally:
-        for writer in accepted:
-            writer.close()
-        silent.close()
-        await silent.wait_closed()
+    caller, client = caller_dialing(silent, dial_timeout=10.0)
+    call = asyncio.ensure_future(caller.call("echo", 1, timeout=10))
+    await until_async("the dial", lambda: client.counters["dials"] == 1)
+    await client.close()
+    with pytest.raises(ServiceUnavailable, match="closed while connecting"):
+        await call
+    assert caller.unavailable == 1
 
 
 async def test_an_argument_that_cannot_be_sent_is_a_request_error(
