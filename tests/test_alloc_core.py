@@ -283,6 +283,24 @@ def test_when_the_active_robot_dies_its_running_standby_takes_over():
     assert active.instance == "A-s1"
 
 
+def test_a_hot_standby_not_reported_yet_takes_over_before_another_robot_is_tried():
+    """The active's robot died while its hot standby was still starting (robot-2 has not
+    gossiped it yet): the standby's robot takes the active, although robot-3 comes first."""
+    system = SystemDef("s", (comp("A", standby=StandbySpec(other_robots=1)),), allocation=TABLE_V)
+    first = run(system, three())
+    assert where(first) == {"A": "robot-1", "A-s1": "robot-2"}
+    view = cluster(robot("robot-3"), robot("robot-2"))
+    result = run(system, view, previous=first.plan)
+    assert where(result) == {"A-s1": "robot-2", "A-s2": "robot-3"}
+    cold = SystemDef(
+        "s", (comp("A", standby=StandbySpec(other_robots=1, mode="cold")),), allocation=TABLE_V
+    )
+    first = run(cold, three())
+    assert where(first) == {"A": "robot-1", "A-s1": "robot-2"}
+    result = run(cold, view, previous=first.plan)  # a cold standby runs nothing: first fit
+    assert where(result) == {"A": "robot-3", "A-s1": "robot-2"}
+
+
 def test_gone_instances_are_not_reused():
     failed = InstanceInfo("A", "A", ProcessState.FAILED, "active", 0.0, 0)
     view = cluster(robot("robot-1"), robot("robot-2", instances=(failed,)))

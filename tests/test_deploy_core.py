@@ -452,3 +452,58 @@ def test_a_robot_cut_off_holds_its_actives_down() -> None:
     cutoff.update(5.0, quorum=False, caught_up=True)
     core.apply(5.0, fleet("r1"), Here(cutoff=cutoff))
     assert desired(core) == {"A": LifecycleState.INACTIVE}  # stop_after 0 s: at once
+
+
+# -- a predecessor's plan the fence refuses ----------------------------------------------------
+
+
+def test_a_new_allocator_whose_claim_raised_the_fence_still_catches_up_with_a_newer_plan() -> None:
+    newer = Plan(1, 4, SYSTEM, (Placement("A", "A", "r3"), Placement("B", "B", "r2")), "r0")
+    core = core_holding(HELD)
+    state = fleet("r1", "r2", "r3", plans={"r2": HELD, "r3": newer}, claims={"r1": 2})
+    core.step(10.0, leading(state, 2))
+    assert core.effects() == [Fetch("r3", "http://r3")]  # the fence (2, r1) does not stop it
+    core.fetched("r3", newer)
+    effects = core.effects()
+    assert logs(effects, "plan.refused")  # the store still refuses it...
+    assert core.store.plan == HELD
+    core.step(10.1, leading(state, 2))
+    (plan,) = adopted(core.effects())  # ...and the allocator re-issues it under its epoch
+    assert (plan.key, plan.placements) == ((2, "r1", 1), newer.placements)
+    assert core.store.plan == plan
+
+
+def test_an_allocator_holding_no_plan_carries_on_a_deploy_its_predecessor_took_late() -> None:
+    """r0 (epoch 1) had not heard of r1's claim (epoch 2) when a deploy reached it: the robots
+    that had heard refuse its plan; r1 fetches it and re-issues it, so the deploy is not lost."""
+    late = Plan(1, 1, SYSTEM, (Placement("A", "A", "r1"), Placement("B", "B", "r2")), "r0")
+    core = core_holding(None)
+    quiet = fleet("r0", "r1", "r2", claims={"r1": 2, "r0": 1})
+    core.step(10.0, leading(quiet, 2))
+    assert core.effects() == []  # nothing to adopt
+    state = fleet("r0", "r1", "r2", plans={"r0": late}, claims={"r1": 2, "r0": 1})
+    core.step(12.0, leading(state, 2))
+    assert core.effects() == [Fetch("r0", "http://r0")]
+    core.fetched("r0", late)
+    core.effects()
+    core.step(12.1, leading(state, 2))
+    effects = core.effects()
+    (plan,) = adopted(effects)
+    assert (plan.key, plan.placements) == ((2, "r1", 1), late.placements)
+    assert {e.robot for e in effects if isinstance(e, Push)} == {"r0", "r2"}
+    reasons = [d["reason"] for d in logs(effects, "allocation")]
+    assert reasons == ["carried on r0's plan (epoch 1, version 1)"]
+
+
+def test_an_allocator_with_a_plan_of_its_own_epoch_refuses_a_predecessors_later_plan() -> None:
+    core = core_holding()
+    state = fleet("r1", "r2", "r0", claims={"r1": 2})
+    mine = deployed(core, state, epoch=2)
+    minority = Plan(1, 7, SYSTEM, (Placement("A", "A", "r0"), Placement("B", "B", "r0")), "r0")
+    state = fleet("r1", "r2", "r0", plans={"r0": minority, "r1": mine}, claims={"r1": 2})
+    core.step(20.0, leading(state, 2))
+    assert core.effects() == []  # not fetched: a cut-off old allocator does not undo the fleet
+    core.fetched("r0", minority)  # even if it arrives somehow
+    core.step(20.1, leading(state, 2))
+    assert adopted(core.effects()) == []
+    assert core.store.plan == mine

@@ -8,9 +8,10 @@ How it works (pure: no I/O, no clock; `allocate` is the whole API):
 2. Actives are placed first, in three passes: (a) every active that the previous plan or a
    running instance of the same name already has on a robot stays there if that robot still
    passes every constraint (smallest change); (b) pinned components, on their pin or nowhere;
-   (c) the rest: a robot already running a standby of the component (the paper reuses started
-   standbys: the active takes over that instance and its name, so a re-allocation after the
-   active's robot died activates a warm standby instead of starting a new instance), then
+   (c) the rest: a robot already running a standby of the component, or given a hot one by the
+   previous plan and not reporting it yet (the paper reuses started standbys: the active takes
+   over that instance and its name, so a re-allocation after the active's robot died activates
+   a warm standby instead of starting a new instance), then
    `prefer`, then the strategy's order. Standbys follow in two passes: (a) kept where the
    previous plan or a running instance has them, (b) the rest, named `<component>-s<k>` with the
    smallest free k (names held by the previous plan stay with their instance).
@@ -272,15 +273,33 @@ class _Allocation:
         """Make a running standby of `comp` its active, if one fits (it keeps its name; what
         ruled out the robots tried for the active `name` goes with it)."""
         peers = self._peers(comp)
-        for i, inst in self.running_standbys.get(comp.name, ()):
-            why = self.check.reason(comp, inst.name, False, i, peers)
+        for i, standby in self._takeovers(comp):
+            why = self.check.reason(comp, standby, False, i, peers)
             if why is None:
-                self.explain.carry(name, inst.name)
-                self._place(comp, inst.name, InstanceRole.ACTIVE, False, i, how="standby_promoted")
+                self.explain.carry(name, standby)
+                self._place(comp, standby, InstanceRole.ACTIVE, False, i, how="standby_promoted")
                 self.kept += 1
                 return True
-            self.explain.tried(inst.name, i, f"runs a standby; {why}")
+            self.explain.tried(standby, i, f"runs a standby; {why}")
         return False
+
+    def _takeovers(self, comp: ComponentDef) -> list[tuple[int, str]]:
+        """(robot index, name) of the standbys of `comp` an active may take over: the running
+        ones, then the previous plan's hot ones that robots in the view have not reported yet
+        (a standby still starting when its active's robot died is the quickest way back)."""
+        out = [(i, inst.name) for i, inst in self.running_standbys.get(comp.name, ())]
+        seen = {name for _, name in out}
+        for p in self.previous.get(comp.name, ()):
+            i = self.index.get(p.robot)
+            hot = p.role == InstanceRole.STANDBY and p.mode != "cold"
+            if (
+                hot
+                and i is not None
+                and p.instance not in seen
+                and p.instance not in self.names[comp.name]
+            ):
+                out.append((i, p.instance))
+        return out
 
     def _how(self, comp: ComponentDef, i: int) -> str:
         """preferred when robot i is in the component's `prefer` list, else ranked."""

@@ -15,11 +15,14 @@ done is queued as an effect (`sdrpeer.deploy.effects`) that the shell drains wit
 3. Allocator duties, while the view says this robot holds the role: once it has caught up with
    the newest plan it can hear of (`adopt_after` seconds after winning, or at once when no
    robot gossips a newer one) it re-issues that plan under its own epoch — losing the allocator
-   loses nothing — and from then on re-allocates (smallest change) when a placement's robot is
-   gone or degraded or a standby is missing; an attempt that issued nothing is not repeated
-   with the same plan and robots for `retry_every` seconds. A component the disconnect policy
-   holds (`disconnect.held_components`) keeps its placements until its `lost_after`; one moved
-   off a lost robot with `reconcile: keep_original` is moved back once that robot is well.
+   loses nothing; a predecessor's plan newer than the one it holds is taken although its own
+   claim raised the fence, and so is a predecessor's plan while it holds none, e.g. a deploy the
+   old allocator took before it heard of the new one — and from then on re-allocates (smallest
+   change) when a placement's robot is gone or degraded or a standby is missing; an attempt
+   that issued nothing is not repeated with the same plan and robots for `retry_every` seconds.
+   A component the disconnect policy holds (`disconnect.held_components`) keeps its placements
+   until its `lost_after`; one moved off a lost robot with `reconcile: keep_original` is moved
+   back once that robot is well.
 4. Requests (`request`: `Deploy`, `Move`, `Recover`) run on the allocator only (`NotAllocator`
    elsewhere).
 5. Apply (`apply(now, state, here)`, once the shell has heard whether the robot is in touch):
@@ -153,6 +156,12 @@ class DeployCore:
         """Active placements here stood down for a newer plan's copy elsewhere (`superseded`)."""
         self._refused: dict[str, str] = {}
         """Placements here the launch policy refuses, with why (logged once)."""
+        self._successor_of = 0
+        """While this robot holds the role: its epoch (plans of lower epochs are its
+        predecessors'); 0 otherwise."""
+        self._basis: Plan | None = None
+        """A predecessor's plan, newer than the one held, that the fence keeps out of the store:
+        what the allocator re-issues (see `_wants_predecessor`)."""
 
     # ----------------------------------------------------------------- the shell's surface
     def effects(self) -> list[Effect]:
@@ -172,6 +181,7 @@ class DeployCore:
             self.store.see_claim(epoch, leader)
         for robot in [r for r, t in self._fetch_failed.items() if t <= now]:
             del self._fetch_failed[robot]
+        self._successor_of = view.epoch if view.allocator else 0
         self._sync(now, state)
         if view.allocator:
             self._duties(now, view)
@@ -195,9 +205,11 @@ class DeployCore:
         return True
 
     def fetched(self, robot: str, plan: Plan) -> None:
-        """The answer of the `Fetch` from `robot`."""
+        """The answer of the `Fetch` from `robot`: offered to the store; a predecessor's plan the
+        allocator wants (`_wants_predecessor`) and the fence refuses becomes what it re-issues."""
         self._fetching = None
-        self.offer(plan, source=robot)
+        if not self.offer(plan, source=robot) and self._wants_predecessor(plan.key):
+            self._basis = plan
 
     def fetch_failed(self, now: float, robot: str) -> None:
         """The `Fetch` from `robot` failed: ask it again `fetch_retry` seconds from now."""
@@ -205,7 +217,8 @@ class DeployCore:
         self._fetch_failed[robot] = now + self.config.fetch_retry
 
     def caught_up(self, state: ClusterState) -> bool:
-        """No alive robot gossips a plan newer than ours, and no fetch is in flight."""
+        """No alive robot gossips a plan newer than ours (or, on the allocator, than the
+        predecessor's plan it re-issues), and no fetch is in flight."""
         return self._fetching is None and self._newest_offer(state) is None
 
     def newer_holders(self, state: ClusterState) -> set[str]:
@@ -308,8 +321,7 @@ class DeployCore:
     ) -> tuple[str, PlanKey] | None:
         """The robot gossiping the newest plan we would take (with `now`: leaving out robots a
         fetch just failed from)."""
-        held = self.store.plan
-        floor = None if held is None else held.key
+        floor = self._floor()
         failed = self._fetch_failed
         for key, robot in state.plan_offers():
             if floor is not None and key <= floor:
@@ -318,9 +330,32 @@ class DeployCore:
                 continue
             if now is not None and failed.get(robot, -math.inf) > now:
                 continue
-            if self.store.accepts(key):
+            if self.store.accepts(key) or self._wants_predecessor(key):
                 return (robot, key)
         return None
+
+    def _floor(self) -> PlanKey | None:
+        """The newest plan this robot holds or will re-issue (None: neither)."""
+        keys = [p.key for p in (self.store.plan, self._basis) if p is not None]
+        return max(keys, default=None)
+
+    def _wants_predecessor(self, key: PlanKey) -> bool:
+        """Whether the allocator takes a plan of an earlier epoch that the fence refuses, to
+        re-issue it under its own: while it adopts (a robot it had not heard from yet may hold
+        a plan newer than its own; the fence, raised by its own claim, would refuse it), and
+        while it holds no plan at all (a predecessor that had not heard of it yet took a deploy:
+        without this, nobody would own that system and the robots that heard of the new
+        allocator would refuse it). Once it holds a plan of its own epoch, a predecessor's later
+        plan is refused like anywhere else (a cut-off old allocator's plans must not undo the
+        fleet's)."""
+        epoch = self._successor_of
+        if not epoch or key[0] >= epoch:
+            return False
+        held = self.store.plan
+        if held is not None and held.epoch >= epoch:
+            return False
+        floor = self._floor()
+        return floor is None or key > floor
 
     def _sync(self, now: float, state: ClusterState) -> None:
         if self._fetching is not None:
@@ -336,7 +371,7 @@ class DeployCore:
 
     # ----------------------------------------------------------------- the allocator
     def _off_duty(self) -> None:
-        self._elected_at, self._last_attempt = None, None
+        self._elected_at, self._last_attempt, self._basis = None, None, None
         self._adopt_by = self._retry_at = self._held_due = math.inf
         self._lost_since.clear()
 
@@ -354,8 +389,15 @@ class DeployCore:
                 return
             self._adopt_by = math.inf
             self._adopted_epoch = epoch
+            plan = self._basis or plan
             if plan is not None and plan.epoch < epoch and not self._must_move(plan, view):
-                self._allocate(now, view, Reissue("new allocator"))
+                self._allocate(now, view, Reissue("new allocator"), plan)
+                return
+        elif self._basis is not None and plan is None:
+            plan = self._basis
+            who = f"{plan.allocator}'s plan (epoch {plan.epoch}, version {plan.version})"
+            if not self._must_move(plan, view):
+                self._allocate(now, view, Reissue(f"carried on {who}"), plan)
                 return
         if plan is None or plan.system is None:
             self._held_due = self._retry_at = math.inf
@@ -383,7 +425,7 @@ class DeployCore:
             why.append(
                 f"standbys missing: {', '.join(f'{c} {n}' for c, n in sorted(short.items()))}"
             )
-        self._allocate(now, view, Reissue("; ".join(why), recovery=True))
+        self._allocate(now, view, Reissue("; ".join(why), recovery=True), plan)
 
     def _must_move(self, plan: Plan, view: DeployView) -> bool:
         """Whether some placement sits on a robot that is gone or degraded."""
@@ -430,21 +472,25 @@ class DeployCore:
             return isinstance(result, Plan)
         return False
 
-    def _allocate(self, now: float, view: DeployView, reason: Reason) -> Plan | Infeasible | None:
-        """The one allocation path: `plan_change.change`, its logs, and the plan published."""
-        plan = self.store.plan
+    def _allocate(
+        self, now: float, view: DeployView, reason: Reason, base: Plan | None = None
+    ) -> Plan | Infeasible | None:
+        """The one allocation path: `plan_change.change` from `base` (the plan held, or a
+        predecessor's the allocator re-issues), its logs, and the plan published."""
+        plan = base or self.store.plan
         held = self._held(now, plan, view)
         ctx = Context(self.name, view.epoch, view.state, view.excluded, held)
         out = change(reason, plan, ctx)
         self._effects.extend(out.logs)
         if isinstance(out.result, Plan):
-            self._publish(out.result, view.state)
+            self._publish(out.result, view.state, plan)
         return out.result
 
-    def _publish(self, plan: Plan, state: ClusterState) -> None:
-        plan = with_origins(plan, self.store.plan, state)
+    def _publish(self, plan: Plan, state: ClusterState, base: Plan | None) -> None:
+        plan = with_origins(plan, base, state)
         if not self.offer(plan, source=self.name):
             return
+        self._basis = None
         for robot, rec in state.alive.items():
             if robot != self.name and rec.api is not None:
                 self._effects.append(Push(robot, rec.api, plan))
