@@ -83,6 +83,15 @@ class EventKind(StrEnum):
     """A robot-wide recovery condition holds."""
     RECOVERY_CLEARED = "recovery.cleared"
     """A robot-wide recovery condition no longer holds."""
+    COMPLIANCE_VIOLATED = "compliance.violated"
+    """A running placement has failed one of its Table I/II constraints for the sustain time
+    (this robot's judgement: component, constraint, value, bound, robots)."""
+    COMPLIANCE_CLEARED = "compliance.cleared"
+    """A violated constraint is inside its bound again past the hysteresis margin, or the
+    placement it was about changed."""
+    COMPLIANCE_MOVE = "compliance.move"
+    """The allocator moved a component whose placement violated a constraint
+    (`compliance.on_violation: replace`)."""
     FLEET_CUT_OFF = "fleet.cut_off"
     """This robot hears fewer than a majority of the fleet."""
     FLEET_REJOINED = "fleet.rejoined"

@@ -485,7 +485,9 @@ class Agent:
         """The link bounds and publishing boundaries of the deployed system (kept per plan)."""
         plan = None if self.coordinator is None else self.coordinator.store.plan
         system = None if plan is None else plan.system
-        key = None if system is None else (system.recovery, system.allocation.thresholds)
+        # the tightest bounds of any component or connection: a link past a connection's own
+        # bound is listed exactly, so the allocator and compliance see its value
+        key = None if system is None else (system.recovery, system.tightest_thresholds())
         if key != self._bounds_for:
             self._bounds_for = key
             recovery, thresholds = (None, None) if key is None else key

@@ -99,7 +99,9 @@ class _Allocation:
         self.robots = _first_fit_order(view)
         self.index = {r.name: i for i, r in enumerate(self.robots)}
         self.loads = tuple(RobotLoad(r) for r in self.robots)
-        self.check = Feasibility(self.robots, self.loads, system.allocation, avoid)
+        self.check = Feasibility(
+            self.robots, self.loads, system.allocation, avoid, system.connections
+        )
         self.standbys_optional = False
         """Leave out standbys that find no robot (see `allocate`)."""
         self.held: frozenset[str] = frozenset()

@@ -2,7 +2,10 @@
 
 Nothing here does I/O. `format_status` is `sdrpeer status`: the allocator, the plan, a table of
 components (robot, state, since, standbys, traffic) and the connections with their traffic, in
-colour on a terminal. `format_top` is one screen of `sdrpeer top`, built from one live sample of
+colour on a terminal; once a constraint applies to a running placement, each component's
+compliance (its Table I/II constraints re-checked while it runs) and a table of the
+constraints past their bound.
+`format_top` is one screen of `sdrpeer top`, built from one live sample of
 the agent's stream (`sdrpeer.dashboard.feed`): robots with their metrics and link summary, then
 components.
 """
@@ -39,6 +42,7 @@ COMPONENT_COLORS = {
     "cold": "90",
 }
 STATUS_COLUMNS = ("COMPONENT", "ROBOT", "STATE", "SINCE", "SENDS", "STANDBYS")
+COMPLIANCE_COLUMNS = ("COMPONENT", "CONSTRAINT", "OF", "VALUE", "BOUND", "STATE", "SINCE")
 ROBOT_COLUMNS = ("ROBOT", "STATE", "ROLE", "CPU", "MEM-FREE", "BATTERY", "RSSI", "RTT", "LOSS")
 
 
@@ -75,6 +79,38 @@ def _lost(conn: Mapping[str, Any], color: bool) -> str:
     return paint(f"{lost}/s", "31", color) if lost else "0"
 
 
+def _quantity(constraint: Any, value: Any) -> str:
+    """A compliance value or bound in its constraint's unit (loss is a fraction)."""
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return MISSING
+    if constraint == "loss":
+        return f"{100 * value:.1f}%"
+    if constraint in ("cpu", "battery"):
+        return human_percent(value)
+    if constraint == "memory":
+        return human_bytes(value)
+    if constraint == "rssi":
+        return human_dbm(value)
+    if constraint in ("delay", "jitter"):
+        return human_ms(value)
+    return f"{value:.4g}m" if constraint == "distance" else f"{value:.4g}"
+
+
+def _compliance(doc: Mapping[str, Any], component: Any, color: bool) -> str:
+    """The COMPLIANCE cell: ok, or the constraints violated (red) or past their bound for less
+    than the sustain (yellow); - when no constraint applies."""
+    rows = [r for r in doc.get("compliance") or [] if r.get("component") == component]
+    if not rows:
+        return MISSING
+    bad = [r["constraint"] for r in rows if r.get("state") == "violated"]
+    if bad:
+        return paint("violated: " + ",".join(dict.fromkeys(bad)), "31", color)
+    holding = [r["constraint"] for r in rows if r.get("state") == "holding"]
+    if holding:
+        return paint("holding: " + ",".join(dict.fromkeys(holding)), "33", color)
+    return "ok"
+
+
 def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = True) -> str:
     """The `sdrpeer status` text (`local`: times in the local zone, else UTC)."""
     alloc = doc.get("allocator") or {}
@@ -88,6 +124,7 @@ def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = 
         f" by {plan.get('allocator')}"
     )
     sends = _sends(doc)
+    checked = bool(doc.get("compliance"))  # a COMPLIANCE column once any constraint applies
     rows = []
     for c in doc.get("components") or []:
         standbys = ", ".join(
@@ -105,7 +142,9 @@ def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = 
                 standbys or MISSING,
             ]
         )
-    lines.append(render_table(STATUS_COLUMNS, rows))
+        if checked:
+            rows[-1].append(_compliance(doc, c.get("component"), color))
+    lines.append(render_table(STATUS_COLUMNS + (("COMPLIANCE",) if checked else ()), rows))
     conns = doc.get("connections") or []
     if conns:
         lines.append("")
@@ -114,6 +153,22 @@ def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = 
             for c in conns
         ]
         lines.append(render_table(("FROM", "TO", "TRAFFIC", "LOST"), edges))
+    past = [r for r in doc.get("compliance") or [] if r.get("state") in ("violated", "holding")]
+    if past:
+        lines.append("")
+        cells = [
+            [
+                str(r.get("component")),
+                str(r.get("constraint")),
+                str(r.get("subject")),
+                _quantity(r.get("constraint"), r.get("value")),
+                f"{r.get('must_be')} {_quantity(r.get('constraint'), r.get('bound'))}",
+                paint(str(r.get("state")), "31" if r.get("state") == "violated" else "33", color),
+                _clock(r.get("since"), local),
+            ]
+            for r in past
+        ]
+        lines.append(render_table(COMPLIANCE_COLUMNS, cells))
     return "\n".join(lines)
 
 

@@ -60,14 +60,23 @@ def cmd_check(args: argparse.Namespace) -> int:
             context = "stepped" if target.hz is None else f"periodic {target.hz:g} Hz"
             members = ", ".join(m for m, _ in target.members)
             print(f"  {'':<28} composite, {context}: {members}")
+        own = {k: v for k, v in vars_of(c.thresholds).items() if v is not None}
+        if own:
+            print(f"  {'':<28} own thresholds {own}")
     for conn in system.connections:
         rate = conn.traffic_bytes_per_s
         traffic = "?" if rate is None else f"{format_size(int(rate))}/s"
-        print(f"  {conn.id:<60} {traffic}")
+        bounds = {k: v for k, v in vars_of(conn.bounds).items() if v is not None}
+        print(f"  {conn.id:<60} {traffic}" + (f"  own bounds {bounds}" if bounds else ""))
     a = system.allocation
     limits = {k: v for k, v in vars_of(a.thresholds).items() if v is not None}
     print(f"  allocation: {a.strategy}, thresholds {limits or 'none'}")
     print(f"  recovery: {len(system.recovery.rules)} rules")
+    k = system.compliance
+    print(
+        f"  compliance: {k.on_violation} after {k.sustain_s:g}s, clears {k.clear:.0%} inside, "
+        f"at most one move per {k.min_interval_s:g}s"
+    )
     return 0
 
 

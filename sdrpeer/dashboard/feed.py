@@ -43,6 +43,7 @@ POKE_KINDS = (
     EventKind.ELECTION,
     "plan.",
     "member.",
+    "compliance.",
     EventKind.RECOVERY_MOVE,
 )
 """Event kinds after which pages get a fresh sample at once."""

@@ -14,7 +14,10 @@ Each step reads `loop.time()` once and passes it inward:
    plan, re-allocating when robots die or degrade, moving `keep_original` components back;
 3. the touch shell learns whether the robot is caught up; then the core applies the plan to
    this robot (`DeployCore.apply`, given the instances ACTIVE here, the cut-off state and the
-   launch policy).
+   launch policy);
+4. the compliance shell re-checks the plan's running placements against their Table I/II
+   constraints (`deploy.compliance_shell`); on the allocator, a violation held for the policy's
+   sustain under `on_violation: replace` becomes a `Comply` move.
 The core's effects are carried out here, in order: plan fetches and pushes over HTTP
 (`deploy.peers`, one task each), a plan taken is saved (`PlanStore.save`), applied and
 published in the record (`on_change`), the desired instances go to the instance manager, events
@@ -35,6 +38,7 @@ from typing import Any
 
 from sdrpeer.api import peer_client
 from sdrpeer.deploy import peers
+from sdrpeer.deploy.compliance_shell import ComplianceShell, describe
 from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.deploy.core import DeployCore, DeployView, Here, Request
 from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
@@ -43,16 +47,17 @@ from sdrpeer.deploy.handoff_shell import HandoffShell
 from sdrpeer.deploy.health_shell import HealthShell
 from sdrpeer.deploy.local_shell import LocalShell
 from sdrpeer.deploy.placer import Infeasible
-from sdrpeer.deploy.plan_change import Deploy, Move, Recover
+from sdrpeer.deploy.plan_change import Comply, Deploy, Move, Recover
 from sdrpeer.deploy.planstore import PlanStore
 from sdrpeer.deploy.status import SinceTracker, status_doc
 from sdrpeer.deploy.touch_shell import TouchShell
 from sdrpeer.deploy.view import ClusterState
 from sdrpeer.election.config import ElectionConfig
 from sdrpeer.election.events import Elected, SteppedDown
-from sdrpeer.errors import ApiError
+from sdrpeer.errors import ApiError, MoveError
 from sdrpeer.eventlog import EventKind, EventLog
 from sdrpeer.plan import Plan
+from sdrpeer.recovery.compliance import Violated
 from sdrpeer.recovery.config import RecoveryConfig
 from sdrpeer.recovery.events import Decision, RobotCondition
 from sdrpeer.runtime.manager import InstanceManager
@@ -94,6 +99,8 @@ class Coordinator:
         """Component faults on this robot (restart here; plan changes through the allocator)."""
         self.health = HealthShell(recovery)
         """Robot-wide recovery conditions (low battery, bad link) of every robot."""
+        self.compliance = ComplianceShell(recovery)
+        """The running placements re-checked against their Table I/II constraints."""
         self.core = DeployCore(name, PlanStore(data_dir / "plan.json"), config)
         """Plan sync and the allocator's duties (sans-IO); this shell carries out its effects."""
         self.handoff = HandoffShell(
@@ -160,6 +167,7 @@ class Coordinator:
             due = min(
                 self.election.next_timer(),
                 self.health.next_timer(),
+                self.compliance.next_timer(),
                 self.local.next_timer(),
                 self.core.next_timer(),
                 self.touch.next_timer(self.store.plan),
@@ -205,6 +213,10 @@ class Coordinator:
         self._carry_out()
         self.touch.after_sync(now, state, quorum, self.caught_up(state), info.leader)
         self._apply(now, state)
+        self.compliance.update(now, self.store.plan, state)
+        self._log_compliance()
+        if self.election.is_allocator():
+            self._comply(now)
         self.handoff.tick()
 
     def _view(self, now: float, state: ClusterState | None = None) -> DeployView:
@@ -278,6 +290,43 @@ class Coordinator:
                 value=event.value,
             )
 
+    def _log_compliance(self) -> None:
+        """Violations and clearings, as this robot judges them, into the event log."""
+        for event in self.compliance.drain():
+            r = event.reading
+            detail: dict[str, Any] = {
+                "component": r.component,
+                "constraint": r.constraint,
+                "subject": r.subject,
+                "robots": list(r.robots),
+                "value": r.value,
+                "bound": r.bound,
+                "must_be": "above" if r.above else "below",
+            }
+            if isinstance(event, Violated):
+                kind = EventKind.COMPLIANCE_VIOLATED
+                detail["held_s"] = round(event.at - event.since, 3)
+            else:
+                kind, detail["why"] = EventKind.COMPLIANCE_CLEARED, event.why
+            self.events.add(time.time(), kind, self.name, **detail)
+
+    def _comply(self, now: float) -> None:
+        """On the allocator: move what `on_violation: replace` says must move (one at a time
+        per component, at most once per `min_interval`)."""
+        for component, reading in self.compliance.due_moves(now):
+            self.compliance.moved(now, component)
+            try:
+                result = self.core.request(
+                    now, self._view(now), Comply(component, describe(reading))
+                )
+            except (MoveError, LookupError) as e:
+                log.info("compliance: cannot move %s: %s", component, e)
+                continue
+            finally:
+                self._carry_out()
+            if isinstance(result, Infeasible):
+                log.info("compliance: no robot for %s: %s", component, result)
+
     def _api_of(self, robot: str) -> str | None:
         rec = self.cluster().alive.get(robot)
         return None if rec is None else rec.api
@@ -332,6 +381,16 @@ class Coordinator:
         alive = self.cluster().alive
         doc = status_doc(self.store.plan, alive, allocator, self._since, now_wall)
         doc["cut_off"] = self.touch.cut
+        doc["compliance"] = rows = self.compliance.rows(now_wall)
+        for comp in doc["components"]:
+            mine = [r for r in rows if r["component"] == comp["component"]]
+            comp["compliance"] = (
+                None
+                if not mine
+                else "violated"
+                if any(r["state"] == "violated" for r in mine)
+                else "ok"
+            )
         return doc
 
     # ----------------------------------------------------------------- the allocator

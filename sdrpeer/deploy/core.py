@@ -52,6 +52,7 @@ from sdrpeer.deploy.disconnect import CutOff, held_components
 from sdrpeer.deploy.effects import Adopted, Desired, Effect, Fetch, Log, Push
 from sdrpeer.deploy.placer import Infeasible
 from sdrpeer.deploy.plan_change import (
+    Comply,
     Context,
     Deploy,
     Move,
@@ -72,8 +73,8 @@ from sdrpeer.vocabulary import InstanceRole, LifecycleState
 log = logging.getLogger(__name__)
 
 
-Request = Deploy | Move | Recover
-"""What an operator or a robot may ask the allocator for."""
+Request = Deploy | Move | Recover | Comply
+"""What an operator or a robot (or continuous compliance) may ask the allocator for."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,7 +23,10 @@ What differs by reason:
   nothing;
 - `Recover`: `standby_same_robot` swaps in the standby on that robot, the other steps avoid that
   robot for the component; `LookupError` for a component the system does not have;
-- `Move`: `move.move_inputs` (pinned to a destination, or its robot avoided; `MoveError`).
+- `Move`: `move.move_inputs` (pinned to a destination, or its robot avoided; `MoveError`);
+- `Comply`: a `Move` without a destination, asked by continuous compliance
+  (`sdrpeer.recovery.compliance`): every constraint applies, so the component lands where its
+  Table I thresholds and its connections' Table II bounds hold now.
 """
 
 from __future__ import annotations
@@ -81,7 +84,17 @@ class Move:
     to: str | None
 
 
-Reason = Deploy | Reissue | Recover | Move
+@dataclass(frozen=True, slots=True)
+class Comply:
+    """Move a component's active off a robot where its placement violates a constraint
+    (`compliance.on_violation: replace`): a `Move` without a destination, logged as such."""
+
+    component: str
+    why: str
+    """The violated constraint, as logged (`loss 0.3 not below 0.05 on Cam.image->Det.image`)."""
+
+
+Reason = Deploy | Reissue | Recover | Move | Comply
 """Why the allocator allocates."""
 
 
@@ -170,7 +183,7 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             new = result
         else:
             new = result
-    if isinstance(reason, Move) and plan is not None:
+    if isinstance(reason, Move | Comply) and plan is not None:
         new = replace(new, system=plan.system)  # the pin is for this allocation only
     left = sorted(ctx.state.alive.keys() - {r.name for r in ask.view.robots})
     new = explained(new, plan, _reason_text(reason, plan), left)
@@ -225,6 +238,8 @@ def _reason_text(reason: Reason, plan: Plan | None) -> str:
         return f"recovery: {reason.action} for {reason.instance} on {reason.robot}"
     active = None if plan is None else plan.active_of(reason.component)
     origin = "" if active is None else f" from {active.robot}"
+    if isinstance(reason, Comply):
+        return f"compliance: move {reason.component}{origin}: {reason.why}"
     return f"move {reason.component}{origin}" + (f" to {reason.to}" if reason.to else "")
 
 
@@ -252,7 +267,8 @@ def _ask(reason: Reason, plan: Plan | None, ctx: Context) -> _Ask | Infeasible:
             previous, avoid = plan, {comp: {reason.robot}}
         view = cluster_view(state, None, ctx.excluded)
         return _Ask(plan.system, view, previous, avoid, recovery=True, held=held - {comp})
-    inputs = move_inputs(plan, reason.component, reason.to, state.alive)
+    to = reason.to if isinstance(reason, Move) else None
+    inputs = move_inputs(plan, reason.component, to, state.alive)
     view = cluster_view(state, None, ctx.excluded)
     return _Ask(inputs.system, view, inputs.previous, inputs.avoid, held=held - {reason.component})
 
@@ -273,6 +289,12 @@ def _logs(reason: Reason, old: Plan | None, new: Plan, epoch: int) -> list[Log]:
         return [Log(EventKind.RECOVERY_MOVE, {"reason": why, "moved": moved})]
     active = old.active_of(reason.component)
     origin = "" if active is None else active.robot
+    if isinstance(reason, Comply):
+        why = f"compliance: {reason.component} off {origin}: {reason.why}"
+        return [
+            Log(EventKind.ALLOCATION, {"reason": why, "epoch": epoch}),
+            Log(EventKind.COMPLIANCE_MOVE, {"reason": why, "moved": moved}),
+        ]
     why = f"move {reason.component} from {origin}" + (f" to {reason.to}" if reason.to else "")
     return [
         Log(EventKind.ALLOCATION, {"reason": why, "epoch": epoch}),

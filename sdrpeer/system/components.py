@@ -8,7 +8,9 @@ own declarations. A `script` file and an `exec` program given by a relative path
 the system file's directory and must exist (sdrpeer.system.paths). Requirements come from
 `profile:` (a file written by `sdrpeer profile`, path relative to the system file) and/or
 `requires:` (inline); an inline value wins over the profile's, and inline `traffic:` rates are
-merged over the profiled out-port rates.
+merged over the profiled out-port rates. `constraints:` holds the component's own Table I
+thresholds (cpu_below, mem_free_above, battery_above), which narrow the fleet's
+(`Thresholds.stricter`); a Table II key there is refused with where it belongs.
 """
 
 from __future__ import annotations
@@ -30,10 +32,12 @@ from sdrpeer.system.model import (
     DisconnectSpec,
     Requirements,
     StandbySpec,
+    Thresholds,
 )
 from sdrpeer.system.paths import resolve_exec_target, resolve_script_target
 from sdrpeer.system.problems import MISSING, Problems
 from sdrpeer.system.profiles import ProfileFigures, read_profile
+from sdrpeer.system.sections import ROBOT_KEYS, read_thresholds
 from sdrpeer.system.values import (
     boolean,
     bounded,
@@ -58,6 +62,7 @@ COMPONENT_KEYS = (
     "prefer",
     "watchdog",
     "disconnect",
+    "constraints",
 )
 REQUIRES_KEYS = ("cpu", "memory", "traffic")
 STANDBY_KEYS = ("same_robot", "other_robots", "mode", "sync")
@@ -139,6 +144,9 @@ def read_component(
     prefer = p.get(fields, "prefer", where, robot_names, ())
     watchdog = p.get(fields, "watchdog", where, _watchdog, None)
     disconnect = _disconnect(p, fields, where)
+    thresholds = Thresholds()
+    if "constraints" in fields:
+        thresholds = read_thresholds(p, fields["constraints"], f"{where}.constraints", ROBOT_KEYS)
     definition = None
     if len(p.items) == errors_before:
         definition = ComponentDef(
@@ -152,6 +160,7 @@ def read_component(
             prefer=prefer,
             watchdog_s=watchdog,
             disconnect=disconnect,
+            thresholds=thresholds,
         )
     if not name and "name" in fields:  # a bad name still names it for the connections
         raw = p.f.value(fields["name"])

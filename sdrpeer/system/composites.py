@@ -42,6 +42,7 @@ COMPOSITE_KEYS = (
     "prefer",
     "watchdog",
     "disconnect",
+    "constraints",
 )
 MEMBER_KEYS = ("name", "launcher", "target", "params", "profile", "requires")
 MAX_HZ = 10_000.0

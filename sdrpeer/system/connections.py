@@ -13,6 +13,8 @@ bound once, and its policy may only set `encrypt`. The policy is checked by the 
 given, else the sender's profiled rate for that port, else unknown (None). The same stream given
 twice is an error. An end naming a member of a composite (`Cam.image`, sdrpeer.system.composites)
 is checked against the member's class and becomes its composite's port (`Vision`, `Cam.image`).
+`constraints:` holds the connection's own Table II bounds (rssi_above, jitter_below,
+distance_below, loss_below, delay_below), which narrow the fleet's when its ends run on two robots.
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ from sdrpeer.errors import SpecError
 from sdrpeer.runtime.spec import _port, validate_policy
 from sdrpeer.system.components import ComponentEntry
 from sdrpeer.system.composites import Member
-from sdrpeer.system.model import ConnectionDef
+from sdrpeer.system.model import ConnectionDef, Thresholds
 from sdrpeer.system.problems import MISSING, Problems
+from sdrpeer.system.sections import LINK_KEYS, read_thresholds
 from sdrpeer.system.values import parse_bandwidth
 
-CONNECTION_KEYS = ("from", "to", "policy", "traffic")
+CONNECTION_KEYS = ("from", "to", "policy", "traffic", "constraints")
 _KIND = {"from": ("out", "OutPort"), "to": ("in", "InPort")}
 _SERVICE = {"from": "requires", "to": "provides"}
 """The service-port kind each end may be instead (a binding: consumer -> provider)."""
@@ -70,12 +73,17 @@ def read_connections(
         elif service:
             bound[sender] = item.start_mark.line + 1
         traffic: float | None = p.get(fields, "traffic", where, parse_bandwidth, None)
+        bounds = Thresholds()
+        if "constraints" in fields:
+            bounds = read_thresholds(p, fields["constraints"], f"{where}.constraints", LINK_KEYS)
         if len(p.items) != before or MISSING in (*sender, *receiver):
             continue  # (an end in a composite that is in error was reported there)
         entry = components[sender[0]].definition
         if traffic is None and entry is not None and not service:
             traffic = entry.requires.port_rate(sender[1])
-        conn = ConnectionDef(*sender, *receiver, policy=policy, traffic_bytes_per_s=traffic)
+        conn = ConnectionDef(
+            *sender, *receiver, policy=policy, traffic_bytes_per_s=traffic, bounds=bounds
+        )
         if conn.id in seen:
             p.add(item, where, f"{conn.id} given twice (first at line {seen[conn.id]})")
             continue

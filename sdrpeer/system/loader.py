@@ -4,8 +4,8 @@ How it works: the text is composed with `YamlFile` (every node keeps its line) a
 through a `Problems` collector: the top level here, then `components:` (sdrpeer.system.components),
 `composites:` (sdrpeer.system.composites: each becomes one component), `connections:`
 (sdrpeer.system.connections, which needs the components' classes and profiles),
-`allocation:` and `recovery:` (sdrpeer.system.sections). A wrong field is recorded and the walk
-goes on, so one `SystemFileError` lists every problem, sorted by line, each as
+`allocation:`, `recovery:` and `compliance:` (sdrpeer.system.sections). A wrong field is
+recorded and the walk goes on, so one `SystemFileError` lists every problem, sorted by line, each as
 `file:line: field 'components[2].requires.memory': message`. Nothing is returned unless the
 whole file is right. The format is documented in docs/system-file.md; the JSON Schema for editors
 is `schema_path()`.
@@ -35,7 +35,12 @@ from sdrpeer.system.composites import read_composites
 from sdrpeer.system.connections import read_connections
 from sdrpeer.system.model import SystemDef
 from sdrpeer.system.problems import MISSING, Problems
-from sdrpeer.system.sections import read_allocation, read_recovery, read_streams
+from sdrpeer.system.sections import (
+    read_allocation,
+    read_compliance,
+    read_recovery,
+    read_streams,
+)
 from sdrpeer.yamlfile import YamlFile
 
 __all__ = ["SystemFileError", "load_system", "parse_system", "schema_path"]
@@ -49,6 +54,7 @@ TOP_KEYS = (
     "allocation",
     "recovery",
     "streams",
+    "compliance",
 )
 VERSIONS = (1,)
 _LINE = re.compile(r"^.*?:(\d+):")
@@ -85,6 +91,7 @@ def _build(f: YamlFile, base_dir: Path) -> SystemDef:
     allocation = read_allocation(p, top.get("allocation"))
     recovery = read_recovery(p, top.get("recovery"))
     streams = read_streams(p, top.get("streams"))
+    compliance = read_compliance(p, top.get("compliance"))
     if p.items:
         p.items.sort(key=_line)
         p.check()
@@ -96,6 +103,7 @@ def _build(f: YamlFile, base_dir: Path) -> SystemDef:
         allocation=allocation,
         recovery=recovery,
         streams=streams,
+        compliance=compliance,
         source=f.name,
     )
 

@@ -77,6 +77,62 @@ class DisconnectSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class Thresholds:
+    """Tables I and II of the paper; None means the constraint is not checked."""
+
+    cpu_below_pct: float | None = None
+    """Table I: a robot's CPU after adding the component must stay below this."""
+    mem_free_above_bytes: int | None = None
+    """Table I: a robot's free memory after adding the component must stay above this."""
+    battery_above_pct: float | None = None
+    """Table I: a robot's battery must be above this."""
+    rssi_above_dbm: float | None = None
+    """Table II: both ends of a cross-robot connection need RSSI above this."""
+    jitter_below_ms: float | None = None
+    """Table II: measured jitter between the two robots must be below this."""
+    distance_below_m: float | None = None
+    """Table II: the two robots must be closer than this."""
+    loss_below: float | None = None
+    """Beyond the paper: measured packet loss (0..1) between the two robots below this."""
+    delay_below_ms: float | None = None
+    """Beyond the paper: measured round-trip time between the two robots below this (the
+    smoothed RTT of the gossip probes, not half of it: docs/system-file.md, "Constraints")."""
+
+    def stricter(self, other: Thresholds) -> Thresholds:
+        """Each threshold of `self` and `other` taken at its stricter value (None: the other's):
+        a component's or a connection's own bound narrows the fleet's, never widens it."""
+        out: dict[str, Any] = {}
+        for name in THRESHOLD_FIELDS:
+            a, b = getattr(self, name), getattr(other, name)
+            if a is None or b is None:
+                out[name] = a if b is None else b
+            elif name in ABOVE_FIELDS:
+                out[name] = max(a, b)
+            else:
+                out[name] = min(a, b)
+        return Thresholds(**out)
+
+    def has_any(self) -> bool:
+        """Whether any threshold is set."""
+        return any(getattr(self, name) is not None for name in THRESHOLD_FIELDS)
+
+
+THRESHOLD_FIELDS = (
+    "cpu_below_pct",
+    "mem_free_above_bytes",
+    "battery_above_pct",
+    "rssi_above_dbm",
+    "jitter_below_ms",
+    "distance_below_m",
+    "loss_below",
+    "delay_below_ms",
+)
+"""Every field of `Thresholds`, Table I's first."""
+ABOVE_FIELDS = frozenset({"mem_free_above_bytes", "battery_above_pct", "rssi_above_dbm"})
+"""The thresholds a value must stay above (the others: below)."""
+
+
+@dataclass(frozen=True, slots=True)
 class ComponentDef:
     """One component of the system: what to run, what it needs, and where it may go."""
 
@@ -98,6 +154,9 @@ class ComponentDef:
     """Seconds its host may go without a heartbeat before it is killed as hung (None: the
     agent's default, 0: no watchdog)."""
     disconnect: DisconnectSpec = field(default_factory=DisconnectSpec)
+    thresholds: Thresholds = field(default_factory=Thresholds)
+    """Its own Table I thresholds (`constraints:`), on top of the fleet's: the robot of each of
+    its instances must meet the stricter of the two (only the Table I fields are set)."""
 
     def params_map(self) -> dict[str, Any]:
         """The parameters as a dict."""
@@ -116,33 +175,15 @@ class ConnectionDef:
     """Connector policy (push, buffer, full, ...; docs/protocol.md) as sorted pairs."""
     traffic_bytes_per_s: float | None = None
     """Expected traffic: written in the file, else the sender's profile for that port, else None."""
+    bounds: Thresholds = field(default_factory=Thresholds)
+    """Its own Table II bounds (`constraints:`), on top of the fleet's: when its two ends run on
+    different robots, the link between them must meet the stricter of the two (only the Table II
+    fields are set)."""
 
     @property
     def id(self) -> str:
         """The connection id used on the data plane (`Cam.image->View.image`)."""
         return f"{self.from_component}.{self.from_port}->{self.to_component}.{self.to_port}"
-
-
-@dataclass(frozen=True, slots=True)
-class Thresholds:
-    """Tables I and II of the paper; None means the constraint is not checked."""
-
-    cpu_below_pct: float | None = None
-    """Table I: a robot's CPU after adding the component must stay below this."""
-    mem_free_above_bytes: int | None = None
-    """Table I: a robot's free memory after adding the component must stay above this."""
-    battery_above_pct: float | None = None
-    """Table I: a robot's battery must be above this."""
-    rssi_above_dbm: float | None = None
-    """Table II: both ends of a cross-robot connection need RSSI above this."""
-    jitter_below_ms: float | None = None
-    """Table II: measured jitter between the two robots must be below this."""
-    distance_below_m: float | None = None
-    """Table II: the two robots must be closer than this."""
-    loss_below: float | None = None
-    """Beyond the paper: measured packet loss (0..1) between the two robots below this."""
-    delay_below_ms: float | None = None
-    """Beyond the paper: measured round-trip time between the two robots below this."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,6 +240,27 @@ class RecoveryDef:
     """A moved component stays at least this long before it may move back."""
 
 
+ON_VIOLATION = ("report", "replace")
+"""What the allocator does when a placement stops meeting its constraints: report it (event,
+status, dashboard), or also move the component (`sdrpeer.recovery.compliance`)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ComplianceDef:
+    """The `compliance:` section: placements re-checked against fresh metrics while they run."""
+
+    on_violation: str = "report"
+    """report or replace (see ON_VIOLATION)."""
+    sustain_s: float = 5.0
+    """How long a constraint must be violated without a break before it counts (`for:`)."""
+    clear: float = 0.1
+    """Hysteresis: a violation clears only once the value is this share of the bound inside
+    it (delay bound 20ms, clear 10%: below 18ms; rssi above -60dBm: above -54dBm); at most 20%:
+    a record lists a link's exact values down to 80% of its bound (`monitor.links.STAY_LISTED`)."""
+    min_interval_s: float = 60.0
+    """At most one compliance move of a component per this many seconds (`min_interval:`)."""
+
+
 @dataclass(frozen=True, slots=True)
 class StreamsDef:
     """The system's data streams as a whole (the `streams:` section)."""
@@ -218,6 +280,7 @@ class SystemDef:
     allocation: AllocationDef = field(default_factory=AllocationDef)
     recovery: RecoveryDef = field(default_factory=RecoveryDef)
     streams: StreamsDef = field(default_factory=StreamsDef)
+    compliance: ComplianceDef = field(default_factory=ComplianceDef)
     source: str | None = field(default=None, compare=False)
     """The file it was read from (messages only; not part of equality or the digest)."""
 
@@ -227,6 +290,16 @@ class SystemDef:
             if c.name == name:
                 return c
         raise KeyError(name)
+
+    def tightest_thresholds(self) -> Thresholds:
+        """The fleet's thresholds narrowed by every component's and every connection's own:
+        where a robot starts to matter to some placement (what records list and publish at)."""
+        t = self.allocation.thresholds
+        for c in self.components:
+            t = t.stricter(c.thresholds)
+        for conn in self.connections:
+            t = t.stricter(conn.bounds)
+        return t
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-able form (tuples become lists); `system_from_json` is its inverse."""
@@ -278,6 +351,7 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
                 prefer=tuple(c.get("prefer", ())),
                 watchdog_s=c.get("watchdog_s"),
                 disconnect=DisconnectSpec(**c.get("disconnect", {})),
+                thresholds=Thresholds(**c.get("thresholds", {})),
             )
         )
     conns = tuple(
@@ -288,6 +362,7 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
             to_port=c["to_port"],
             policy=_pairs(c["policy"]),
             traffic_bytes_per_s=c.get("traffic_bytes_per_s"),
+            bounds=Thresholds(**c.get("bounds", {})),
         )
         for c in doc["connections"]
     )
@@ -314,4 +389,5 @@ def system_from_json(doc: dict[str, Any]) -> SystemDef:
         allocation=allocation,
         recovery=recovery,
         streams=StreamsDef(encrypt=bool(doc.get("streams", {}).get("encrypt", True))),
+        compliance=ComplianceDef(**doc.get("compliance", {})),
     )

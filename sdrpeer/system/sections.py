@@ -20,8 +20,10 @@ import yaml
 
 from sdrpeer.system.metrics import METRICS, parse_condition
 from sdrpeer.system.model import (
+    ON_VIOLATION,
     QUORUMS,
     AllocationDef,
+    ComplianceDef,
     RecoveryDef,
     RecoveryRule,
     StreamsDef,
@@ -142,13 +144,63 @@ def read_allocation(p: Problems, node: yaml.Node | None) -> AllocationDef:
 
 
 def _thresholds(p: Problems, node: yaml.Node) -> Thresholds:
-    fields = p.mapping(node, "allocation.constraints", tuple(THRESHOLDS))
+    return read_thresholds(p, node, "allocation.constraints", tuple(THRESHOLDS))
+
+
+ROBOT_KEYS = ("cpu_below", "mem_free_above", "battery_above")
+"""Table I: the thresholds a component's own `constraints:` may set."""
+LINK_KEYS = ("rssi_above", "jitter_below", "distance_below", "loss_below", "delay_below")
+"""Table II: the bounds a connection's own `constraints:` may set."""
+
+
+def read_thresholds(p: Problems, node: yaml.Node, where: str, keys: tuple[str, ...]) -> Thresholds:
+    """A `constraints:` mapping of `keys` (THRESHOLDS' file keys) into `Thresholds`; a key of the
+    other table is reported with where it belongs."""
+    fields = p.mapping(node, where, None)
     values: dict[str, Any] = {}
     for key, value_node in (fields or {}).items():
+        if key not in THRESHOLDS:
+            p.add(value_node, f"{where}.{key}", f"unknown field (known: {', '.join(keys)})")
+            continue
+        if key not in keys:
+            belongs = "a connection's" if key in LINK_KEYS else "a component's"
+            p.add(
+                value_node,
+                f"{where}.{key}",
+                f"{key} is not allowed here: it goes under {belongs} constraints "
+                f"(here: {', '.join(keys)})",
+            )
+            continue
         attr, parser = THRESHOLDS[key]
         with p.guard():
-            values[attr] = p.f.parse(value_node, f"allocation.constraints.{key}", parser)
+            values[attr] = p.f.parse(value_node, f"{where}.{key}", parser)
     return Thresholds(**values)
+
+
+COMPLIANCE_KEYS = ("on_violation", "for", "clear", "min_interval")
+
+
+def read_compliance(p: Problems, node: yaml.Node | None) -> ComplianceDef:
+    """The compliance section (defaults when absent): what a violated placement leads to."""
+    if node is None:
+        return ComplianceDef()
+    fields = p.mapping(node, "compliance", COMPLIANCE_KEYS)
+    if fields is None:
+        return ComplianceDef()
+    return ComplianceDef(
+        on_violation=p.get(
+            fields, "on_violation", "compliance", _one_of(list(ON_VIOLATION)), "report"
+        ),
+        sustain_s=p.get(fields, "for", "compliance", _duration(0, 3600), 5.0),
+        clear=p.get(
+            fields,
+            "clear",
+            "compliance",
+            _limit(parse_percent, 0, 20, "0% to 20%", factor=0.01),
+            0.1,
+        ),
+        min_interval_s=p.get(fields, "min_interval", "compliance", _duration(0, 86400), 60.0),
+    )
 
 
 def _one_of(names: list[str]) -> Callable[[object], str]:

@@ -114,7 +114,7 @@
       if (isFleet(mo)) S.fleet.push(fleetEvent(mo));
     }
     if ((s.moments || []).length) S.momentsVersion += 1;
-    mark("summary", "warnings", "fleet", "topology", "charts", "states");
+    mark("summary", "warnings", "fleet", "topology", "compliance", "charts", "states");
     if ((s.moments || []).some(isFleet)) mark("events");
   }
 
@@ -563,7 +563,43 @@
       Object.entries(MARKERS).map(([k, c]) => `<span style="--c:${c}">${k}</span>`).join("");
   }
 
+  // ------------------------------------------------------------------ compliance
+  // The status's `compliance` rows (sdrpeer.recovery.compliance.rows): one per constraint of a
+  // running placement, grouped by component; a violated row is red, one past its bound for less
+  // than the sustain ("holding") amber, an unmeasured one grey.
+  const TABLE_I = new Set(["cpu", "memory", "battery"]);
+  function quantity(constraint, v) {
+    if (v === null || v === undefined) return "-";
+    switch (constraint) {
+      case "loss": return `${num(v * 100, 1)} %`;
+      case "cpu": case "battery": return `${num(v, 1)} %`;
+      case "memory": return `${num(v / 1e6, 0)} MB`;
+      case "rssi": return `${num(v, 1)} dBm`;
+      case "delay": case "jitter": return `${num(v, 2)} ms`;
+      case "distance": return `${num(v, 1)} m`;
+      default: return num(v, 2);
+    }
+  }
+  function renderCompliance() {
+    const rows = (S.status && S.status.compliance) || [];
+    const html = rows.map((r, i) => {
+      const first = i === 0 || rows[i - 1].component !== r.component;
+      const of = TABLE_I.has(r.constraint) ? r.subject : `${r.subject} (${(r.robots || []).join(" / ")})`;
+      return `<tr class="c-${esc(r.state)}" data-component="${esc(r.component)}" ` +
+        `data-constraint="${esc(r.constraint)}" data-state="${esc(r.state)}">` +
+        `<td>${first ? esc(r.component) : ""}</td><td>${TABLE_I.has(r.constraint) ? "I" : "II"}</td>` +
+        `<td>${esc(r.constraint)}</td><td>${esc(of)}</td>` +
+        `<td class="num">${quantity(r.constraint, r.value)}</td>` +
+        `<td class="num">${esc(r.must_be)} ${quantity(r.constraint, r.bound)}</td>` +
+        `<td><span class="badge comp-${esc(r.state)}">${esc(r.state)}</span></td>` +
+        `<td>${r.since == null ? "-" : clock(r.since)}</td></tr>`;
+    });
+    $("compliance").tBodies[0].innerHTML = html.length ? html.join("")
+      : '<tr><td colspan="8" class="muted">no constraint applies to a running placement</td></tr>';
+  }
+
   const RENDER = {
+    compliance: renderCompliance,
     summary: renderSummary, warnings: renderWarnings, fleet: renderFleet, topology: renderTopology,
     charts: renderCharts, states: renderStates, events: renderEvents,
   };
@@ -587,7 +623,7 @@
       S.connected = false;
       $("conn").className = "conn snap";
       $("conn").textContent = `snapshot ${S.t.length ? clock(S.t[S.t.length - 1]) : ""}`;
-      mark("summary", "warnings", "fleet", "topology", "charts", "states", "events");
+      mark("summary", "warnings", "fleet", "topology", "compliance", "charts", "states", "events");
       render();
       document.documentElement.dataset.snapshot = "ready";
     });
