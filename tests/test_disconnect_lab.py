@@ -76,6 +76,18 @@ def placed(status: dict[str, Any]) -> dict[str, str | None]:
     return {c["component"]: c["robot"] for c in status["components"]}
 
 
+def story(client: AgentClient) -> str:
+    """What a failure message adds: the robot's status and its latest events."""
+    try:
+        status = client.get("/v1/status")
+        events = client.get("/v1/events")
+    except ApiError as e:
+        return f"(no status: {e})"
+    comps = [(c["instance"], c["robot"], c["state"]) for c in status["components"]]
+    tail = [(e["kind"], e.get("detail")) for e in events[-25:]]
+    return f"allocator {status['allocator']}, plan {status['plan']}, {comps}; events {tail}"
+
+
 def deploy_onto_robot_3(one: AgentClient, three: AgentClient) -> None:
     """Deploy the system through robot-1 and wait until robot-3 runs its three actives."""
     system = parse_system(SYSTEM, "cut.yaml").to_json()
@@ -87,6 +99,7 @@ def deploy_onto_robot_3(one: AgentClient, three: AgentClient) -> None:
         within=WITHIN,
         poll=POLL,
         retry=NOT_YET,
+        context=lambda: f"robot-3: {story(three)}",
     )
 
 
