@@ -59,8 +59,9 @@ def test_keygen_prints_a_key_the_agent_reads(tmp_path: Path) -> None:
 def test_the_fleet_rotates_with_no_suspicion_and_keeps_its_keys(
     lab: RunningLab, tmp_path: Path
 ) -> None:
-    first = rotate(lab, tmp_path)
+    first = rotate(lab, tmp_path, settle=3.0)
     assert first["robots_on_new_key"] == ROBOTS, first
+    assert set(first["alive_seen_after"].values()) == {ROBOTS}, first  # on the new key alone
     assert first["bad_events"] == [], first  # no member ever SUSPECT or DEAD
     assert first["rejected"] == {"unauthenticated": 0, "unknown_key": 0}, first
     new_id = first["new_key_id"]

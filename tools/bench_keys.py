@@ -2,7 +2,8 @@
 """Rotating the cluster key of a running fleet with `sdrpeer keygen` and `sdrpeer key ...`:
 suspicions during the rotation, and how long the fleet takes to switch its primary key.
 
-Usage: python tools/bench_keys.py [--robots 5] [--runs 3] [--netns] [--preset lan] [--json PATH]
+Usage: python tools/bench_keys.py [--robots 5] [--runs 3] [--netns] [--preset lan] [--settle 10]
+       [--json PATH]
 
 How it works: one lab of `--robots` real agents (`sdrpeer lab up`; `--netns`: each robot in its
 own network namespace, root) is started, then each run rotates its key with the real command
@@ -12,9 +13,10 @@ the change, so the `primary` command's time is the time for the whole fleet to s
 sealing key, Python's start-up included; the agents' `keys.reloaded` events give the spread from
 the first robot sealing with the new key to the last). Afterwards `sdrpeer key list --json` must
 show every robot on the new key alone, and every agent's event log, read from before the run, is
-searched for `member.suspect` and `member.dead` (the target: none), and its `unauthenticated`
-and `unknown_key` rejections counted (none expected: every datagram opens at every step). The
-table prints medians over the runs; `--json` writes every run.
+searched, after `--settle` seconds of the fleet on the new key alone, for `member.suspect` and
+`member.dead` (the target: none; every robot must still see every robot alive), and its
+`unauthenticated` and `unknown_key` rejections counted (none expected: every datagram opens at
+every step). The table prints medians over the runs; `--json` writes every run.
 """
 
 from __future__ import annotations
@@ -108,8 +110,9 @@ def switch_times(running: RunningLab, before: dict[str, tuple[int, dict[str, int
     return out
 
 
-def rotate(running: RunningLab, work: Path) -> dict[str, Any]:
-    """One rotation with the real command line; its figures."""
+def rotate(running: RunningLab, work: Path, settle: float) -> dict[str, Any]:
+    """One rotation with the real command line, then `settle` seconds of the fleet on the new
+    key alone; its figures."""
     lab_dir = running.lab_dir
     before = marks(running)
     listing = json.loads(cli(lab_dir, "key", "list", "--json")[1])
@@ -133,8 +136,16 @@ def rotate(running: RunningLab, work: Path) -> dict[str, Any]:
         for name, doc in after["robots"].items()
         if doc.get("primary") == new_id and doc.get("keys") == [new_id]
     )
+    time.sleep(settle)  # a robot left on a retired key would be suspected within this
     bad, rejected = trouble_since(running, before)
+    alive = {
+        robot.name: sum(
+            m["state"] == "alive" for m in AgentClient(str(robot.api), timeout=5).members()
+        )
+        for robot in running.lab.robots
+    }
     return {
+        "alive_seen_after": alive,
         "new_key_id": new_id,
         "retired": old,
         "seconds": steps,
@@ -158,6 +169,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--netns", action="store_true", help="each robot in a network namespace (root)")
     p.add_argument("--preset", default="lan", help="the agents' preset (default lan)")
     p.add_argument("--json", type=Path, metavar="PATH", help="write every run here")
+    p.add_argument(
+        "--settle",
+        type=float,
+        default=10.0,
+        help="seconds watched after each retire before counting (default 10: several of the "
+        "preset's probe timeouts, so a robot left on a retired key would be suspected)",
+    )
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="bench-keys-") as tmp:
         work = Path(tmp)
@@ -166,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         running = start_lab(options, say=lambda _: None)
         try:
-            runs = [rotate(running, work) for _ in range(args.runs)]
+            runs = [rotate(running, work, args.settle) for _ in range(args.runs)]
         finally:
             running.stop(grace=5)
     med = {
@@ -195,6 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'  command start to last':<28}{last:>10.3f}")
     on_new = min(r["robots_on_new_key"] for r in runs)
     print(f"{'robots on the new key alone':<28}{on_new:>7}/{args.robots}")
+    seen = min(n for r in runs for n in r["alive_seen_after"].values())
+    print(f"{'alive seen by each, after':<28}{seen:>7}/{args.robots} (min, {args.settle:g} s on)")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         doc = {
