@@ -507,3 +507,19 @@ def test_an_allocator_with_a_plan_of_its_own_epoch_refuses_a_predecessors_later_
     core.step(20.1, leading(state, 2))
     assert adopted(core.effects()) == []
     assert core.store.plan == mine
+
+
+def test_an_allocator_carries_on_the_plan_of_a_rival_it_outranks_at_the_same_epoch() -> None:
+    """r0 and r1 both claimed epoch 3 (the election keeps the higher name, r1, and so does every
+    fence); r0 took a deploy first: r1 re-issues it rather than leave it to nobody."""
+    rival = Plan(3, 1, SYSTEM, (Placement("A", "A", "r1"), Placement("B", "B", "r2")), "r0")
+    core = core_holding(None)
+    state = fleet("r0", "r1", "r2", plans={"r0": rival}, claims={"r1": 3, "r0": 3})
+    core.step(10.0, leading(state, 3))
+    assert core.effects() == [Fetch("r0", "http://r0")]
+    core.fetched("r0", rival)
+    core.effects()
+    core.step(10.1, leading(state, 3))
+    (plan,) = adopted(core.effects())
+    assert (plan.key, plan.placements) == ((3, "r1", 2), rival.placements)
+    assert core.store.plan == plan

@@ -12,17 +12,17 @@ done is queued as an effect (`sdrpeer.deploy.effects`) that the shell drains wit
    robot (one fetch in flight); the shell reports `fetched(robot, plan)` or
    `fetch_failed(now, robot)` (that robot is not asked again for `fetch_retry` seconds). Pushed
    and fetched plans go through `offer`; a plan taken becomes `Adopted` (store, apply, gossip).
-3. Allocator duties, while the view says this robot holds the role: once it has caught up with
-   the newest plan it can hear of (`adopt_after` seconds after winning, or at once when no
-   robot gossips a newer one) it re-issues that plan under its own epoch — losing the allocator
-   loses nothing; a predecessor's plan newer than the one it holds is taken although its own
-   claim raised the fence, and so is a predecessor's plan while it holds none, e.g. a deploy the
-   old allocator took before it heard of the new one — and from then on re-allocates (smallest
-   change) when a placement's robot is gone or degraded or a standby is missing; an attempt
-   that issued nothing is not repeated with the same plan and robots for `retry_every` seconds.
-   A component the disconnect policy holds (`disconnect.held_components`) keeps its placements
-   until its `lost_after`; one moved off a lost robot with `reconcile: keep_original` is moved
-   back once that robot is well.
+3. Allocator duties, while the view says this robot holds the role: once it has caught up with the
+   newest plan it can hear of (`adopt_after` seconds after winning, or at once when no robot
+   gossips a newer one) it re-issues that plan under its own epoch — losing the allocator loses
+   nothing; a predecessor's plan (an earlier epoch, or a rival it outranks at its own) newer than
+   the one it holds is taken although its own claim raised the fence, and so is a predecessor's
+   plan while it holds none, e.g. a deploy the old allocator took before it heard of the new one —
+   and from then on re-allocates (smallest change) when a placement's robot is gone or degraded or
+   a standby is missing; an attempt that issued nothing is not repeated with the same plan and
+   robots for `retry_every` seconds. A component the disconnect policy holds
+   (`disconnect.held_components`) keeps its placements until its `lost_after`; one moved off a lost
+   robot with `reconcile: keep_original` is moved back once that robot is well.
 4. Requests (`request`: `Deploy`, `Move`, `Recover`) run on the allocator only (`NotAllocator`
    elsewhere).
 5. Apply (`apply(now, state, here)`, once the shell has heard whether the robot is in touch):
@@ -341,19 +341,20 @@ class DeployCore:
         return max(keys, default=None)
 
     def _wants_predecessor(self, key: PlanKey) -> bool:
-        """Whether the allocator takes a plan of an earlier epoch that the fence refuses, to
-        re-issue it under its own: while it adopts (a robot it had not heard from yet may hold
-        a plan newer than its own; the fence, raised by its own claim, would refuse it), and
-        while it holds no plan at all (a predecessor that had not heard of it yet took a deploy:
-        without this, nobody would own that system and the robots that heard of the new
-        allocator would refuse it). Once it holds a plan of its own epoch, a predecessor's later
-        plan is refused like anywhere else (a cut-off old allocator's plans must not undo the
-        fleet's)."""
+        """Whether the allocator takes a predecessor's plan (an earlier epoch, or a rival ranked
+        below it at its own epoch: the fence's order) that the fence refuses, to re-issue it
+        under its own: while it adopts (a robot it had not heard from yet may hold a plan newer
+        than its own; the fence, raised by its own claim, would refuse it), and while it holds
+        no plan at all (a predecessor that had not heard of it yet took a deploy: without this,
+        nobody would own that system and the robots that heard of the new allocator would
+        refuse it). Once it holds a plan of its own, a predecessor's later plan is refused like
+        anywhere else (a cut-off old allocator's plans must not undo the fleet's)."""
         epoch = self._successor_of
-        if not epoch or key[0] >= epoch:
+        mine = (epoch, self.name)
+        if not epoch or (key[0], key[1]) >= mine:
             return False
         held = self.store.plan
-        if held is not None and held.epoch >= epoch:
+        if held is not None and (held.epoch, held.allocator) >= mine:
             return False
         floor = self._floor()
         return floor is None or key > floor
@@ -391,7 +392,12 @@ class DeployCore:
             self._adopt_by = math.inf
             self._adopted_epoch = epoch
             plan = self._basis or plan
-            if plan is not None and plan.epoch < epoch and not self._must_move(plan, view):
+            ours = (epoch, self.name)
+            if (
+                plan is not None
+                and (plan.epoch, plan.allocator) < ours
+                and not self._must_move(plan, view)
+            ):
                 self._allocate(now, view, Reissue("new allocator"), plan)
                 return
         elif self._basis is not None and plan is None:

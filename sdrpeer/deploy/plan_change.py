@@ -178,7 +178,7 @@ def change(reason: Reason, plan: Plan | None, ctx: Context) -> Change:
             new = Plan(epoch, version, plan.system, plan.placements, me, why=plan.why)
         elif isinstance(reason, Reissue):
             assert plan is not None
-            if result.placements == plan.placements and plan.epoch == epoch:
+            if result.placements == plan.placements and (plan.epoch, plan.allocator) == (epoch, me):
                 return Change(None, logs)  # e.g. still no robot for a missing standby
             new = result
         else:
