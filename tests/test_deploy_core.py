@@ -457,6 +457,19 @@ def test_a_robot_cut_off_holds_its_actives_down() -> None:
 # -- a predecessor's plan the fence refuses ----------------------------------------------------
 
 
+def carried_on(
+    core: DeployCore, now: float, state: ClusterState, epoch: int, *, robot: str, plan: Plan
+) -> list[Effect]:
+    """The allocator `core` fetches `plan` from `robot` (the fence refuses it) and re-issues it
+    at its next step: that step's effects."""
+    core.step(now, leading(state, epoch))
+    assert core.effects() == [Fetch(robot, f"http://{robot}")]
+    core.fetched(robot, plan)
+    core.effects()
+    core.step(now + 0.1, leading(state, epoch))
+    return core.effects()
+
+
 def test_a_new_allocator_whose_claim_raised_the_fence_still_catches_up_with_a_newer_plan() -> None:
     newer = Plan(1, 4, SYSTEM, (Placement("A", "A", "r3"), Placement("B", "B", "r2")), "r0")
     core = core_holding(HELD)
@@ -482,12 +495,7 @@ def test_an_allocator_holding_no_plan_carries_on_a_deploy_its_predecessor_took_l
     core.step(10.0, leading(quiet, 2))
     assert core.effects() == []  # nothing to adopt
     state = fleet("r0", "r1", "r2", plans={"r0": late}, claims={"r1": 2, "r0": 1})
-    core.step(12.0, leading(state, 2))
-    assert core.effects() == [Fetch("r0", "http://r0")]
-    core.fetched("r0", late)
-    core.effects()
-    core.step(12.1, leading(state, 2))
-    effects = core.effects()
+    effects = carried_on(core, 12.0, state, 2, robot="r0", plan=late)
     (plan,) = adopted(effects)
     assert (plan.key, plan.placements) == ((2, "r1", 1), late.placements)
     assert {e.robot for e in effects if isinstance(e, Push)} == {"r0", "r2"}
@@ -515,11 +523,6 @@ def test_an_allocator_carries_on_the_plan_of_a_rival_it_outranks_at_the_same_epo
     rival = Plan(3, 1, SYSTEM, (Placement("A", "A", "r1"), Placement("B", "B", "r2")), "r0")
     core = core_holding(None)
     state = fleet("r0", "r1", "r2", plans={"r0": rival}, claims={"r1": 3, "r0": 3})
-    core.step(10.0, leading(state, 3))
-    assert core.effects() == [Fetch("r0", "http://r0")]
-    core.fetched("r0", rival)
-    core.effects()
-    core.step(10.1, leading(state, 3))
-    (plan,) = adopted(core.effects())
+    (plan,) = adopted(carried_on(core, 10.0, state, 3, robot="r0", plan=rival))
     assert (plan.key, plan.placements) == ((3, "r1", 2), rival.placements)
     assert core.store.plan == plan
