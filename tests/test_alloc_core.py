@@ -292,6 +292,10 @@ def test_a_hot_standby_not_reported_yet_takes_over_before_another_robot_is_tried
     view = cluster(robot("robot-3"), robot("robot-2"))
     result = run(system, view, previous=first.plan)
     assert where(result) == {"A-s1": "robot-2", "A-s2": "robot-3"}
+    failed = InstanceInfo("A-s1", "A", ProcessState.FAILED, "standby", 0.0, 0)
+    view = cluster(robot("robot-3"), robot("robot-2", instances=(failed,)))
+    result = run(system, view, previous=first.plan)  # a standby reported failed is not taken
+    assert where(result) == {"A": "robot-3", "A-s1": "robot-2"}
     cold = SystemDef(
         "s", (comp("A", standby=StandbySpec(other_robots=1, mode="cold")),), allocation=TABLE_V
     )

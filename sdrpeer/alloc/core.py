@@ -294,13 +294,11 @@ class _Allocation:
         for p in self.previous.get(comp.name, ()):
             i = self.index.get(p.robot)
             hot = p.role == InstanceRole.STANDBY and p.mode != "cold"
-            if (
-                hot
-                and i is not None
-                and p.instance not in seen
-                and p.instance not in self.names[comp.name]
-            ):
-                out.append((i, p.instance))
+            if not hot or i is None or p.instance in seen or p.instance in self.names[comp.name]:
+                continue
+            if any(inst.name == p.instance for inst in self.robots[i].instances):
+                continue  # reported, and not running: failed or going (not a standby to take)
+            out.append((i, p.instance))
         return out
 
     def _how(self, comp: ComponentDef, i: int) -> str:
