@@ -526,3 +526,39 @@ def test_an_allocator_carries_on_the_plan_of_a_rival_it_outranks_at_the_same_epo
     (plan,) = adopted(carried_on(core, 10.0, state, 3, robot="r0", plan=rival))
     assert (plan.key, plan.placements) == ((3, "r1", 2), rival.placements)
     assert core.store.plan == plan
+
+
+def test_a_predecessors_plan_is_issued_at_adoption_even_when_what_must_move_is_held() -> None:
+    """The newer plan fetched while adopting places B on r4, which is gone, and B's disconnect
+    policy holds it there for 30 s: nothing may move yet, but the plan is issued under the new
+    epoch at once (kept in memory only, r1 would go on applying the older plan it holds, and
+    the robots that heard of r1 refuse the predecessor's: A active twice)."""
+    slow = DisconnectSpec(lost_after_s=30.0)
+    system = SystemDef(
+        "s", (comp("A", 700 * MB), comp("B", 700 * MB, disconnect=slow)), allocation=TABLE_V
+    )
+    held = Plan(1, 3, system, (Placement("A", "A", "r1"), Placement("B", "B", "r2")), "r0")
+    newer = Plan(1, 5, system, (Placement("A", "A", "r3"), Placement("B", "B", "r4")), "r0")
+    core = core_holding(held)
+    state = fleet("r1", "r2", "r3", plans={"r2": held, "r3": newer}, claims={"r1": 2})
+    (plan,) = adopted(carried_on(core, 10.0, state, 2, robot="r3", plan=newer))
+    assert (plan.key, plan.placements) == ((2, "r1", 1), newer.placements)
+    assert core.store.plan == plan
+    assert core.caught_up(state)
+
+
+def test_a_request_while_adopting_starts_from_the_predecessors_newer_plan() -> None:
+    newer = Plan(1, 5, SYSTEM, (Placement("A", "A", "r3"), Placement("B", "B", "r2")), "r0")
+    core = core_holding(HELD)
+    state = fleet("r1", "r2", "r3", plans={"r3": newer}, claims={"r1": 2})
+    core.step(10.0, leading(state, 2))
+    assert core.effects() == [Fetch("r3", "http://r3")]
+    core.fetched("r3", newer)
+    core.effects()
+    assert not core.caught_up(state)  # the predecessor's plan waits to be re-issued
+    moved = core.request(10.05, leading(state, 2), Move("B", "r1"))
+    assert isinstance(moved, Plan)
+    assert where(moved) == {"A": "r3", "B": "r1"}  # A where the newer plan has it
+    core.effects()
+    core.step(10.1, leading(state, 2))
+    assert adopted(core.effects()) == []  # our own plan already: nothing left to adopt

@@ -117,6 +117,16 @@ class Here:
     """Its launch policy (None: everything may run)."""
 
 
+def _before(plan: Plan | None, epoch: int, me: str) -> bool:
+    """Whether `plan` is a predecessor's of the allocator `me` at `epoch` (the fence's order)."""
+    return plan is not None and (plan.epoch, plan.allocator) < (epoch, me)
+
+
+def _carried(plan: Plan) -> str:
+    """The reason logged when an allocator re-issues a predecessor's plan after adopting."""
+    return f"carried on {plan.allocator}'s plan (epoch {plan.epoch}, version {plan.version})"
+
+
 class DeployCore:
     """One robot's plan sync, its share of the plan and, while it holds the role, the
     allocator's duties."""
@@ -218,8 +228,13 @@ class DeployCore:
         self._fetch_failed[robot] = now + self.config.fetch_retry
 
     def caught_up(self, state: ClusterState) -> bool:
-        """No alive robot gossips a plan newer than ours (or, on the allocator, than the
-        predecessor's plan it re-issues), and no fetch is in flight."""
+        """No alive robot gossips a plan newer than ours, no fetch is in flight, and (on the
+        allocator) no predecessor's plan waits to be re-issued."""
+        return self._basis is None and self._synced(state)
+
+    def _synced(self, state: ClusterState) -> bool:
+        """No alive robot gossips a plan newer than ours or than the predecessor's plan the
+        allocator will re-issue, and no fetch is in flight."""
         return self._fetching is None and self._newest_offer(state) is None
 
     def newer_holders(self, state: ClusterState) -> set[str]:
@@ -351,8 +366,8 @@ class DeployCore:
         anywhere else (a cut-off old allocator's plans must not undo the fleet's)."""
         epoch = self._successor_of
         mine = (epoch, self.name)
-        if not epoch or (key[0], key[1]) >= mine:
-            return False
+        if not epoch or (key[0], key[1]) >= mine or not self.store.fence.accepts(*mine):
+            return False  # not a predecessor's, or a higher claim fenced this allocator off
         held = self.store.plan
         if held is not None and (held.epoch, held.allocator) >= mine:
             return False
@@ -382,30 +397,25 @@ class DeployCore:
         if self._elected_at is None:
             self._elected_at = now
         state, epoch = view.state, view.epoch
-        plan = self.store.plan
-        if self._adopted_epoch != epoch:
+        adopting = self._adopted_epoch != epoch
+        if adopting:
             adopt_by = self._elected_at + self.config.adopt_after  # the timer's own value
-            if not self.caught_up(state) and now < adopt_by:
+            if not self._synced(state) and now < adopt_by:
                 self._adopt_by = adopt_by  # the only deadline while it waits
                 self._held_due, self._last_attempt, self._retry_at = math.inf, None, math.inf
                 return
             self._adopt_by = math.inf
             self._adopted_epoch = epoch
-            plan = self._basis or plan
-            ours = (epoch, self.name)
-            if (
-                plan is not None
-                and (plan.epoch, plan.allocator) < ours
-                and not self._must_move(plan, view)
-            ):
-                self._allocate(now, view, Reissue("new allocator"), plan)
-                return
-        elif self._basis is not None and plan is None:
-            plan = self._basis
-            who = f"{plan.allocator}'s plan (epoch {plan.epoch}, version {plan.version})"
-            if not self._must_move(plan, view):
-                self._allocate(now, view, Reissue(f"carried on {who}"), plan)
-                return
+        basis, self._basis = self._basis, None  # taken now: a refused publish does not loop
+        plan = basis or self.store.plan
+        # a plan this allocator did not make (adopted, or a predecessor's it carries on) is
+        # issued under its epoch now, whatever else this step does: the robots that heard of it
+        # refuse the predecessor's
+        foreign = (adopting or basis is not None) and _before(plan, epoch, self.name)
+        reason = "new allocator" if adopting or plan is None else _carried(plan)
+        if foreign and plan is not None and not self._must_move(plan, view):
+            self._allocate(now, view, Reissue(reason), plan)
+            return
         if plan is None or plan.system is None:
             self._held_due = self._retry_at = math.inf
             self._last_attempt = None
@@ -419,6 +429,8 @@ class DeployCore:
         short = plan.standbys_short()
         if not (lost or sick or short):
             self._last_attempt, self._retry_at = None, math.inf
+            if foreign:  # what must move is held by its disconnect policy: issue it, held
+                self._allocate(now, view, Reissue(reason, recovery=True), plan)
             return
         attempt = (plan.key, frozenset(state.alive), view.degraded, held)
         if attempt == self._last_attempt and now < self._retry_at:
@@ -470,7 +482,7 @@ class DeployCore:
                 )
             )
             try:
-                result = self._allocate(now, view, Move(comp, robot))
+                result = self._allocate(now, view, Move(comp, robot), plan)
             except (LookupError, ValueError) as e:
                 log.info("cannot move %s back to %s: %s", comp, robot, e)
                 return False
@@ -484,7 +496,7 @@ class DeployCore:
     ) -> Plan | Infeasible | None:
         """The one allocation path: `plan_change.change` from `base` (the plan held, or a
         predecessor's the allocator re-issues), its logs, and the plan published."""
-        plan = base or self.store.plan
+        plan = base or self._basis or self.store.plan
         held = self._held(now, plan, view)
         ctx = Context(self.name, view.epoch, view.state, view.excluded, held)
         out = change(reason, plan, ctx)
@@ -495,9 +507,9 @@ class DeployCore:
 
     def _publish(self, plan: Plan, state: ClusterState, base: Plan | None) -> None:
         plan = with_origins(plan, base, state)
+        self._basis = None  # made from it (or refused: this robot is not the allocator after all)
         if not self.offer(plan, source=self.name):
             return
-        self._basis = None
         for robot, rec in state.alive.items():
             if robot != self.name and rec.api is not None:
                 self._effects.append(Push(robot, rec.api, plan))
