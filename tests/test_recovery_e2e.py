@@ -77,7 +77,10 @@ def test_signal_loss_on_the_allocators_robot_moves_the_allocator_first(
     doc = deploy(cluster, one, fast_system(tmp_path))
     placed = {c["robot"] for c in doc["components"]}
     assert placed == {"robot-1"}, cluster.logs()  # first_fit: the origin
-    before = status(two)["allocator"]
+    # on a loaded machine an election may be under way (name None): robot-1 must win it again
+    before = cluster.wait_until(
+        lambda: status(two)["allocator"], lambda a: a["name"] is not None, "a known allocator"
+    )
     assert before["name"] == "robot-1", (
         f"the allocator left robot-1 before its signal fell: {before}"
     )
