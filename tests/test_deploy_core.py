@@ -562,3 +562,23 @@ def test_a_request_while_adopting_starts_from_the_predecessors_newer_plan() -> N
     core.effects()
     core.step(10.1, leading(state, 2))
     assert adopted(core.effects()) == []  # our own plan already: nothing left to adopt
+
+
+def test_deploying_the_system_held_again_moves_nothing() -> None:
+    """A client that retries a deploy (its first answer lost to a timeout) or applies the same
+    file again gets the plan held: no new allocation, which would judge robots by metrics that
+    do not count yet the instances the first plan is starting, and move them."""
+    core = core_holding()
+    state = fleet("r1", "r2", "r3")
+    first = deployed(core, state, epoch=1)
+    full = fleet("r2", "r1", "r3")  # another order: a new allocation would place A on r2
+    again = core.request(2.0, leading(full, 1), Deploy(SYSTEM, "r2"))
+    assert again == first
+    effects = core.effects()
+    assert adopted(effects) == []
+    assert not [e for e in effects if isinstance(e, Push)]
+    assert logs(effects, "allocation") == [{"reason": "deploy: the system held, unchanged"}]
+    other = SystemDef("s", (comp("A", 700 * MB),), allocation=TABLE_V)
+    changed = core.request(3.0, leading(state, 1), Deploy(other, "r1"))
+    assert isinstance(changed, Plan)
+    assert changed.key == (1, "r1", 2)  # a different system is deployed as ever

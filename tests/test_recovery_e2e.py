@@ -109,7 +109,7 @@ def test_a_killed_robots_components_come_up_elsewhere(cluster: RealCluster, tmp_
     agents = cluster.start_many(3)
     one, two, _ = agents
     doc = deploy(cluster, one, fast_system(tmp_path))
-    assert {c["robot"] for c in doc["components"]} == {"robot-1"}
+    assert {c["robot"] for c in doc["components"]} == {"robot-1"}, explained(two, doc)
     listed = {i["name"] for i in two.member("robot-1")["instances"]}
     assert listed  # robot-1's record lists the actives it runs
     cluster.kill(one)
@@ -120,9 +120,25 @@ def test_a_killed_robots_components_come_up_elsewhere(cluster: RealCluster, tmp_
         )
         assert {i["name"] for i in dead["instances"]} == listed
         assert {i["state"] for i in dead["instances"]} == {"lost"}
+    at_death = {
+        r: [(i["name"], i["state"]) for i in a.member(r)["instances"]]
+        for r, a in (("robot-2", two), ("robot-3", agents[2]))
+    }
     after = cluster.wait_until(lambda: status(two), all_active_off("robot-1"), "moved", 20)
     standby_robots = {s["robot"] for c in doc["components"] for s in c["standbys"]}
-    assert {c["robot"] for c in after["components"]} <= standby_robots  # hot standbys took over
+    assert {c["robot"] for c in after["components"]} <= standby_robots, (  # hot standbys took over
+        at_death,
+        explained(two, after),
+    )
+
+
+def explained(agent: Agent, doc: dict[str, Any]) -> list[Any]:
+    """How the allocator chose each active's robot, and what ruled the others out."""
+    out = []
+    for c in doc["components"]:
+        d = agent.get(f"/v1/describe/{c['component']}")
+        out += [(i["instance"], i["robot"], i["why"]) for i in d["instances"]]
+    return out
 
 
 CRASHY = """\

@@ -68,6 +68,7 @@ from sdrpeer.errors import NotAllocator
 from sdrpeer.eventlog import EventKind
 from sdrpeer.plan import Plan
 from sdrpeer.runtime.spec import InstanceSpec
+from sdrpeer.system.model import SystemDef
 from sdrpeer.vocabulary import InstanceRole, LifecycleState
 
 log = logging.getLogger(__name__)
@@ -120,6 +121,15 @@ class Here:
 def _before(plan: Plan | None, epoch: int, me: str) -> bool:
     """Whether `plan` is a predecessor's of the allocator `me` at `epoch` (the fence's order)."""
     return plan is not None and (plan.epoch, plan.allocator) < (epoch, me)
+
+
+def _same_system(plan: Plan | None, system: SystemDef | None, epoch: int, me: str) -> bool:
+    """Whether `plan` is this allocator's own, at its epoch, for exactly `system`."""
+    if plan is None or (plan.epoch, plan.allocator) != (epoch, me):
+        return False
+    if plan.system is None or system is None:
+        return plan.system is system
+    return plan.system.digest() == system.digest()
 
 
 def _carried(plan: Plan) -> str:
@@ -260,6 +270,13 @@ class DeployCore:
         component the deployed system does not have)."""
         if not view.allocator:
             raise NotAllocator(view.leader)
+        held = self._basis or self.store.plan
+        if isinstance(reason, Deploy) and _same_system(held, reason.system, view.epoch, self.name):
+            assert held is not None
+            self._effects.append(
+                Log(EventKind.ALLOCATION, {"reason": "deploy: the system held, unchanged"})
+            )
+            return held  # deploying again what runs moves nothing (a client's retry, an apply)
         result = self._allocate(now, view, reason)
         assert result is not None  # only a Reissue may come to nothing
         if isinstance(reason, Deploy) and isinstance(result, Plan):
