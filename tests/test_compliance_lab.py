@@ -5,6 +5,7 @@ as an event and in the status, and the receiver re-placed where its link holds."
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -16,10 +17,13 @@ from sdrpeer.errors import ApiError
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from sdrpeer.record.robot import state_to_wire
-from sdrpeer.system.loader import parse_system
 from sdrpeer.vocabulary import LifecycleState
 from tests.realnet import NETNS_ONLY
 from tests.wait import until
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+
+from bench_compliance import system as bench_system
 
 pytestmark = pytest.mark.realnet
 WITHIN, POLL = 60.0, 0.1
@@ -27,32 +31,6 @@ NOT_YET = (ApiError,)
 SUSTAIN = 2.0
 ACTIVE = state_to_wire(LifecycleState.ACTIVE)
 """How `GET /v1/status` spells an active instance's state."""
-
-SYSTEM = f"""name: comply
-components:
-  - name: Src
-    target: components.camera:Camera
-    params: {{reserve_mb: 0, rate: 2, width: 32, height: 24}}
-    requires: {{memory: 1500MB}}
-    pin: robot-1
-  - name: Det
-    target: components.anomaly_detection:AnomalyDetection
-    params: {{reserve_mb: 0}}
-    requires: {{memory: 600MB}}
-    prefer: [robot-2]
-connections:
-  - from: Src.image
-    to: Det.image
-    constraints: {{loss_below: 15%}}
-compliance: {{on_violation: replace, for: {SUSTAIN}s, min_interval: 60s}}
-recovery:
-  rules:
-    - {{cause: component_error, actions: [restart]}}
-"""
-"""Src's declared 1500MB leave robot-1 (2000MB) no room for Det, so Det runs on another robot
-and its connection crosses a link. Only the component_error rule: Table III's communication
-failure would move everything off the lossy robot by itself, and this test is about the
-connection's own bound."""
 
 
 @pytest.fixture
@@ -87,7 +65,11 @@ def test_a_lossy_link_past_a_connections_bound_is_reported_and_the_receiver_move
 ) -> None:
     clients = {r.name: AgentClient(str(r.api), r.token, timeout=3) for r in lab.lab.robots}
     one = clients["robot-1"]
-    system = parse_system(SYSTEM, "comply.yaml").to_json()
+    # the bench's system: Src's declared 1500MB leave robot-1 (2000MB) no room for Det, so Det
+    # runs on another robot and its connection (its own loss bound: 15 %) crosses a link; only
+    # the component_error rule, since Table III's communication failure would move everything
+    # off the lossy robot by itself, and this test is about the connection's own bound
+    system = bench_system(bound=15, sustain=SUSTAIN, min_interval=60)
     post_when_elected(one, "/v1/deploy", {"system": system}, 30.0)
     until(
         "Det ACTIVE on robot-2",
