@@ -427,6 +427,33 @@ def test_own_record_echo_does_not_bump_but_an_older_life_does() -> None:
     assert core.record_of("r0") == (41, b"mine")
 
 
+def own_records_sent(sent: list[tuple[Addr, Packet]]) -> set[bytes]:
+    """The payloads of our own (r0's) records in `sent`."""
+    return {
+        u.payload
+        for _, p in sent
+        if isinstance(p, Gossip)
+        for u in p.updates
+        if isinstance(u, Record) and u.name == "r0"
+    }
+
+
+def test_our_own_new_record_goes_out_at_once_and_news_inside_the_gap_at_its_end() -> None:
+    # A robot standing down an instance publishes a record that decides when another robot may
+    # activate the component's new copy: it must not wait for the next regular round (0.1 s).
+    core = with_peers()
+    advance(core, 0.0, 5.0)  # the joins' gossip spent
+    core.datagrams_to_send()
+    core.set_record(5.0, b"stood down: A")
+    assert own_records_sent(core.datagrams_to_send()) == {b"stood down: A"}
+    gap = CONFIG.gossip_interval / 4
+    core.set_record(5.0 + gap / 5, b"stood down: A, B")  # inside the gap: not sent yet
+    assert own_records_sent(core.datagrams_to_send()) == set()
+    assert core.next_timer() <= 5.0 + gap + 1e-9  # but at the gap's end, not a round later
+    core.handle_timer(5.0 + gap)
+    assert own_records_sent(answer_pings(core, 5.0 + gap)) == {b"stood down: A, B"}
+
+
 def test_broadcast_event_goes_out_at_once_and_is_deduplicated() -> None:
     core = with_peers()
     core.broadcast_event(1.0, "trap", b"battery low")

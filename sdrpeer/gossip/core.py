@@ -92,7 +92,9 @@ from sdrpeer.gossip.wire import encoded_size
 from sdrpeer.vocabulary import MemberState
 
 # Timer kinds.
-PROBE, PROBE_TIMEOUT, PROBE_END, GOSSIP, SYNC, SUSPICION, FWD_END, REAP, JOIN, RECHECK = range(10)
+(PROBE, PROBE_TIMEOUT, PROBE_END, GOSSIP, SYNC, SUSPICION, FWD_END, REAP, JOIN, RECHECK, URGENT) = (
+    range(11)
+)
 
 
 SEEN_EVENTS_MAX = 8192
@@ -177,6 +179,7 @@ class Membership:
         self._fwd: dict[int, tuple[Addr, int, bool]] = {}
         self._gossip_armed = False
         self._urgent_at = float("-inf")
+        self._urgent_armed = False
         self._event_seq = 0
         self._seen_events: dict[tuple[str, int], None] = {}
         self._sync_replied: dict[str, float] = {}
@@ -215,12 +218,19 @@ class Membership:
 
     def _urgent_round(self) -> None:
         """A gossip round now for news that decides life and death (a death, a new
-        suspicion): each hop then costs a network delay, not the wait for the next round, and
-        the robots' suspicion timers start and end together. At most one such round per
-        quarter gossip interval; the regular rounds carry the rest."""
-        if self._now - self._urgent_at >= self.config.gossip_interval / 4:
+        suspicion) or a placement (our own new record: an instance stood down, a plan taken):
+        each hop then costs a network delay, not the wait for the next round, and the robots'
+        timers start and end together. At most one such round per quarter gossip interval:
+        news arriving inside that gap goes in one round at its end, not at the next regular
+        round (a robot standing down five instances within 60 ms publishes five records; the
+        last one decides when the new robot may activate)."""
+        soonest = self._urgent_at + self.config.gossip_interval / 4
+        if self._now >= soonest:
             self._urgent_at = self._now
             self._gossip_round()
+        elif not self._urgent_armed:
+            self._urgent_armed = True
+            self._at(soonest, URGENT, None)
 
     def _gossip_round(self) -> None:
         if self._queue:
@@ -579,6 +589,7 @@ class Membership:
         old = self._records.get(self.name)
         version = old[0] + 1 if old else self._first_version
         self._store_own_record(version, payload)
+        self._urgent_round()
         return version
 
     def set_vitals(self, now: float, payload: bytes) -> int:
@@ -660,6 +671,10 @@ class Membership:
                 self._retry_join(arg)
             elif kind == RECHECK:
                 self._recheck(*arg)
+            elif kind == URGENT:
+                self._urgent_armed = False
+                if self._queue:
+                    self._urgent_round()
 
     # ----------------------------------------------------------------- outputs
     def next_timer(self) -> float:
