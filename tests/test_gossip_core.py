@@ -427,6 +427,17 @@ def test_own_record_echo_does_not_bump_but_an_older_life_does() -> None:
     assert core.record_of("r0") == (41, b"mine")
 
 
+def test_an_earlier_lifes_record_before_our_first_sends_nothing_empty() -> None:
+    # A restarted agent hears its earlier life's record before it has published one: it sent
+    # an empty record past it, which every robot logged as malformed.
+    core = with_peers()
+    sent = feed(core, 0.1, Record("r0", 40, b"from before the restart"))
+    advance(core, 0.1, 1.0)
+    assert own_records_sent(sent + core.datagrams_to_send()) == set()
+    assert core.set_record(1.0, b"mine") == 41
+    assert own_records_sent(core.datagrams_to_send()) == {b"mine"}
+
+
 def own_records_sent(sent: list[tuple[Addr, Packet]]) -> set[bytes]:
     """The payloads of our own (r0's) records in `sent`."""
     return {

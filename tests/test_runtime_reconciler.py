@@ -9,7 +9,7 @@ import pytest
 from sdrpeer.runtime.backoff import RestartConfig, RestartPolicy, backoff_delay
 from sdrpeer.runtime.reconciler import Action, Observed, Reconciler
 from sdrpeer.runtime.spec import ConnectionSpec, InstanceSpec
-from sdrpeer.vocabulary import LifecycleState, ProcessState
+from sdrpeer.vocabulary import InstanceRole, LifecycleState, ProcessState
 
 CAM_TO_VIEW = ConnectionSpec("c1", "image", "View", "image")
 
@@ -230,3 +230,28 @@ def test_restart_policy_resets_after_a_stable_run_and_gives_up():
     assert p.on_exit(started=41.2, now=42.0) is None  # third fast failure in a row
     p.reset()
     assert p.on_exit(started=50.0, now=51.0) == pytest.approx(0.1)
+
+
+# ------------------------------------------------------------------ paced starts
+
+
+def test_starts_are_paced_would_be_actives_first_then_by_name() -> None:
+    # Twenty hosts spawned at once starved ten agents on two cores (issue 30): at most
+    # max_starting hosts start together, actives before standbys.
+    standbys = {f"S{i}": spec(f"S{i}", role=InstanceRole.STANDBY) for i in range(3)}
+    actives = {f"A{i}": spec(f"A{i}") for i in (2, 1)}
+    desired = {**standbys, **actives}
+    r = Reconciler(max_starting=2)
+    assert kinds(r.plan(0.0, desired, {})) == [("start", "A1"), ("start", "A2")]
+    assert r.plan(0.1, desired, {}) == []  # both starts still in flight: no room
+    r.done("A1")
+    r.done("A2")
+    starting = {"A1": obs("STARTING", actives["A1"]), "A2": obs("CREATED", actives["A2"])}
+    assert r.plan(0.2, desired, starting) == []  # spawned, not initialized yet: no room
+    starting["A1"] = obs("INACTIVE", actives["A1"])
+    assert kinds(r.plan(0.3, desired, starting)) == [("activate", "A1"), ("start", "S0")]
+
+
+def test_without_a_limit_every_start_goes_at_once() -> None:
+    desired = {f"S{i}": spec(f"S{i}") for i in range(5)}
+    assert len(Reconciler().plan(0.0, desired, {})) == 5

@@ -12,6 +12,7 @@ from collections.abc import AsyncIterator, Callable
 from dataclasses import replace
 from pathlib import Path
 
+import psutil
 import pytest
 
 from sdrpeer.control.messages import Activate
@@ -191,6 +192,17 @@ async def test_the_agents_process_tree_meter_counts_hosts(sups):
     _, host_rss = sup.sample()
     _, tree_rss = ProcessTreeMeter(os.getpid(), include_root=False).measure()
     assert tree_rss >= host_rss > 0
+
+
+@pytest.mark.parametrize("nice", [0, 5])
+async def test_a_host_runs_host_nice_steps_nicer_than_its_agent(sups, nice):
+    # A robot's components must not starve its agent (issue 30: ten agents' probes missed while
+    # their hosts started on two cores); `host_nice` 0 keeps the agent's priority.
+    sup = sups(fake(), supervisor_fast().with_(host_nice=nice))
+    sup.start()
+    await until_async("INACTIVE", lambda: sup.state, lambda s: s == "INACTIVE")
+    assert sup.pid is not None
+    assert psutil.Process(sup.pid).nice() == min(19, os.nice(0) + nice)
 
 
 async def test_a_stop_while_the_host_is_being_made_leaves_no_orphan(

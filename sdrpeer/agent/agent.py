@@ -97,6 +97,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("sdrpeer.agent")
 
+METER_MAX_AGE = 0.25
+"""Seconds a measurement of this robot's processes (cpu, memory) is reused
+(`ProcessTreeMeter.max_age`): the metrics loop samples once a second, every instance change
+samples again at once."""
+
 INSECURE_WARNING = (
     "running INSECURE (no cluster key): gossip on %s is neither authenticated, encrypted nor "
     "replay-protected: anyone who can reach it reads every robot's metrics, position and plan "
@@ -131,7 +136,7 @@ class Agent:
         self.host: HostMetrics | None = None
         self.scenario: Scenario | None = None
         self.traps = TrapDetector()
-        self.meter = ProcessTreeMeter(os.getpid())
+        self.meter = ProcessTreeMeter(os.getpid(), max_age=METER_MAX_AGE)
         self._runner: AppRunner | None = None
         self.api_site: BoundedSite | None = None
         self._tasks: list[asyncio.Task[None]] = []

@@ -265,9 +265,11 @@ def _reap_leftovers(lab_dir: Path) -> list[str]:
     or host that outlived `lab.stop` is a leak the soak reports."""
     marker = str(lab_dir)
     found = []
+    mine = {os.getpid(), *(p.pid for p in psutil.Process().parents())}  # `timeout ... --keep
+    # DIR` around the soak names the lab too: it was killed as a leftover of its own soak
     for proc in psutil.process_iter(["pid", "cmdline"]):
         cmdline = proc.info.get("cmdline") or []
-        if proc.pid != os.getpid() and any(marker in part for part in cmdline):
+        if proc.pid not in mine and any(marker in part for part in cmdline):
             found.append(f"pid {proc.pid}: {' '.join(cmdline)[:200]}")
             with contextlib.suppress(psutil.Error):
                 proc.kill()

@@ -24,9 +24,23 @@ log = logging.getLogger(__name__)
 
 
 def plan_digest(plan: Plan) -> str:
-    """A short hash of a plan's content (system and placements)."""
+    """A short hash of a plan's content (system and placements); computed once per plan object
+    (every record published carries it)."""
+    known = _DIGESTS.get(id(plan))
+    if known is not None and known[0] is plan:
+        return known[1]
     text = json.dumps(plan.to_json(), sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    digest = hashlib.sha256(text.encode()).hexdigest()[:16]
+    if len(_DIGESTS) >= _DIGESTS_KEPT:
+        del _DIGESTS[next(iter(_DIGESTS))]
+    _DIGESTS[id(plan)] = (plan, digest)
+    return digest
+
+
+_DIGESTS: dict[int, tuple[Plan, str]] = {}
+"""id -> (the plan, its digest) of the plans whose digest was asked for last (the object is
+kept, so its id cannot be reused while it is here)."""
+_DIGESTS_KEPT = 8
 
 
 class PlanStore:

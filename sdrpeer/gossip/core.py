@@ -835,12 +835,15 @@ class Membership:
     def _merge_record(self, r: Record) -> None:
         if r.name == self.name:  # a record of ours from an earlier life: jump past it
             mine = self._records.get(self.name)
-            if (
-                mine is None
-                or r.version > mine[0]
+            if mine is None:  # nothing published yet: our first record goes out past it (an
+                # empty one now reached every robot as a malformed record, and they kept the
+                # earlier life's instances until our first real one came)
+                self._first_version = max(self._first_version, r.version + 1)
+            elif (
+                r.version > mine[0]
                 or (r.version == mine[0] and r.payload != mine[1])
             ):
-                self._store_own_record(r.version + 1, mine[1] if mine else b"", jump=True)
+                self._store_own_record(r.version + 1, mine[1], jump=True)
             return
         old = self._records.get(r.name)
         if old is not None and old[0] >= r.version:

@@ -42,6 +42,13 @@ class SupervisorConfig:
     killed (its heartbeats may be waiting unread while the agent's loop was busy)."""
     eof_grace: float = 1.0
     """A host that closed its control channel is killed if it has not exited this much later."""
+    max_starting: int = 2
+    """Hosts starting at once on this robot, at most (0: no limit): the rest wait their turn,
+    would-be actives first (`sdrpeer.runtime.reconciler`)."""
+    host_nice: int = 5
+    """Hosts run this much nicer than their agent (`nice(2)`; 0: the same priority): a robot's
+    components take every cycle its agent leaves idle, and cannot starve the agent's probes,
+    heartbeat reads and steps when they, or their start-ups, want more than the cores have."""
 
     def with_(self, **changes: Any) -> SupervisorConfig:
         """A copy with some fields changed."""

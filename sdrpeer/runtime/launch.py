@@ -108,9 +108,18 @@ def die_with_parent() -> None:
         _PRCTL(_PR_SET_PDEATHSIG, _SIGKILL)
 
 
-def preexec() -> Callable[[], None] | None:
-    """The preexec_fn for hosts (None where there is no parent-death signal)."""
-    return die_with_parent if _PRCTL is not None else None
+def preexec(nice: int = 0) -> Callable[[], None] | None:
+    """The preexec_fn for hosts: die with the agent where there is a parent-death signal, and
+    run `nice` steps nicer than the agent (None: nothing to do in the child)."""
+    if nice <= 0:
+        return die_with_parent if _PRCTL is not None else None
+
+    def child() -> None:
+        die_with_parent()
+        with contextlib.suppress(OSError):
+            os.nice(nice)
+
+    return child
 
 
 async def create_process(argv: list[str], **options: Any) -> asyncio.subprocess.Process:

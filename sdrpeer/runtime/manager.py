@@ -98,7 +98,7 @@ class InstanceManager:
         self.before_stop_timeout = 2.0
         self.data_keys: tuple[bytes, ...] = ()
         """What new hosts authenticate data connections with (`set_data_keys` on rotation)."""
-        self.reconciler = Reconciler()
+        self.reconciler = Reconciler(max_starting=config.max_starting)
         self._desired: dict[str, InstanceSpec] = {}
         self._adhoc = AdHoc()
         self.remote_address: Callable[[str], str | None] = lambda instance: None

@@ -20,6 +20,14 @@ at most one `Action` for each, in name order. Rules, in the order they are tried
    is kept INACTIVE, warm). Activate only when every receiver the instance sends to that should be
    active already is (receivers before senders); deactivate a receiver only after the senders
    that go down with it. Inside a cycle of connections these orderings are ignored.
+
+Starts are paced: at most `max_starting` hosts are starting at once (spawned or being spawned,
+not initialized yet: a host's start-up, Python and its imports, is the most CPU an instance ever
+takes in one go), instances that should end up ACTIVE first, then standbys, each in name order.
+A plan that puts twenty instances on a robot spawned twenty interpreters at once; ten robots
+sharing two cores did so together, and the agents, starved, missed their probes' deadlines and
+were declared dead (issue 30). Starting more hosts at once than the robot has cores makes none
+of them ready sooner.
 """
 
 from __future__ import annotations
@@ -37,6 +45,8 @@ _DOWN: frozenset[InstanceState] = frozenset(
     {ProcessState.STOPPED, ProcessState.STOPPING, LifecycleState.FINALIZED}
 )
 """Not desired and nothing to stop: stopped, or on its way there."""
+STARTING: frozenset[InstanceState] = frozenset({ProcessState.STARTING, LifecycleState.CREATED})
+"""A host spawned (or being spawned) whose component is not initialized yet."""
 KINDS = ("start", "stop", "activate", "deactivate", "connect", "disconnect", "repoint")
 
 
@@ -94,8 +104,10 @@ def _reach(desired: Mapping[str, InstanceSpec]) -> dict[str, set[str]]:
 class Reconciler:
     """Plans actions and remembers which are in flight."""
 
-    def __init__(self, action_timeout: float = 30.0) -> None:
+    def __init__(self, action_timeout: float = 30.0, max_starting: int = 0) -> None:
         self.action_timeout = action_timeout
+        self.max_starting = max_starting
+        """Hosts starting at once, at most (0: no limit); see the module docstring."""
         self.in_flight: dict[str, tuple[Action, float]] = {}
 
     def done(self, name: str) -> None:
@@ -114,6 +126,7 @@ class Reconciler:
                 del self.in_flight[name]
         reach = _reach(desired)
         actions = []
+        starts = []
         for name in sorted(set(desired) | set(observed)):
             if name in self.in_flight:
                 continue
@@ -124,10 +137,31 @@ class Reconciler:
                 if spec is None
                 else _desired(spec, obs, desired, observed, reach)
             )
-            if action is not None:
+            if action is not None and action.kind == "start":
+                starts.append(action)
+            elif action is not None:
                 self.in_flight[name] = (action, now)
                 actions.append(action)
+        for action in self._paced(starts, desired, observed):
+            self.in_flight[action.instance] = (action, now)
+            actions.append(action)
         return actions
+
+    def _paced(
+        self,
+        starts: list[Action],
+        desired: Mapping[str, InstanceSpec],
+        observed: Mapping[str, Observed],
+    ) -> list[Action]:
+        """The starts that may go now: all of them without a limit, else as many as the limit
+        leaves beside the hosts starting already, would-be actives first."""
+        if self.max_starting <= 0:
+            return starts
+        busy = {n for n, (a, _) in self.in_flight.items() if a.kind == "start"}
+        busy |= {n for n, obs in observed.items() if obs.status in STARTING}
+        room = max(0, self.max_starting - len(busy))
+        starts.sort(key=lambda a: (not desired[a.instance].wants_active(), a.instance))
+        return starts[:room]
 
 
 def _undesired(name: str, obs: Observed) -> Action | None:

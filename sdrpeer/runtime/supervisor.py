@@ -299,7 +299,7 @@ class Supervisor:
                 stderr=out,
                 pass_fds=(child.fileno(),),
                 env=env,
-                preexec_fn=preexec(),
+                preexec_fn=preexec(self.config.host_nice),
                 start_new_session=False,
             )
         except asyncio.CancelledError:

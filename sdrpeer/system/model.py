@@ -308,9 +308,24 @@ class SystemDef:
         return doc
 
     def digest(self) -> str:
-        """A short stable hash of the system's content (sha256 of its canonical JSON)."""
+        """A short stable hash of the system's content (sha256 of its canonical JSON); computed
+        once per object (`status` and the dashboard ask for it several times a second, and
+        `asdict` of a 20-component system took a tenth of a busy agent's samples)."""
+        known = _DIGESTS.get(id(self))
+        if known is not None and known[0] is self:
+            return known[1]
         text = json.dumps(self.to_json(), sort_keys=True, separators=(",", ":"), default=str)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        digest = hashlib.sha256(text.encode()).hexdigest()[:16]
+        if len(_DIGESTS) >= _DIGESTS_KEPT:
+            del _DIGESTS[next(iter(_DIGESTS))]
+        _DIGESTS[id(self)] = (self, digest)
+        return digest
+
+
+_DIGESTS: dict[int, tuple[SystemDef, str]] = {}
+"""id -> (the system, its digest) of the systems whose digest was asked for last (the object is
+kept, so its id cannot be reused while it is here)."""
+_DIGESTS_KEPT = 8
 
 
 def _pairs(x: Any) -> tuple[tuple[str, Any], ...]:
