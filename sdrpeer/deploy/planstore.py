@@ -11,7 +11,6 @@ and can give it to a new allocator. `info()` is what the robot gossips about it.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 from pathlib import Path
@@ -19,6 +18,7 @@ from pathlib import Path
 from sdrpeer.election.fence import Fence
 from sdrpeer.plan import Plan, plan_from_json
 from sdrpeer.record.robot import PlanInfo
+from sdrpeer.system.model import DigestMemo, json_digest
 
 log = logging.getLogger(__name__)
 
@@ -26,21 +26,10 @@ log = logging.getLogger(__name__)
 def plan_digest(plan: Plan) -> str:
     """A short hash of a plan's content (system and placements); computed once per plan object
     (every record published carries it)."""
-    known = _DIGESTS.get(id(plan))
-    if known is not None and known[0] is plan:
-        return known[1]
-    text = json.dumps(plan.to_json(), sort_keys=True, separators=(",", ":"), default=str)
-    digest = hashlib.sha256(text.encode()).hexdigest()[:16]
-    if len(_DIGESTS) >= _DIGESTS_KEPT:
-        del _DIGESTS[next(iter(_DIGESTS))]
-    _DIGESTS[id(plan)] = (plan, digest)
-    return digest
+    return _DIGESTS.get(plan, lambda: json_digest(plan.to_json()))
 
 
-_DIGESTS: dict[int, tuple[Plan, str]] = {}
-"""id -> (the plan, its digest) of the plans whose digest was asked for last (the object is
-kept, so its id cannot be reused while it is here)."""
-_DIGESTS_KEPT = 8
+_DIGESTS = DigestMemo()
 
 
 class PlanStore:

@@ -839,10 +839,7 @@ class Membership:
                 # empty one now reached every robot as a malformed record, and they kept the
                 # earlier life's instances until our first real one came)
                 self._first_version = max(self._first_version, r.version + 1)
-            elif (
-                r.version > mine[0]
-                or (r.version == mine[0] and r.payload != mine[1])
-            ):
+            elif r.version > mine[0] or (r.version == mine[0] and r.payload != mine[1]):
                 self._store_own_record(r.version + 1, mine[1], jump=True)
             return
         old = self._records.get(r.name)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -311,21 +312,36 @@ class SystemDef:
         """A short stable hash of the system's content (sha256 of its canonical JSON); computed
         once per object (`status` and the dashboard ask for it several times a second, and
         `asdict` of a 20-component system took a tenth of a busy agent's samples)."""
-        known = _DIGESTS.get(id(self))
-        if known is not None and known[0] is self:
+        return _DIGESTS.get(self, lambda: json_digest(self.to_json()))
+
+
+def json_digest(doc: Any) -> str:
+    """A short stable hash of a JSON-able document (sha256 of its canonical JSON)."""
+    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class DigestMemo:
+    """Digests computed once per object, for the last `kept` objects asked about (each object
+    is kept while it is here, so its id cannot be reused meanwhile)."""
+
+    def __init__(self, kept: int = 8) -> None:
+        self.kept = kept
+        self._known: dict[int, tuple[object, str]] = {}
+
+    def get(self, obj: object, compute: Callable[[], str]) -> str:
+        """`obj`'s digest: remembered, or `compute()`d now."""
+        known = self._known.get(id(obj))
+        if known is not None and known[0] is obj:
             return known[1]
-        text = json.dumps(self.to_json(), sort_keys=True, separators=(",", ":"), default=str)
-        digest = hashlib.sha256(text.encode()).hexdigest()[:16]
-        if len(_DIGESTS) >= _DIGESTS_KEPT:
-            del _DIGESTS[next(iter(_DIGESTS))]
-        _DIGESTS[id(self)] = (self, digest)
+        digest = compute()
+        if len(self._known) >= self.kept:
+            del self._known[next(iter(self._known))]
+        self._known[id(obj)] = (obj, digest)
         return digest
 
 
-_DIGESTS: dict[int, tuple[SystemDef, str]] = {}
-"""id -> (the system, its digest) of the systems whose digest was asked for last (the object is
-kept, so its id cannot be reused while it is here)."""
-_DIGESTS_KEPT = 8
+_DIGESTS = DigestMemo()
 
 
 def _pairs(x: Any) -> tuple[tuple[str, Any], ...]:
