@@ -235,21 +235,28 @@ def test_restart_policy_resets_after_a_stable_run_and_gives_up():
 # ------------------------------------------------------------------ paced starts
 
 
-def test_starts_are_paced_would_be_actives_first_then_by_name() -> None:
-    # Twenty hosts spawned at once starved ten agents on two cores (issue 30): at most
-    # max_starting hosts start together, actives before standbys.
+def test_standbys_starts_are_paced_and_wait_for_the_actives() -> None:
+    # Twenty hosts spawned at once starved ten agents on two cores (issue 30): standbys start at
+    # most max_starting at a time, and only once no would-be active waits to start; actives
+    # start at once (a recovery launching five cold components needs all five).
     standbys = {f"S{i}": spec(f"S{i}", role=InstanceRole.STANDBY) for i in range(3)}
-    actives = {f"A{i}": spec(f"A{i}") for i in (2, 1)}
+    actives = {f"A{i}": spec(f"A{i}") for i in range(3)}
     desired = {**standbys, **actives}
     r = Reconciler(max_starting=2)
-    assert kinds(r.plan(0.0, desired, {})) == [("start", "A1"), ("start", "A2")]
-    assert r.plan(0.1, desired, {}) == []  # both starts still in flight: no room
-    r.done("A1")
-    r.done("A2")
-    starting = {"A1": obs("STARTING", actives["A1"]), "A2": obs("CREATED", actives["A2"])}
+    assert kinds(r.plan(0.0, desired, {})) == [("start", "A0"), ("start", "A1"), ("start", "A2")]
+    assert r.plan(0.1, desired, {}) == []  # three starts in flight: no room for a standby
+    for a in actives:
+        r.done(a)
+    starting = {a: obs("STARTING", s) for a, s in actives.items()}
+    starting["A1"] = obs("CREATED", actives["A1"])
     assert r.plan(0.2, desired, starting) == []  # spawned, not initialized yet: no room
+    starting["A0"] = obs("INACTIVE", actives["A0"])
     starting["A1"] = obs("INACTIVE", actives["A1"])
-    assert kinds(r.plan(0.3, desired, starting)) == [("activate", "A1"), ("start", "S0")]
+    assert kinds(r.plan(0.3, desired, starting)) == [
+        ("activate", "A0"),
+        ("activate", "A1"),
+        ("start", "S0"),
+    ]
 
 
 def test_without_a_limit_every_start_goes_at_once() -> None:

@@ -21,13 +21,13 @@ at most one `Action` for each, in name order. Rules, in the order they are tried
    active already is (receivers before senders); deactivate a receiver only after the senders
    that go down with it. Inside a cycle of connections these orderings are ignored.
 
-Starts are paced: at most `max_starting` hosts are starting at once (spawned or being spawned,
-not initialized yet: a host's start-up, Python and its imports, is the most CPU an instance ever
-takes in one go), instances that should end up ACTIVE first, then standbys, each in name order.
-A plan that puts twenty instances on a robot spawned twenty interpreters at once; ten robots
-sharing two cores did so together, and the agents, starved, missed their probes' deadlines and
-were declared dead (issue 30). Starting more hosts at once than the robot has cores makes none
-of them ready sooner.
+Standbys' starts are paced: a standby starts only while fewer than `max_starting` hosts are
+starting (spawned or being spawned, not initialized yet: a host's start-up, Python and its
+imports, is the most CPU an instance ever takes in one go), in name order, and never while an
+instance that should end up ACTIVE waits to start. Those start at once: a recovery that launches
+five cold components needs all five as soon as possible. A plan that puts twenty instances on a
+robot spawned twenty interpreters at once; ten robots sharing two cores did so together, and the
+agents, starved, missed their probes' deadlines and were declared dead (issue 30).
 """
 
 from __future__ import annotations
@@ -153,15 +153,16 @@ class Reconciler:
         desired: Mapping[str, InstanceSpec],
         observed: Mapping[str, Observed],
     ) -> list[Action]:
-        """The starts that may go now: all of them without a limit, else as many as the limit
-        leaves beside the hosts starting already, would-be actives first."""
+        """The starts that may go now: every would-be active's; standbys' as many as the limit
+        leaves beside the hosts starting already (all of them without a limit)."""
         if self.max_starting <= 0:
             return starts
+        actives = [a for a in starts if desired[a.instance].wants_active()]
+        if actives:  # the standbys wait until these are up
+            return actives
         busy = {n for n, (a, _) in self.in_flight.items() if a.kind == "start"}
         busy |= {n for n, obs in observed.items() if obs.status in STARTING}
-        room = max(0, self.max_starting - len(busy))
-        starts.sort(key=lambda a: (not desired[a.instance].wants_active(), a.instance))
-        return starts[:room]
+        return starts[: max(0, self.max_starting - len(busy))]
 
 
 def _undesired(name: str, obs: Observed) -> Action | None:
