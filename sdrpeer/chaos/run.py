@@ -32,6 +32,7 @@ from typing import Any
 
 import psutil
 
+from sdrpeer.chaos.elections import elections
 from sdrpeer.chaos.judge import Judge, Look
 from sdrpeer.chaos.schedule import Fault, schedule
 from sdrpeer.client import AgentClient, post_when_elected, wait_for
@@ -327,8 +328,11 @@ def _soak(
     else:
         soak.judge.never_converged(time.monotonic() - t0)
     placed = _placed(soak)
+    logs = _events(soak)
     if opts.lab_dir is not None:
-        _save_events(soak, opts.lab_dir)
+        for robot, events in logs.items():
+            (opts.lab_dir / robot).mkdir(parents=True, exist_ok=True)
+            (opts.lab_dir / robot / "events.json").write_text(json.dumps(events))
     soak.pool.shutdown()
     soak.judge.final_plan(placed)
     report = soak.judge.report()
@@ -340,6 +344,7 @@ def _soak(
         network="namespaces" if netns else "loopback",
         t0_wall=round(t0_wall, 3),  # unix time of t = 0: events.json entries map onto t
         faults_done=soak.done,
+        elections=elections(logs, soak.done, t0_wall),
     )
     return report
 
@@ -365,9 +370,11 @@ def due_events(
             started += 1
 
 
-def _save_events(soak: Soak, lab_dir: Path) -> None:
-    """Every running robot's event log into ROBOT/events.json of a kept lab (`--keep`), to
-    find what happened behind a violation (the agents keep them in memory only)."""
+def _events(soak: Soak) -> dict[str, list[Any]]:
+    """Every running robot's event log (the agents keep them in memory only): for the
+    elections' count, and into ROBOT/events.json of a kept lab (`--keep`) to find what happened
+    behind a violation."""
+    logs: dict[str, list[Any]] = {}
     for robot, client in soak.clients.items():
         if robot in soak.down:
             continue
@@ -380,8 +387,8 @@ def _save_events(soak: Soak, lab_dir: Path) -> None:
                     break
                 events += page
                 since = int(page[-1]["id"])
-        (lab_dir / robot).mkdir(parents=True, exist_ok=True)
-        (lab_dir / robot / "events.json").write_text(json.dumps(events))
+        logs[robot] = events
+    return logs
 
 
 def _placed(soak: Soak) -> dict[str, int]:
@@ -422,9 +429,18 @@ def format_report(r: dict[str, Any]) -> str:
         f"{r['look_interval_s']['p50']} s, p99 {r['look_interval_s']['p99']} s)",
         f"agents' RSS: peak {r['agent_rss_peak_mib']} MiB, largest growth "
         f"{r['agent_rss_growth_mib']} MiB",
+        _elections_line(r.get("elections")),
         f"violations: {len(r['violations'])} (target 0)",
     ]
     if r.get("leaked_processes"):
         lines.append(f"processes left running after the lab stopped: {r['leaked_processes']}")
     lines += [f"  {v}" for v in r["violations"][:20]]
     return "\n".join(lines)
+
+
+def _elections_line(e: dict[str, Any] | None) -> str:
+    """How many elections, why, and how many of them were churn among living members."""
+    if e is None:
+        return "elections: not counted"
+    why = ", ".join(f"{k} {v}" for k, v in sorted(e["by_reason"].items()))
+    return f"elections: {e['total']} ({why}); churn among living members: {e['churn']}"
