@@ -14,10 +14,15 @@ not one stuck in a user-space buffer).
 A supervisor task owns the socket: it dials `to`, writes the hello, waits for the ok, then sleeps
 until the link drops, `repoint` changes the address, or `close` is called. A drop is redialed
 with exponential backoff (pending values stay queued, up to the buffer; frames lost inside the
-dead socket show up as a gap in seq at the receiver). `repoint` detaches the link at once, so
-later frames wait for the new peer, and shuts the old link, which still delivers what it was
-handed. seq counts frames written to this connection, starting at 1, across redials. The socket
-itself (and, on a Unix socket, the shared-memory ring big values take) is `link.Link`'s.
+dead socket show up as a gap in seq at the receiver). A dial the receiver refuses (its error
+reply, a proof that does not hold, encryption refused) is redialed likewise, and each refusal
+goes to `on_refused` with its reason (`None` once a dial gets through again), so that the host
+can tell its agent. `release()` (the host is exiting) makes `drain` return at once from then on:
+a component blocked in `send()` on a connection that cannot take a frame lets go. `repoint`
+detaches the link at once, so later frames wait for the new peer, and shuts the old link, which
+still delivers what it was handed. seq counts frames written to this connection, starting at 1,
+across redials. The socket itself (and, on a Unix socket, the shared-memory ring big values
+take) is `link.Link`'s.
 
 Acknowledged streams (push all/fifo, when the receiver agrees): the writer keeps every frame
 until the receiver acknowledges it (sdrpeer.dataplane.retention), and writes nothing more while
@@ -35,6 +40,7 @@ import asyncio
 import contextlib
 import logging
 import os
+from collections.abc import Callable
 
 from sdrpeer.dataplane.address import parse_address
 from sdrpeer.dataplane.auth import DataAuth
@@ -106,6 +112,13 @@ class Connection:
         """Values refused at `offer` because they were oversized or unencodable."""
         self.last_error: str | None = None
         """Why the last dial or link failed."""
+        self.refusals = 0
+        """Dials the receiver refused."""
+        self.refusal: str | None = None
+        """Why the receiver refused the last dial (None once a dial got through)."""
+        self.on_refused: Callable[[str | None], None] | None = None
+        """Told every refusal's reason, and None when a dial gets through after refusals."""
+        self._released = False
         self.dropped_remote = 0
         """Frames the receiving InPort's policy discarded (overwrite, drop, skip, new), as its
         acknowledgements counted them: with `dropped`, every frame this connection lost to a
@@ -213,10 +226,17 @@ class Connection:
         return FrameError(exc.reason, f"{where}: {exc.detail}")
 
     async def drain(self) -> None:
-        """Wait until the queue has room (returns at once when it has, or when closing)."""
-        while not self._queue.has_room and not self._closing:
+        """Wait until the queue has room (returns at once when it has, when closing, or once
+        released)."""
+        while not self._queue.has_room and not self._closing and not self._released:
             self._room.clear()
             await self._room.wait()
+
+    def release(self) -> None:
+        """Stop making writers wait (the host is exiting): `drain` returns at once from now on,
+        and a value offered to a full `block` queue is refused (counted in `dropped`)."""
+        self._released = True
+        self._room.set()
 
     def repoint(self, to: str) -> None:
         """Send later frames to `to`; frames already written still reach the old receiver."""
@@ -332,6 +352,8 @@ class Connection:
             except (OSError, TimeoutError, FrameError, ValueError) as exc:
                 self.last_error = f"{to}: {exc}"
                 log.debug("data connection %s: dial failed: %s", self.conn_id, self.last_error)
+                if isinstance(exc, FrameError) and exc.reason == "refused":
+                    self._dial_refused(exc.detail)
                 self._wake.clear()
                 with contextlib.suppress(TimeoutError):
                     async with asyncio.timeout(delay):
@@ -343,6 +365,8 @@ class Connection:
                 link.transport.abort()
                 continue
             delay = initial
+            if self.refusal is not None:
+                self._dial_refused(None)
             if dropped:
                 self.reconnects += 1
             self._adopt(link)
@@ -352,6 +376,17 @@ class Connection:
                 self._wake.clear()
                 await self._wake.wait()
             dropped = self.to == to
+
+    def _dial_refused(self, reason: str | None) -> None:
+        """A dial was refused for `reason` (None: one got through after refusals)."""
+        if reason is not None:
+            self.refusals += 1
+        self.refusal = reason
+        if self.on_refused is not None:
+            try:
+                self.on_refused(reason)
+            except Exception:
+                log.exception("data connection %s: on_refused failed", self.conn_id)
 
     def _offer(self) -> AckOffer | None:
         """The hello's ack map: the first seq the next link carries (the oldest unacked)."""

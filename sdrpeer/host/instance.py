@@ -14,7 +14,11 @@ transition, a failing callback); the caller turns either into `reply ok=false`. 
 server's `resolve` is `in_port`, its `resolve_service` `service`. A `connect` whose `out` is one
 of our consumer service ports makes a service binding (sdrpeer.dataplane.service's
 `ServiceClient`, bound to the port's `ServiceCaller`) instead of a data stream; `disconnect` and
-`repoint` treat both alike. Provided services answer only while the component is ACTIVE.
+`repoint` treat both alike. Provided services answer only while the component is ACTIVE. A
+receiver refusing one of our data streams is logged and reported to the agent (`refused`: the
+first refusal at once, then at most once per 30 s per connection, sdrpeer.dataplane.refusals;
+and once more, with no error, when it gets through again). `release_senders` (the host is
+exiting) lets a component blocked in `send()` go, so finalizing never waits on a receiver.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from sdrpeer.control.messages import (
     Disconnect,
     Exit,
     Fault,
+    Refused,
     Repoint,
     Report,
     Reset,
@@ -47,6 +52,7 @@ from sdrpeer.control.messages import (
 )
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.refusals import RefusalWatch
 from sdrpeer.dataplane.service import ServiceClient
 from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import handoff
@@ -118,6 +124,8 @@ class HostedInstance:
         }
         self.bindings: dict[str, tuple[ServiceClient, ServiceCaller]] = {}
         """Service bindings from our consumer ports, by connection id."""
+        self.refusals = RefusalWatch()
+        """Which refusals of our outgoing data streams to report (rate-limited)."""
         self.state = _state_name(runner.state)
         self._serve(self.state)
 
@@ -245,10 +253,50 @@ class HostedInstance:
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None
+        connection.on_refused = lambda reason: self._refused(connection, reason)
         connection.start()
         port.attach(connection)
         self.connections[conn_id] = (connection, port)
         log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
+
+    def _refused(self, connection: Connection, reason: str | None) -> None:
+        """A receiver refused `connection` (None: it got through again): log and report it to
+        the agent when `refusals` says it is due."""
+        now = self.clock()
+        conn_id = connection.conn_id
+        if reason is None:
+            told = self.refusals.accepted(conn_id)
+        else:
+            told = self.refusals.refused(now, conn_id, reason)
+        if told is None:
+            return
+        where = f"{connection.from_} -> {connection.to} {connection.in_port}"
+        if told.error is None:
+            log.info("connection %s (%s): accepted again", conn_id, where)
+        else:
+            log.warning(
+                "connection %s (%s): refused by the receiver (%d time(s) since last said): %s",
+                conn_id,
+                where,
+                told.count,
+                told.error,
+            )
+        report = Refused(
+            conn_id,
+            connection.from_,
+            connection.to,
+            connection.in_port,
+            told.error,
+            told.count,
+            now,
+        )
+        self.report(report)
+
+    def release_senders(self) -> None:
+        """The host is exiting: no component waits in `send()` for a connection any more."""
+        for connection, _ in self.connections.values():
+            if isinstance(connection, Connection):
+                connection.release()
 
     def _bind(self, conn: Conn) -> None:
         """Bind one of our consumer ports to a provider (a service binding)."""
@@ -297,6 +345,7 @@ class HostedInstance:
             return
         connection, port = self._lookup(conn_id)
         del self.connections[conn_id]
+        self.refusals.forget(conn_id)
         port.detach(connection)
         await maybe_await(connection.close())
         log.info("connection %s closed", conn_id)

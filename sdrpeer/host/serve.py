@@ -7,9 +7,11 @@ when standalone, activates at once and logs the port counters once a second. Com
 by the channel and run one at a time, in order, by `_serve_commands`, each answered by exactly one
 `reply` (`snapshot`'s state goes in `part` messages written with its reply, in one write).
 Whatever ends the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent dying)
-sets `stop`; then the runner finalizes (deactivating first if active) within the timeout,
-connections and the data server close, `exit` is answered, and the channel is closed after the
-last report is written.
+sets `stop`; then the outgoing connections stop making senders wait (a component blocked in
+`send()` on a receiver that refuses it, or is slow, lets go at once: finalizing waits for its
+lock), the runner finalizes (deactivating first if active) within the timeout, connections and
+the data server close, `exit` is answered, and the channel is closed after the last report is
+written.
 """
 
 from __future__ import annotations
@@ -105,6 +107,7 @@ class Host:
         await self.stop.wait()
         for task in tasks:
             task.cancel()
+        self.inst.release_senders()
         code = await self._finalize(runner)
         await self.inst.close_connections()
         await maybe_await(server.close())
