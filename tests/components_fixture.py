@@ -42,24 +42,6 @@ class Counter(Component):
         self.out.write(self.n)
 
 
-class Pusher(Component):
-    """Sends 1, 2, 3, ... on `out` with `send()` (waiting for room: a `full: block` connection
-    that cannot take a frame holds `on_execute`, and with it the component's lock)."""
-
-    execution = Periodic(param="rate")
-    rate = Param(float, 200.0, "frames per second")
-    out = OutPort("the count")
-
-    def on_initialize(self) -> None:
-        """Start from zero."""
-        self.n = 0
-
-    async def on_execute(self) -> None:
-        """Send the next number once every connection has room."""
-        self.n += 1
-        await self.out.send(self.n)
-
-
 class Recorder(Component):
     """Records every value arriving on `inp`; logs how many it has at deactivation."""
 

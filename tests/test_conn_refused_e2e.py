@@ -29,7 +29,7 @@ def test_a_refused_connection_says_why_in_events_status_and_the_cli(
     agent = cluster.start("robot-1")
     pub = {
         "name": "Pub",
-        "target": "tests.components_fixture:Pusher",
+        "target": "components.ledger:Sequencer",
         "connections": [{"out": "out", "to": "Rec", "in": "nope", "policy": {"full": "block"}}],
     }
     rec = {"name": "Rec", "target": "tests.components_fixture:Recorder"}

@@ -24,8 +24,9 @@ def hosts(tmp_path: Path) -> Iterator[HostPool]:
 
 
 def refused_pair(hosts: HostPool) -> tuple[HostProc, HostProc]:
-    """A Pusher blocked on a `full: block` stream to a Recorder that refuses its key."""
-    pub, _ = hosts.ready(f"{FX}:Pusher", name="Pub", env=SENDER_KEY)
+    """A Sequencer (it sends with `send()`) blocked on a `full: block` stream to a Recorder
+    that refuses its key."""
+    pub, _ = hosts.ready("components.ledger:Sequencer", name="Pub", env=SENDER_KEY)
     rec, rec_hello = hosts.ready(f"{FX}:Recorder", name="Rec", env=RECEIVER_KEY)
     assert rec.command("activate")["ok"] is True
     conn = {
