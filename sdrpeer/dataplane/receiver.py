@@ -139,16 +139,19 @@ class Receiver(asyncio.BufferedProtocol):
             return
         reader = self.reader
         reader.received(nbytes)
-        if self.port is not None:
-            self.server.bytes_in[self.in_port] += nbytes
         try:
-            if self.port is None and not self._hello():
-                return
-            if self._opener is not None:  # encrypted from the proof on: what followed it
-                rest = reader.decoder.take_rest()
-                self._opener.buffer()[: len(rest)] = rest  # (a hello is far below a read)
-                self._opener.received(len(rest))
-                self._records(0)
+            if self.port is not None:
+                self.server.bytes_in[self.in_port] += nbytes
+            elif self._hello():  # what came behind the handshake in this read counts too
+                if self._opener is not None:  # encrypted from the proof on: what followed it
+                    rest = reader.decoder.take_rest()
+                    self.server.bytes_in[self.in_port] += len(rest)
+                    self._opener.buffer()[: len(rest)] = rest  # (a hello is far below a read)
+                    self._opener.received(len(rest))
+                    self._records(0)
+                    return
+                self.server.bytes_in[self.in_port] += reader.decoder.partial
+            else:
                 return
             frames = reader.frames()
         except FrameError as exc:
