@@ -4,7 +4,7 @@ once (sdrpeer.dataplane.refusals; literal times)."""
 
 from __future__ import annotations
 
-from sdrpeer.dataplane.refusals import RefusalWatch, Told
+from sdrpeer.dataplane.refusals import DialRefusals, RefusalWatch, Told
 
 
 def test_refusals_are_told_once_then_at_most_every_period_with_their_count() -> None:
@@ -21,3 +21,24 @@ def test_refusals_are_told_once_then_at_most_every_period_with_their_count() -> 
     assert w.accepted("c9") is None  # never refused: nothing to say
     w.forget("c2")
     assert w.refused(133.0, "c2", "bad key") == Told("c2", "bad key", 1)
+
+
+def test_a_dialing_end_counts_its_refusals_and_tells_each_and_the_end_once() -> None:
+    told: list[str | None] = []
+    dials = DialRefusals("c1")
+    dials.through()  # never refused: nothing to tell
+    dials.on_refused = told.append
+    dials.refused("bad key")
+    dials.refused("bad key")
+    assert (dials.count, dials.last) == (2, "bad key")
+    dials.through()
+    dials.through()
+    assert (dials.count, dials.last) == (2, None)
+    assert told == ["bad key", "bad key", None]
+
+    def broken(reason: str | None) -> None:
+        raise RuntimeError("a broken hook")
+
+    dials.on_refused = broken
+    dials.refused("again")  # logged, not raised: the dialing goes on
+    assert dials.count == 3

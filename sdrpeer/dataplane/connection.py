@@ -16,9 +16,10 @@ until the link drops, `repoint` changes the address, or `close` is called. A dro
 with exponential backoff (pending values stay queued, up to the buffer; frames lost inside the
 dead socket show up as a gap in seq at the receiver). A dial the receiver refuses (its error
 reply, a proof that does not hold, encryption refused) is redialed likewise, and each refusal
-goes to `on_refused` with its reason (`None` once a dial gets through again), so that the host
-can tell its agent. `release()` (the host is exiting) makes `drain` return at once from then on:
-a component blocked in `send()` on a connection that cannot take a frame lets go. `repoint`
+goes to `refusals.on_refused` with its reason (`None` once a dial gets through again), so that
+the host can tell its agent. `release()` (the host is exiting) makes `drain` return at once
+from then on: a component blocked in `send()` on a connection that cannot take a frame lets
+go. `repoint`
 detaches the link at once, so later frames wait for the new peer, and shuts the old link, which
 still delivers what it was handed. seq counts frames written to this connection, starting at 1,
 across redials. The socket itself (and, on a Unix socket, the shared-memory ring big values
@@ -40,13 +41,13 @@ import asyncio
 import contextlib
 import logging
 import os
-from collections.abc import Callable
 
 from sdrpeer.dataplane.address import parse_address
 from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, AckOffer, Hello
 from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.pending import PolicyLike
+from sdrpeer.dataplane.refusals import DialRefusals
 from sdrpeer.dataplane.retention import DEFAULT_BYTES, DEFAULT_FRAMES, Retention
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.writer import FrameWriter
@@ -112,12 +113,8 @@ class Connection:
         """Values refused at `offer` because they were oversized or unencodable."""
         self.last_error: str | None = None
         """Why the last dial or link failed."""
-        self.refusals = 0
-        """Dials the receiver refused."""
-        self.refusal: str | None = None
-        """Why the receiver refused the last dial (None once a dial got through)."""
-        self.on_refused: Callable[[str | None], None] | None = None
-        """Told every refusal's reason, and None when a dial gets through after refusals."""
+        self.refusals = DialRefusals(conn_id)
+        """Dials the receiver refused (sdrpeer.dataplane.refusals), told to its `on_refused`."""
         self._released = False
         self.dropped_remote = 0
         """Frames the receiving InPort's policy discarded (overwrite, drop, skip, new), as its
@@ -353,7 +350,7 @@ class Connection:
                 self.last_error = f"{to}: {exc}"
                 log.debug("data connection %s: dial failed: %s", self.conn_id, self.last_error)
                 if isinstance(exc, FrameError) and exc.reason == "refused":
-                    self._dial_refused(exc.detail)
+                    self.refusals.refused(exc.detail)
                 self._wake.clear()
                 with contextlib.suppress(TimeoutError):
                     async with asyncio.timeout(delay):
@@ -365,8 +362,7 @@ class Connection:
                 link.transport.abort()
                 continue
             delay = initial
-            if self.refusal is not None:
-                self._dial_refused(None)
+            self.refusals.through()
             if dropped:
                 self.reconnects += 1
             self._adopt(link)
@@ -376,17 +372,6 @@ class Connection:
                 self._wake.clear()
                 await self._wake.wait()
             dropped = self.to == to
-
-    def _dial_refused(self, reason: str | None) -> None:
-        """A dial was refused for `reason` (None: one got through after refusals)."""
-        if reason is not None:
-            self.refusals += 1
-        self.refusal = reason
-        if self.on_refused is not None:
-            try:
-                self.on_refused(reason)
-            except Exception:
-                log.exception("data connection %s: on_refused failed", self.conn_id)
 
     def _offer(self) -> AckOffer | None:
         """The hello's ack map: the first seq the next link carries (the oldest unacked)."""

@@ -15,10 +15,11 @@ server's `resolve` is `in_port`, its `resolve_service` `service`. A `connect` wh
 of our consumer service ports makes a service binding (sdrpeer.dataplane.service's
 `ServiceClient`, bound to the port's `ServiceCaller`) instead of a data stream; `disconnect` and
 `repoint` treat both alike. Provided services answer only while the component is ACTIVE. A
-receiver refusing one of our data streams is logged and reported to the agent (`refused`: the
-first refusal at once, then at most once per 30 s per connection, sdrpeer.dataplane.refusals;
-and once more, with no error, when it gets through again). `release_senders` (the host is
-exiting) lets a component blocked in `send()` go, so finalizing never waits on a receiver.
+receiver refusing one of our data streams or service bindings is logged and reported to the
+agent (`refused`: the first refusal at once, then at most once per 30 s per connection,
+sdrpeer.dataplane.refusals; and once more, with no error, when it gets through again).
+`release_senders` (the host is exiting) lets a component blocked in `send()` go, so finalizing
+never waits on a receiver.
 """
 
 from __future__ import annotations
@@ -253,24 +254,25 @@ class HostedInstance:
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None
-        connection.on_refused = lambda reason: self._refused(connection, reason)
+        connection.refusals.on_refused = lambda reason: self._refused(
+            conn_id, f"{self.name}.{out}", to, in_port, reason
+        )
         connection.start()
         port.attach(connection)
         self.connections[conn_id] = (connection, port)
         log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
 
-    def _refused(self, connection: Connection, reason: str | None) -> None:
-        """A receiver refused `connection` (None: it got through again): log and report it to
-        the agent when `refusals` says it is due."""
+    def _refused(self, conn_id: str, from_: str, to: str, in_port: str, reason: str | None) -> None:
+        """A receiver refused our connection or binding `conn_id` (None: it got through again):
+        log and report it to the agent when `refusals` says it is due."""
         now = self.clock()
-        conn_id = connection.conn_id
         if reason is None:
             told = self.refusals.accepted(conn_id)
         else:
             told = self.refusals.refused(now, conn_id, reason)
         if told is None:
             return
-        where = f"{connection.from_} -> {connection.to} {connection.in_port}"
+        where = f"{from_} -> {to} {in_port}"
         if told.error is None:
             log.info("connection %s (%s): accepted again", conn_id, where)
         else:
@@ -281,16 +283,7 @@ class HostedInstance:
                 told.count,
                 told.error,
             )
-        report = Refused(
-            conn_id,
-            connection.from_,
-            connection.to,
-            connection.in_port,
-            told.error,
-            told.count,
-            now,
-        )
-        self.report(report)
+        self.report(Refused(conn_id, from_, to, in_port, told.error, told.count, now))
 
     def release_senders(self) -> None:
         """The host is exiting: no component waits in `send()` for a connection any more."""
@@ -318,6 +311,9 @@ class HostedInstance:
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None
+        client.refusals.on_refused = lambda reason: self._refused(
+            conn.id, client.hello.from_, client.to, conn.in_port, reason
+        )
         caller.bind(client)
         self.bindings[conn.id] = (client, caller)
         log.info(
@@ -337,6 +333,7 @@ class HostedInstance:
 
     async def _disconnect(self, conn_id: str) -> None:
         """Close a data stream (or a service binding)."""
+        self.refusals.forget(conn_id)
         if conn_id in self.bindings:
             client, caller = self.bindings.pop(conn_id)
             caller.bind(None)
@@ -345,7 +342,6 @@ class HostedInstance:
             return
         connection, port = self._lookup(conn_id)
         del self.connections[conn_id]
-        self.refusals.forget(conn_id)
         port.detach(connection)
         await maybe_await(connection.close())
         log.info("connection %s closed", conn_id)
