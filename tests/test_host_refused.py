@@ -77,3 +77,21 @@ def test_a_host_blocked_in_send_on_a_refused_stream_exits_at_once(hosts: HostPoo
     assert reply["ok"] is True, reply
     assert pub.wait_exit(10.0) == 0
     assert "finalize did not finish" not in pub.log_text()
+
+
+def test_exit_is_carried_out_while_a_command_waits_on_a_blocked_sender(hosts: HostPool) -> None:
+    """`deactivate` waits for the component's lock, which on_execute holds in `send()`; the
+    agent's command times out and it sends `exit`. Before, `exit` queued behind `deactivate`
+    and the host went on until SIGTERM; now it exits at once and answers both."""
+    pub, _ = refused_pair(hosts)
+    pub.wait_for(
+        lambda m: m["t"] == "heartbeat" and m["ports"]["out"]["frames_out"] >= 4,
+        10.0,
+        "a full queue",
+    )
+    pub.send({"t": "deactivate", "id": 1000})  # hangs: nobody waits for its reply here
+    reply = pub.command("exit", timeout=10.0)
+    assert reply["ok"] is True, reply
+    assert pub.wait_exit(10.0) == 0
+    (abandoned,) = [m for m in pub.seen if m["t"] == "reply" and m["id"] == 1000]  # before exit's
+    assert (abandoned["ok"], abandoned["error"]) == (False, "the host is exiting")
