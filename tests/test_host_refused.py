@@ -95,3 +95,21 @@ def test_exit_is_carried_out_while_a_command_waits_on_a_blocked_sender(hosts: Ho
     assert pub.wait_exit(10.0) == 0
     (abandoned,) = [m for m in pub.seen if m["t"] == "reply" and m["id"] == 1000]  # before exit's
     assert (abandoned["ok"], abandoned["error"]) == (False, "the host is exiting")
+
+
+def test_a_component_blocked_on_a_refused_stream_can_be_deactivated(hosts: HostPool) -> None:
+    """Before, `deactivate` waited for the lock on_execute held in `send()` on the refused
+    stream, until the agent's command timed out (and a stop took that long)."""
+    pub, _ = refused_pair(hosts)
+    pub.wait_for(is_refused, 10.0, "a refused report")
+    pub.wait_for(
+        lambda m: m["t"] == "heartbeat" and m["ports"]["out"]["frames_out"] >= 4,
+        10.0,
+        "a full queue",
+    )
+    assert pub.command("deactivate", timeout=10.0)["ok"] is True
+    pub.wait_state("INACTIVE")
+    dropped = pub.wait_t("heartbeat")["ports"]["out"]["dropped"]
+    assert dropped == 1  # the value the blocked send() held: refused, counted
+    assert pub.command("exit")["ok"] is True
+    assert pub.wait_exit() == 0

@@ -230,10 +230,15 @@ class Connection:
             await self._room.wait()
 
     def release(self) -> None:
-        """Stop making writers wait (the host is exiting): `drain` returns at once from now on,
-        and a value offered to a full `block` queue is refused (counted in `dropped`)."""
+        """Stop making writers wait (the host is exiting): `drain` returns at once from now on
+        (until `hold`), and a value offered to a full `block` queue is refused (counted in
+        `dropped`)."""
         self._released = True
         self._room.set()
+
+    def hold(self) -> None:
+        """Make writers wait for room again (undoes `release`)."""
+        self._released = False
 
     def repoint(self, to: str) -> None:
         """Send later frames to `to`; frames already written still reach the old receiver."""

@@ -19,7 +19,7 @@ receiver refusing one of our data streams or service bindings is logged and repo
 agent (`refused`: the first refusal at once, then at most once per 30 s per connection,
 sdrpeer.dataplane.refusals; and once more, with no error, when it gets through again).
 `release_senders` (the host is exiting) lets a component blocked in `send()` go, so finalizing
-never waits on a receiver.
+never waits on a receiver; `deactivate` does the same for the connections refused now.
 """
 
 from __future__ import annotations
@@ -189,7 +189,12 @@ class HostedInstance:
             case Activate():
                 await maybe_await(self.runner.activate())
             case Deactivate():
-                await maybe_await(self.runner.deactivate())
+                refused = self._release_refused()
+                try:
+                    await maybe_await(self.runner.deactivate())
+                finally:
+                    for connection in refused:
+                        connection.hold()
             case Reset():
                 await maybe_await(self.runner.reset())
             case SetParams(params=params):
@@ -284,6 +289,19 @@ class HostedInstance:
                 told.error,
             )
         self.report(Refused(conn_id, from_, to, in_port, told.error, told.count, now))
+
+    def _release_refused(self) -> list[Connection]:
+        """Let a component blocked in `send()` on a connection its receiver refuses go (so that
+        `deactivate` gets the component's lock); the connections released. A connection that
+        is only down (reconnecting) keeps its writers waiting: a planned move loses nothing."""
+        refused = [
+            c
+            for c, _ in self.connections.values()
+            if isinstance(c, Connection) and c.refusals.last is not None
+        ]
+        for connection in refused:
+            connection.release()
+        return refused
 
     def release_senders(self) -> None:
         """The host is exiting: no component waits in `send()` for a connection any more."""
