@@ -1,7 +1,8 @@
 """End to end: a real agent runs a sender whose receiver refuses its stream (it names an
 in-port the receiver does not have); the refusal's reason reaches the agent's event log
-(`conn.refused`), the instance's status (under its connection) and `sdrpeer instances`
-(issue 30 item 5). The sender's host then exits cleanly when the agent stops it."""
+(`conn.refused`), the instance's status (under its connection), `sdrpeer instances` and the
+robot's gossip record (`out_refused`, which `sdrpeer status` shows) (issue 30 item 5). The
+sender's host then exits cleanly when the agent stops it."""
 
 from __future__ import annotations
 
@@ -54,6 +55,13 @@ def test_a_refused_connection_says_why_in_events_status_and_the_cli(
     assert "Pub: connection" in out
     assert "refused by its receiver" in out
     assert "unknown in-port 'nope'" in out
+    # fleet-wide: the robot's gossip record counts Pub's connections refused now (what
+    # `sdrpeer status` shows under its connections)
+    cluster.wait_until(
+        lambda: {i["name"]: i.get("out_refused") for i in agent.member("robot-1")["instances"]},
+        lambda counts: counts.get("Pub") == 1 and counts.get("Rec") == 0,
+        "out_refused in the gossip record",
+    )
     assert len(refused_events(agent)) == 1  # rate-limited: the sender keeps redialing
     # the sender's component waits in send() (full: block, nothing drains): removing it stops
     # its host at once and cleanly, not after the finalize deadline

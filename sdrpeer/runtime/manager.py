@@ -440,6 +440,7 @@ class InstanceManager:
                 data=sup.tcp_address(),
                 out_bps=round(sup.out_bps),
                 out_lost=math.ceil(sup.out_lost_ps),  # one frame lost in a while still shows
+                out_refused=sum(1 for c in sup.refusals if c in sup.connections),
             )
             for _, sup in sorted(self._sups.items())
         )

@@ -520,6 +520,7 @@ class Supervisor:
                 msg.error,
             )
         problems.call_hook("on_refused", self.on_refused, self, msg)
+        self.on_change(self)  # the gossip record counts the connections refused now
 
     def _problem(self, cause: str | None) -> None:
         if cause is not None:
