@@ -98,6 +98,11 @@ class EventKind(StrEnum):
     """This robot hears a majority again and is catching up."""
     FLEET_IN_TOUCH = "fleet.in_touch"
     """This robot is in touch with the fleet."""
+    CONN_REFUSED = "conn.refused"
+    """A receiver refuses an outgoing connection of an instance here (its reason; the host says
+    the first refusal at once, then at most one per connection every 30 s while it goes on)."""
+    CONN_ACCEPTED = "conn.accepted"
+    """A connection refused before got through to its receiver."""
     PORT_OVERFLOW = "port.overflow"
     """An instance's connections started losing frames to full buffers (sdrpeer.runtime.overflow);
     then at most one per port every 30 s while it goes on."""

@@ -77,6 +77,14 @@ def test_status_colours_states_and_keeps_the_columns() -> None:
     assert plain.replace("\x1b[90m", "").replace("\x1b[0m", "") == STATUS_TEXT
 
 
+def test_a_sender_whose_receiver_refuses_it_gets_a_line_under_the_connections() -> None:
+    conns = [{**DOC["connections"][0], "refused": 1}, {**DOC["connections"][1], "refused": 0}]
+    text = format_status({**DOC, "connections": conns}, local=False)
+    assert text == STATUS_TEXT + (
+        "\nCameraRTC: 1 connection(s) refused by the receiver (sdrpeer describe CameraRTC)"
+    )
+
+
 def test_status_without_a_plan() -> None:
     doc: dict[str, Any] = {"allocator": {"name": None, "epoch": 0}, "plan": None, "components": []}
     assert format_status(doc) == "allocator: (none yet) (epoch 0)\nno system deployed"

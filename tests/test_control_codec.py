@@ -24,6 +24,7 @@ from sdrpeer.control.messages import (
     Heartbeat,
     Hello,
     Part,
+    Refused,
     Reply,
     Repoint,
     Report,
@@ -114,6 +115,32 @@ REPORT_CASES: list[tuple[Report | Part, dict[str, Any]]] = [
     (
         Fault("emergency_stop", "bumper", 3.0),
         {"t": "fault", "kind": "emergency_stop", "detail": "bumper", "ts": 3.0},
+    ),
+    (
+        Refused("c1", "Cam.image", "tcp://10.0.0.8:4000", "image", "unknown in-port", 2, 3.0),
+        {
+            "t": "refused",
+            "conn": "c1",
+            "from": "Cam.image",
+            "to": "tcp://10.0.0.8:4000",
+            "in": "image",
+            "error": "unknown in-port",
+            "count": 2,
+            "ts": 3.0,
+        },
+    ),
+    (
+        Refused("c1", "Cam.image", "tcp://10.0.0.8:4000", "image", None, 0, 4.0),
+        {
+            "t": "refused",
+            "conn": "c1",
+            "from": "Cam.image",
+            "to": "tcp://10.0.0.8:4000",
+            "in": "image",
+            "error": None,
+            "count": 0,
+            "ts": 4.0,
+        },
     ),
     (Part(7, b"\x00\x01" * 10), {"t": "part", "of": 7, "data": b"\x00\x01" * 10}),
 ]

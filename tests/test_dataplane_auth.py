@@ -9,7 +9,7 @@ import msgpack
 import pytest
 
 from sdrpeer.dataplane import Connection, DataServer
-from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.auth import DataAuth, proof_names, proof_parts
 from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello
 from sdrpeer.dataplane.testing import RecordingPort, make_policy
 from sdrpeer.keys.datakeys import keys_from_env, keys_to_env
@@ -44,6 +44,20 @@ def test_proofs_hold_only_under_the_same_key_and_names() -> None:
     assert not a.check_sender(rn, sn, ("c", "in", "y.out", "session", "7"), proof)
     assert not a.check_sender(rn, sn, moved, proof)
     assert not a.check_sender(a.nonce(), sn, names, proof)  # another receiver nonce: a replay
+
+
+def test_the_proofs_cover_whether_the_stream_is_encrypted() -> None:
+    """A receiver's proof over what it saw ("clear": the flag stripped on the way) does not hold
+    for the sender that asked for encryption, nor the sender's for the receiver."""
+    a = DataAuth([K1])
+    sn, rn = a.nonce(), a.nonce()
+    hello = Hello("c", "in", "x.out", {}, auth=sn, enc=True)
+    sealed, clear = proof_parts(hello, True), proof_parts(hello, False)
+    assert sealed[:-1] == clear[:-1] == proof_names(hello)
+    assert (sealed[-1], clear[-1]) == ("enc", "clear")
+    assert a.check_receiver(sn, rn, sealed, a.receiver_proof(sn, rn, clear)) is None
+    assert a.check_sender(rn, sn, clear, DataAuth.sender_proof(K1, rn, sn, sealed)) is None
+    assert a.check_receiver(sn, rn, sealed, a.receiver_proof(sn, rn, sealed)) == K1
 
 
 class Rx:
@@ -129,13 +143,14 @@ async def test_a_replayed_handshake_opens_nothing(rx: Rx) -> None:
     async def handshake(proof: bytes | None) -> bytes | None:
         reader, writer = await asyncio.open_connection(host, int(port))
         nonce = DataAuth.nonce()
-        writer.write(encode_hello(Hello("c", "in", "x.out", {}, auth=nonce)))
+        hello = Hello("c", "in", "x.out", {"encrypt": False}, auth=nonce)  # clear: readable
+        writer.write(encode_hello(hello))
         decoder = FrameDecoder()
         while (reply := decoder.next_map()) is None:
             decoder.feed(await reader.read(4096))
         assert isinstance(reply, dict)
         their_nonce = reply["auth"][0]
-        names = ("c", "in", "x.out", "", "")
+        names = ("c", "in", "x.out", "", "", "clear")
         made = proof or DataAuth.sender_proof(K1, their_nonce, nonce, names)
         writer.write(msgpack.packb({"auth": made}) + msgpack.packb([1, "frame"]))
         await writer.drain()

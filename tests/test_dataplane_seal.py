@@ -8,11 +8,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Callable
+from typing import Any, cast
 
+import msgpack
 import pytest
 
 from sdrpeer.dataplane import Connection, DataServer
 from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello
 from sdrpeer.dataplane.seal import OVERHEAD, Opener, Sealer
 from sdrpeer.dataplane.testing import RecordingPort
 from sdrpeer.errors import FrameError
@@ -162,6 +165,100 @@ async def test_a_connection_may_turn_encryption_off_and_stays_authenticated() ->
         await until_async("len(port.frames) == 1", lambda: len(port.frames), lambda v: v == 1)
         assert PATTERN in relay.seen
         assert server.counters["refused_auth"] == 0
+    finally:
+        await conn.close()
+        await relay.close()
+        await server.close()
+
+
+async def raw_handshake(to: str, hello: Hello) -> dict[str, object]:
+    """Write `hello` to the receiver at `to` as a foreign sender would; its reply map."""
+    host, port = to.removeprefix("tcp://").rsplit(":", 1)
+    reader, writer = await asyncio.open_connection(host, int(port))
+    try:
+        writer.write(encode_hello(hello))
+        decoder = FrameDecoder()
+        async with asyncio.timeout(10):
+            while (reply := decoder.next_map()) is None:
+                data = await reader.read(4096)
+                assert data, "the receiver closed without a reply"
+                decoder.feed(data)
+        assert isinstance(reply, dict)
+        return reply
+    finally:
+        writer.close()
+
+
+async def test_a_keyed_receiver_refuses_a_sender_that_does_not_ask_for_encryption() -> None:
+    """Issue 30 item 3: an old foreign sender wrote an authenticated hello without "enc" and
+    the receiver took its stream in clear. Now it is refused, said and counted, unless the
+    connection's own policy says encrypt: false (what the Python sender then writes)."""
+    port = RecordingPort()
+    server = DataServer(lambda name: port, auth=DataAuth([K1]))
+    await server.start()
+    to = f"tcp://{server.addresses['tcp']}"
+    try:
+        reply = await raw_handshake(to, Hello("c", "in", "x.out", {}, auth=DataAuth.nonce()))
+        assert reply["ok"] is False
+        assert "only takes encrypted streams" in str(reply["error"])
+        assert "auth" not in reply  # no proof for a refused hello
+        assert server.counters["refused_clear"] == 1
+        said = Hello("c", "in", "x.out", {"encrypt": False}, auth=DataAuth.nonce())
+        reply = await raw_handshake(to, said)
+        assert reply["ok"] is True
+        assert "enc" not in reply
+        assert server.counters["refused_clear"] == 1
+    finally:
+        await server.close()
+
+
+def rewrite_hello(change: Callable[[dict[str, Any]], None]) -> Callable[[int, bytes], bytes]:
+    """A relay's `alter` that rewrites the hello (the first map on the stream) with `change`."""
+
+    def alter(at: int, data: bytes) -> bytes:
+        if at != 0:
+            return data
+        unpacker = msgpack.Unpacker(raw=False)
+        unpacker.feed(data)
+        hello = unpacker.unpack()
+        change(hello)
+        return cast(bytes, msgpack.packb(hello)) + data[unpacker.tell() :]
+
+    return alter
+
+
+def strip_enc(hello: dict[str, Any]) -> None:
+    hello.pop("enc", None)
+    hello["policy"] = {**hello["policy"], "encrypt": False}
+
+
+def add_enc(hello: dict[str, Any]) -> None:
+    hello["enc"] = True
+    hello["policy"] = {}
+
+
+@pytest.mark.parametrize(("encrypt", "change"), [(True, strip_enc), (False, add_enc)])
+async def test_a_flag_flipped_in_flight_fails_the_proof(
+    encrypt: bool, change: Callable[[dict[str, Any]], None]
+) -> None:
+    """A man in the middle rewrites the hello's encryption (and the policy's `encrypt` to
+    match, so the receiver has nothing to object to): the receiver's proof covers what it saw,
+    the sender checks it against what it sent, and refuses it; no frame gets through."""
+    port, server, relay, conn = await stream_through(rewrite_hello(change), encrypt=encrypt)
+    try:
+        conn.offer(PATTERN)
+        await until_async(
+            "conn.last_error names the proof",
+            lambda: conn.last_error or "",
+            lambda v: "proof does not hold" in v,
+        )
+        await until_async(
+            "server.counters['refused_auth'] >= 1",
+            lambda: server.counters["refused_auth"],
+            lambda v: v >= 1,
+        )
+        assert port.frames == []
+        assert not conn.connected
     finally:
         await conn.close()
         await relay.close()

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from sdrpeer.cli.status import format_status
 from sdrpeer.deploy.status import SinceTracker, all_active, status_doc
 from sdrpeer.plan import Placement, Plan
 from sdrpeer.record.robot import InstanceInfo, LinkSummary, Metrics, PlanInfo, RobotRecord
-from sdrpeer.system.model import ComponentDef, StandbySpec, SystemDef
+from sdrpeer.system.model import ComponentDef, ConnectionDef, StandbySpec, SystemDef
 from sdrpeer.vocabulary import InstanceRole
 
 SYSTEM = SystemDef(
@@ -75,3 +77,21 @@ def test_no_plan() -> None:
     assert doc["plan"] is None
     assert not all_active(doc)
     assert "no system deployed" in format_status(doc)
+
+
+def test_a_connection_row_says_how_many_of_its_senders_connections_are_refused() -> None:
+    """The gossip record carries, per instance, its outgoing connections refused now
+    (`out_refused`): each connection row of the status shows its sending instance's."""
+    system = replace(SYSTEM, connections=(ConnectionDef("A", "out", "B", "inp"),))
+    plan = replace(PLAN, system=system)
+    sender = record([("A", "active")])
+    refused = replace(sender, instances=(replace(sender.instances[0], out_refused=1),))
+    alive = {"r1": refused, "r2": record([("B", "active")])}
+    doc = status_doc(plan, alive, {"name": "r1", "epoch": 3}, SinceTracker(), 0.0)
+    (row,) = doc["connections"]
+    assert (row["from"], row["to"], row["refused"]) == ("A.out", "B.inp", 1)
+    assert "A: 1 connection(s) refused by the receiver" in format_status(doc)
+    alive["r1"] = sender
+    doc = status_doc(plan, alive, {"name": "r1", "epoch": 3}, SinceTracker(), 0.0)
+    assert doc["connections"][0]["refused"] == 0
+    assert "refused" not in format_status(doc)

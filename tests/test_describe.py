@@ -192,3 +192,27 @@ def test_a_robot_against_the_thresholds_with_what_it_hosts() -> None:
     assert dead["warnings"][0].startswith("robot-3 is dead")
     assert [e["id"] for e in dead["events"]] == [1, 2]
     assert "Robot:        robot-3" in format_describe(dead)
+
+
+def test_a_connection_its_receiver_refuses_is_a_warning_until_it_gets_through() -> None:
+    """conn.refused events (the sender's robot) say why a connection carries nothing; the
+    warning stays while the connection's latest such event is a refusal."""
+    members = [member("robot-1"), member("robot-2")]
+    plan = Plan(1, 1, SYSTEM, (Placement("Cam", "Cam", "robot-1"),), "robot-1", why=WHY[:1])
+    status = {"components": [{"component": "Cam", "instance": "Cam", "state": "active"}]}
+    said: dict[str, Any] = {
+        "instance": "Cam", "component": "Cam", "conn": "c1", "sender": "Cam.image",
+        "to": "tcp://10.0.0.2:4000", "port": "image", "count": 1,
+    }  # fmt: skip
+    error = "this receiver only takes encrypted streams over TCP"
+    refused = {"id": 7, "ts": 8.0, "kind": "conn.refused", "robot": "robot-1",
+               "detail": {**said, "error": error}}  # fmt: skip
+    accepted = {"id": 8, "ts": 9.0, "kind": "conn.accepted", "robot": "robot-1",
+                "detail": said}  # fmt: skip
+    doc = describe_component("Cam", plan, status, members, [refused])
+    assert doc["warnings"] == [
+        "Cam.image -> tcp://10.0.0.2:4000 image (connection c1 on robot-1) is refused by its "
+        "receiver: this receiver only takes encrypted streams over TCP"
+    ]
+    assert [e["id"] for e in doc["events"]] == [7]
+    assert describe_component("Cam", plan, status, members, [refused, accepted])["warnings"] == []

@@ -91,6 +91,12 @@ def test_calls_between_hosts_errors_and_activity(hosts: HostPool) -> None:
     )
     assert beat["ports"]["svc"]["calls"] > 10
     assert "interface mismatch: Caller.other requires test/Echo#" in echo.log_text()
+    # ...and the caller's host tells its agent why (issue 30 item 5)
+    refused = caller.wait_for(
+        lambda m: m["t"] == "refused" and m["conn"] == "b3", 10.0, "a refused report"
+    )
+    assert (refused["from"], refused["in"], refused["to"]) == ("Caller.other", "svc", to)
+    assert "interface mismatch: Caller.other requires" in refused["error"]
     assert caller.command("disconnect", conn_id="b1")["ok"] is True
     assert caller.command("disconnect", conn_id="b1")["error"] == "no connection 'b1'"
     assert caller.command("exit")["ok"] is True

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import msgpack
 
-from sdrpeer.dataplane.auth import DataAuth, proof_names
+from sdrpeer.dataplane.auth import DataAuth, proof_names, proof_parts
 from sdrpeer.dataplane.frames import AckOffer, Hello
 from sdrpeer.dataplane.seal import Opener, sealed_writer
 from sdrpeer.keys.derive import stream_keys
@@ -32,9 +32,11 @@ def test_the_documented_vector_is_what_the_code_computes() -> None:
     hello = Hello("c1", "inp", "Pub.out", {}, ack=AckOffer("s1", 1), auth=v["Ns"], enc=True)
     names = proof_names(hello)
     assert names == ("c1", "inp", "Pub.out", "s1", "1")
+    parts = proof_parts(hello, sealed=True)  # the MACs also cover the encryption
+    assert parts == (*names, "enc")
     auth = DataAuth([v["data_key"]])
-    assert auth.receiver_proof(v["Ns"], v["Nr"], names) == v["MACr"]
-    assert auth.check_sender(v["Nr"], v["Ns"], names, v["MACs"]) == v["data_key"]
+    assert auth.receiver_proof(v["Ns"], v["Nr"], parts) == v["MACr"]
+    assert auth.check_sender(v["Nr"], v["Ns"], parts, v["MACs"]) == v["data_key"]
     assert stream_keys(v["data_key"], v["Ns"], v["Nr"], names) == (v["key_sr"], v["key_rs"])
     assert msgpack.packb([1, "hi"]) == v["frame"]
     written: list[bytes] = []

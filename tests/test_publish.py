@@ -86,6 +86,7 @@ def published() -> Publisher:
         (metrics(mem_total=8 * GB), RECORD),
         (instance(state="error"), RECORD),
         (instance(data="tcp://127.0.0.1:9"), RECORD),
+        (instance(out_refused=1), RECORD),  # a connection its receiver refuses: status shows it
         (replace(BASE, instances=()), RECORD),
         (replace(BASE, election=ElectionInfo(1, "robot-1", True)), RECORD),
         (replace(BASE, plan=PlanInfo(1, 1, "d", "robot-1")), RECORD),

@@ -91,7 +91,10 @@ def test_minimal_record_and_unknown_names() -> None:
         instances=(InstanceInfo("cam", "camera_driver", "weird-state", "observer", 0.0, 0),),
     )
     assert decode_record(encode_record(r)) == r
-    assert len(encode_record(r)) == 71  # 30 of them are the three free-form strings
+    assert len(encode_record(r)) == 72  # 30 of them are the three free-form strings
+    refused = replace(r, instances=(replace(r.instances[0], out_refused=2),))
+    assert decode_record(encode_record(refused)).instances[0].out_refused == 2  # format 5
+    assert record_to_json(refused)["instances"][0]["out_refused"] == 2
 
 
 def test_vitals_round_trip_and_overlay() -> None:
@@ -168,7 +171,7 @@ def wire(**changes: object) -> bytes:
         None,
         0,
         ["C"],
-        [[0, 1, "1", 2, 0, 0, 0, None, 0, 0]],
+        [[0, 1, "1", 2, 0, 0, 0, None, 0, 0, 0]],
         None,
         None,
         None,
@@ -217,12 +220,23 @@ def test_wire_helper_is_valid() -> None:
         ({"links": [1, 1, 1, 0, 9, [None] * 3, ["p", 1, 1, 0] * 9]}, "at most 8 groups"),
         ({"api": 5}, "api: expected a name"),
         ({"priority": 2**40}, "priority"),
-        ({"instances": [[1, 1, "1", 2, 0, 0, 0, None, 0, 0]]}, "instance.component: 1 out of"),
-        ({"instances": [[0, 2, "1", 2, 0, 0, 0, None, 0, 0]]}, "instance.prefix: 2 out of range"),
-        ({"instances": [[0, 1, "1", 99, 0, 0, 0, None, 0, 0]]}, "instance.state: 99 out of range"),
-        ({"instances": [[0, 0, "", 2, 0, 0, 0, None, 0, 0]]}, "instance.name: expected a name"),
-        ({"instances": [[0, 1, "1", 2, 0, 0, 0]]}, "instance: expected a list of 10"),
-        ({"instances": [[0, 1, "1", 2, 0, 0, 0, None, 0, -1]]}, "instance.out_lost: -1 out of"),
+        ({"instances": [[1, 1, "1", 2, 0, 0, 0, None, 0, 0, 0]]}, "instance.component: 1 out of"),
+        (
+            {"instances": [[0, 2, "1", 2, 0, 0, 0, None, 0, 0, 0]]},
+            "instance.prefix: 2 out of range",
+        ),
+        (
+            {"instances": [[0, 1, "1", 99, 0, 0, 0, None, 0, 0, 0]]},
+            "instance.state: 99 out of range",
+        ),
+        ({"instances": [[0, 0, "", 2, 0, 0, 0, None, 0, 0, 0]]}, "instance.name: expected a name"),
+        ({"instances": [[0, 1, "1", 2, 0, 0, 0]]}, "instance: expected a list of 11"),
+        ({"instances": [[0, 1, "1", 2, 0, 0, 0, None, 0, 0]]}, "instance: expected a list of 11"),
+        ({"instances": [[0, 1, "1", 2, 0, 0, 0, None, 0, -1, 0]]}, "instance.out_lost: -1 out of"),
+        (
+            {"instances": [[0, 1, "1", 2, 0, 0, 0, None, 0, 0, -1]]},
+            "instance.out_refused: -1 out of",
+        ),
         ({"metrics": [1, 4, 2, None, None, [10**10, 0]]}, "pos.x: 10000000000 out of range"),
         ({"launch": [["python"]]}, "launch: expected a list of 2"),
         ({"launch": [["python", 5], []]}, "launch.launcher: expected a name"),

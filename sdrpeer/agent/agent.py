@@ -90,6 +90,7 @@ if TYPE_CHECKING:
     from aiohttp.web import AppRunner
 
     from sdrpeer.agent.discovery import Discovery
+    from sdrpeer.control.messages import Refused
     from sdrpeer.deploy.coordinator import Coordinator
     from sdrpeer.monitor.scenario import Scenario
     from sdrpeer.monitor.virtual import VirtualRobot
@@ -328,6 +329,7 @@ class Agent:
             lambda: self._publish(force=True),
             on_fault=self._on_fault,
             on_instance_problem=self._on_fault,
+            on_refused=self._on_refused,
             policy=cfg.launch_policy,
         )
         instances.data_keys = data_keys(self.keyring.keys) if self.keyring else ()
@@ -618,6 +620,25 @@ class Agent:
         )
         if self.coordinator is not None:
             self.coordinator.local.fault(name, kind, detail)
+
+    def _on_refused(self, name: str, report: Refused) -> None:
+        """A receiver refuses one of `name`'s outgoing connections (or takes it again)."""
+        kind = EventKind.CONN_REFUSED if report.error is not None else EventKind.CONN_ACCEPTED
+        detail = {"error": report.error} if report.error is not None else {}
+        spec = None if self.instances is None else self.instances.desired().get(name)
+        self.events.add(
+            time.time(),
+            kind,
+            self.name,
+            instance=name,
+            component=None if spec is None else spec.component,
+            conn=report.conn,
+            sender=report.from_,
+            to=report.to,
+            port=report.in_port,
+            count=report.count,
+            **detail,
+        )
 
     # ----------------------------------------------------------------- deployment
     def _wake_coordinator(self) -> None:

@@ -291,4 +291,17 @@ def format_instances(
                 MISSING if since is None else human_seconds(max(0.0, now - since)),
             ]
         )
-    return render_table(INSTANCE_COLUMNS, rows)
+    lines = [render_table(INSTANCE_COLUMNS, rows)]
+    for i in instances:  # why a connection sends nothing: its receiver refuses it
+        for c in i.get("connections") or []:
+            refused = c.get("refused")
+            if isinstance(refused, Mapping):
+                lines.append(
+                    paint(
+                        f"{i.get('name')}: connection {c.get('id')} refused by its receiver "
+                        f"({refused.get('count')}x): {refused.get('error')}",
+                        "31",
+                        color,
+                    )
+                )
+    return "\n".join(lines)

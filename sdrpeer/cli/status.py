@@ -1,8 +1,9 @@
 """Pure text rendering of the deployment status and of `sdrpeer top`'s screen.
 
 Nothing here does I/O. `format_status` is `sdrpeer status`: the allocator, the plan, a table of
-components (robot, state, since, standbys, traffic) and the connections with their traffic, in
-colour on a terminal; once a constraint applies to a running placement, each component's
+components (robot, state, since, standbys, traffic) and the connections with their traffic (and
+a line for each sender whose receivers refuse some of its connections), in colour on a
+terminal; once a constraint applies to a running placement, each component's
 compliance (its Table I/II constraints re-checked while it runs) and a table of the
 constraints past their bound.
 `format_top` is one screen of `sdrpeer top`, built from one live sample of
@@ -79,6 +80,22 @@ def _lost(conn: Mapping[str, Any], color: bool) -> str:
     return paint(f"{lost}/s", "31", color) if lost else "0"
 
 
+def _refused(conns: Sequence[Mapping[str, Any]], color: bool) -> list[str]:
+    """A line per sending component whose receivers refuse some of its connections now (red):
+    they carry nothing (`sdrpeer describe` says why). `refused` is the sending instance's, like
+    `lost_per_s`: said once per component."""
+    out: list[str] = []
+    said: set[str] = set()
+    for c in conns:
+        sender, n = str(c.get("from")).split(".")[0], c.get("refused")
+        if sender in said or isinstance(n, bool) or not isinstance(n, int) or n <= 0:
+            continue
+        said.add(sender)
+        text = f"{sender}: {n} connection(s) refused by the receiver (sdrpeer describe {sender})"
+        out.append(paint(text, "31", color))
+    return out
+
+
 def _quantity(constraint: Any, value: Any) -> str:
     """A compliance value or bound in its constraint's unit (loss is a fraction)."""
     if not isinstance(value, int | float) or isinstance(value, bool):
@@ -153,6 +170,7 @@ def format_status(doc: Mapping[str, Any], *, color: bool = False, local: bool = 
             for c in conns
         ]
         lines.append(render_table(("FROM", "TO", "TRAFFIC", "LOST"), edges))
+        lines += _refused(conns, color)
     past = [r for r in doc.get("compliance") or [] if r.get("state") in ("violated", "holding")]
     if past:
         lines.append("")

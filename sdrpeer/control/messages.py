@@ -35,6 +35,7 @@ __all__ = [
     "Heartbeat",
     "Hello",
     "Part",
+    "Refused",
     "Reply",
     "Repoint",
     "Report",
@@ -294,9 +295,33 @@ class Fault:
     """When (unix seconds, the host's clock)."""
 
 
-Report = Hello | State | Reply | Heartbeat | Fault
+@dataclass(frozen=True, slots=True)
+class Refused:
+    """A receiver refused one of our outgoing connections (sent at once the first time, then
+    at most once per 30 s per connection while it goes on), or took it again after refusals
+    (`error` None)."""
+
+    T: ClassVar[str] = "refused"
+    conn: str
+    """The connection's id."""
+    from_: str = field(metadata=_wire("from"))
+    """The sending `instance.port` (or service port)."""
+    to: str
+    """The receiver's address it dialled."""
+    in_port: str = field(metadata=_wire("in"))
+    """The receiving port it named."""
+    error: str | None
+    """Why it was refused (the receiver's error, or our own check of its answer); None: the
+    connection got through again."""
+    count: int
+    """Refusals since the previous `refused` report of this connection (this one included)."""
+    ts: float
+    """When (unix seconds, the host's clock)."""
+
+
+Report = Hello | State | Reply | Heartbeat | Fault | Refused
 """Any report."""
-REPORTS: Final[tuple[type[Report], ...]] = (Hello, State, Reply, Heartbeat, Fault)
+REPORTS: Final[tuple[type[Report], ...]] = (Hello, State, Reply, Heartbeat, Fault, Refused)
 
 
 # -- both ways -------------------------------------------------------------------------------------

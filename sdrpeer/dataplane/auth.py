@@ -13,7 +13,10 @@ itself. The MAC is keyed BLAKE2b (16 bytes), which needs no OpenSSL (hosts stay 
 
 What follows the handshake on TCP is encrypted and authenticated (sdrpeer.dataplane.seal) under
 keys derived from the data key both proofs used (`check_receiver` and `check_sender` return it);
-same-robot Unix sockets and shared memory stay in clear.
+same-robot Unix sockets and shared memory stay in clear. Both proofs also cover whether what
+follows is encrypted (`proof_parts`: each side's own view, "enc" or "clear"), so a man in the
+middle who flips the hello's ``enc`` (or the policy's ``encrypt``) makes the proofs fail: a
+downgrade is refused, never accepted.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ try:  # the C module itself: `hashlib` would load OpenSSL into every host (sdrpe
 except ImportError:  # pragma: no cover - an interpreter without it
     from hashlib import blake2b
 
-__all__ = ["DataAuth"]
+__all__ = ["DataAuth", "proof_names", "proof_parts"]
 
 NONCE: Final = 16
 MAC: Final = 16
@@ -106,3 +109,11 @@ def proof_names(hello: Hello) -> tuple[str, ...]:
     ack = hello.ack
     extra = ("", "") if ack is None else (ack.session, str(ack.next))
     return (hello.conn, hello.in_port, hello.from_, *extra)
+
+
+def proof_parts(hello: Hello, sealed: bool) -> tuple[str, ...]:
+    """What both MACs cover besides the nonces: `proof_names`, then whether the stream is
+    encrypted after the sender's proof ("enc" or "clear", as this side sees it), so that a
+    flipped ``enc`` flag fails the proof instead of downgrading the stream. (The stream keys
+    are derived over `proof_names` alone.)"""
+    return (*proof_names(hello), "enc" if sealed else "clear")

@@ -14,10 +14,16 @@ not one stuck in a user-space buffer).
 A supervisor task owns the socket: it dials `to`, writes the hello, waits for the ok, then sleeps
 until the link drops, `repoint` changes the address, or `close` is called. A drop is redialed
 with exponential backoff (pending values stay queued, up to the buffer; frames lost inside the
-dead socket show up as a gap in seq at the receiver). `repoint` detaches the link at once, so
-later frames wait for the new peer, and shuts the old link, which still delivers what it was
-handed. seq counts frames written to this connection, starting at 1, across redials. The socket
-itself (and, on a Unix socket, the shared-memory ring big values take) is `link.Link`'s.
+dead socket show up as a gap in seq at the receiver). A dial the receiver refuses (its error
+reply, a proof that does not hold, encryption refused) is redialed likewise, and each refusal
+goes to `refusals.on_refused` with its reason (`None` once a dial gets through again), so that
+the host can tell its agent. `release()` (the host is exiting) makes `drain` return at once
+from then on: a component blocked in `send()` on a connection that cannot take a frame lets
+go. `repoint`
+detaches the link at once, so later frames wait for the new peer, and shuts the old link, which
+still delivers what it was handed. seq counts frames written to this connection, starting at 1,
+across redials. The socket itself (and, on a Unix socket, the shared-memory ring big values
+take) is `link.Link`'s.
 
 Acknowledged streams (push all/fifo, when the receiver agrees): the writer keeps every frame
 until the receiver acknowledges it (sdrpeer.dataplane.retention), and writes nothing more while
@@ -41,6 +47,7 @@ from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, AckOffer, Hello
 from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.pending import PolicyLike
+from sdrpeer.dataplane.refusals import DialRefusals
 from sdrpeer.dataplane.retention import DEFAULT_BYTES, DEFAULT_FRAMES, Retention
 from sdrpeer.dataplane.shm import DEFAULT_SIZE
 from sdrpeer.dataplane.writer import FrameWriter
@@ -106,6 +113,9 @@ class Connection:
         """Values refused at `offer` because they were oversized or unencodable."""
         self.last_error: str | None = None
         """Why the last dial or link failed."""
+        self.refusals = DialRefusals(conn_id)
+        """Dials the receiver refused (sdrpeer.dataplane.refusals), told to its `on_refused`."""
+        self._released = False
         self.dropped_remote = 0
         """Frames the receiving InPort's policy discarded (overwrite, drop, skip, new), as its
         acknowledgements counted them: with `dropped`, every frame this connection lost to a
@@ -213,10 +223,22 @@ class Connection:
         return FrameError(exc.reason, f"{where}: {exc.detail}")
 
     async def drain(self) -> None:
-        """Wait until the queue has room (returns at once when it has, or when closing)."""
-        while not self._queue.has_room and not self._closing:
+        """Wait until the queue has room (returns at once when it has, when closing, or once
+        released)."""
+        while not self._queue.has_room and not self._closing and not self._released:
             self._room.clear()
             await self._room.wait()
+
+    def release(self) -> None:
+        """Stop making writers wait (the host is exiting): `drain` returns at once from now on
+        (until `hold`), and a value offered to a full `block` queue is refused (counted in
+        `dropped`)."""
+        self._released = True
+        self._room.set()
+
+    def hold(self) -> None:
+        """Make writers wait for room again (undoes `release`)."""
+        self._released = False
 
     def repoint(self, to: str) -> None:
         """Send later frames to `to`; frames already written still reach the old receiver."""
@@ -332,6 +354,8 @@ class Connection:
             except (OSError, TimeoutError, FrameError, ValueError) as exc:
                 self.last_error = f"{to}: {exc}"
                 log.debug("data connection %s: dial failed: %s", self.conn_id, self.last_error)
+                if isinstance(exc, FrameError) and exc.reason == "refused":
+                    self.refusals.refused(exc.detail)
                 self._wake.clear()
                 with contextlib.suppress(TimeoutError):
                     async with asyncio.timeout(delay):
@@ -343,6 +367,7 @@ class Connection:
                 link.transport.abort()
                 continue
             delay = initial
+            self.refusals.through()
             if dropped:
                 self.reconnects += 1
             self._adopt(link)

@@ -23,7 +23,9 @@ arrive; it closes once it has acknowledged everything or its instance stops.
 
 An authenticated TCP link is encrypted (`encrypt`, on by default; sdrpeer.dataplane.seal): the
 hello asks for it, the receiver agrees in its reply, and after the sender's proof `write` seals
-what it is given into records and what comes back is opened before it is read.
+what it is given into records and what comes back is opened before it is read. An authenticated
+TCP link told not to encrypt says so in its hello's policy (``encrypt: false``: a receiver
+refuses a clear stream without it); both proofs cover the choice (sdrpeer.dataplane.auth).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from typing import Any, Final
 import msgpack
 
 from sdrpeer.dataplane.address import parse_address
-from sdrpeer.dataplane.auth import DataAuth, proof_names
+from sdrpeer.dataplane.auth import DataAuth, proof_names, proof_parts
 from sdrpeer.dataplane.frames import FrameDecoder, Hello, encode_hello, parse_reply, reply_auth
 from sdrpeer.dataplane.seal import Opener, sealed_writer
 from sdrpeer.dataplane.shm import SenderRing
@@ -225,7 +227,11 @@ async def dial(
     receiver's replies of up to `max_reply` bytes go there."""
     nonce = auth.nonce() if auth is not None and auth.enabled else None
     kind, host, port = parse_address(to)
-    hello = replace(hello, auth=nonce, enc=encrypt and nonce is not None and kind == "tcp")
+    enc = encrypt and nonce is not None and kind == "tcp"
+    policy = hello.policy
+    if nonce is not None and kind == "tcp" and not enc and policy.get("encrypt") is not False:
+        policy = {**policy, "encrypt": False}  # said, or the receiver refuses a clear stream
+    hello = replace(hello, auth=nonce, enc=enc, policy=policy)
     loop = asyncio.get_running_loop()
     ring: SenderRing | None = None
     link: Link | None = None
@@ -260,12 +266,14 @@ async def dial(
             ring.close()
     if error is None and auth is not None and nonce is not None:
         error, keys = _prove(link, auth, nonce, hello, reply)
-        if error is None and hello.enc:
-            if reply.get("enc") is not True:
-                error = "the receiver does not encrypt the stream"
-            else:
-                assert keys is not None
-                link.encrypt(*keys, max_record)
+        if error is None and reply.get("enc", False) is not hello.enc:
+            error = (
+                "the receiver does not encrypt the stream"
+                if hello.enc
+                else "the receiver encrypts a stream we asked in clear"
+            )
+        elif error is None and keys is not None:
+            link.encrypt(*keys, max_record)
     if error is not None:
         link.transport.close()
         raise FrameError("refused", error)
@@ -288,15 +296,20 @@ def _prove(
         return str(exc), None
     if theirs is None:
         return "the receiver did not authenticate (it has no data key)", None
-    names = proof_names(hello)
-    key = auth.check_receiver(nonce, theirs[0], names, theirs[1])
+    parts = proof_parts(hello, hello.enc)
+    key = auth.check_receiver(nonce, theirs[0], parts, theirs[1])
     if key is None:
-        return "the receiver's proof does not hold under our data keys", None
-    proof = auth.sender_proof(key, theirs[0], nonce, names)
+        return (
+            "the receiver's proof does not hold under our data keys (or the hello was altered"
+            " on the way)"
+        ), None
+    if reply.get("enc", False) is not hello.enc:
+        return None, None  # refused by the caller: no proof of ours is written
+    proof = auth.sender_proof(key, theirs[0], nonce, parts)
     link.transport.write(msgpack.packb({"auth": proof}))
     if not hello.enc:
         return None, None
-    return None, stream_keys(key, nonce, theirs[0], names)
+    return None, stream_keys(key, nonce, theirs[0], proof_names(hello))
 
 
 def _is_ack(obj: list[Any]) -> bool:

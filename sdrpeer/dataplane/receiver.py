@@ -6,9 +6,11 @@ accepted connection; this module is that connection's protocol. It reads into it
 before any frame: sdrpeer.dataplane.auth), maps an offered shared-memory ring (Unix sockets
 only), delivers every frame at once, writes back ring credits and acknowledgements, and keeps
 the socket open after the sender's end of stream until what it delivered is acknowledged. On an
-authenticated TCP connection whose sender asks for it, everything after the proof is encrypted
-(sdrpeer.dataplane.seal): the socket then reads into the `Opener`'s buffer, and each record is
-decrypted straight into the `FrameReader`'s buffer, as if its bytes had been read there. A hello
+authenticated TCP connection everything after the proof is encrypted (sdrpeer.dataplane.seal):
+a hello that does not ask for it (``enc``) is refused (`refused_clear`) unless the connection's
+own policy says ``encrypt: false``, and both proofs cover the choice, so a flipped flag fails
+them. The socket then reads into the `Opener`'s buffer, and each record is decrypted straight
+into the `FrameReader`'s buffer, as if its bytes had been read there. A hello
 with ``svc`` opens a service binding instead (sdrpeer.dataplane.service): its frames are requests
 for the provided service port it names, and the replies go back on the same socket.
 """
@@ -24,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 import msgpack
 
-from sdrpeer.dataplane.auth import proof_names
+from sdrpeer.dataplane.auth import proof_names, proof_parts
 from sdrpeer.dataplane.frames import PROTOCOL_VERSION, Hello, encode_reply, parse_hello
 from sdrpeer.dataplane.port_api import AckingPort, InPortLike, PolicyPort, ServicePortLike
 from sdrpeer.dataplane.reader import FrameReader
@@ -91,6 +93,7 @@ class Receiver(asyncio.BufferedProtocol):
         self.acking: AckingPort | None = None
         """The port, when this stream is acknowledged."""
         self._proving: tuple[Hello, InPortLike, bool, bytes] | None = None  # hello answered
+        self._sealed = False  # the stream is encrypted after the sender's proof
         self._policy: Any = None  # the connection's policy at a PolicyPort (from the hello)
         self._drops = False  # the sender reads [seq, dropped] acks (its hello's ack map said)
         self._last_seq = 0  # the highest seq delivered on this socket
@@ -136,16 +139,19 @@ class Receiver(asyncio.BufferedProtocol):
             return
         reader = self.reader
         reader.received(nbytes)
-        if self.port is not None:
-            self.server.bytes_in[self.in_port] += nbytes
         try:
-            if self.port is None and not self._hello():
-                return
-            if self._opener is not None:  # encrypted from the proof on: what followed it
-                rest = reader.decoder.take_rest()
-                self._opener.buffer()[: len(rest)] = rest  # (a hello is far below a read)
-                self._opener.received(len(rest))
-                self._records(0)
+            if self.port is not None:
+                self.server.bytes_in[self.in_port] += nbytes
+            elif self._hello():  # what came behind the handshake in this read counts too
+                if self._opener is not None:  # encrypted from the proof on: what followed it
+                    rest = reader.decoder.take_rest()
+                    self.server.bytes_in[self.in_port] += len(rest)
+                    self._opener.buffer()[: len(rest)] = rest  # (a hello is far below a read)
+                    self._opener.received(len(rest))
+                    self._records(0)
+                    return
+                self.server.bytes_in[self.in_port] += reader.decoder.partial
+            else:
                 return
             frames = reader.frames()
         except FrameError as exc:
@@ -277,11 +283,18 @@ class Receiver(asyncio.BufferedProtocol):
         port = None
         auth = self.server.auth
         authenticating = auth is not None and auth.enabled
+        tcp = not self._local()
         if hello.version != PROTOCOL_VERSION:
             error = f"protocol version {hello.version} not supported (this is {PROTOCOL_VERSION})"
         elif authenticating and hello.auth is None:
             error = "this receiver only takes authenticated connections (a data key's nonce)"
             self.server.counters["refused_auth"] += 1
+        elif authenticating and tcp and not hello.enc and hello.policy.get("encrypt") is not False:
+            error = (
+                'this receiver only takes encrypted streams over TCP ("enc": true in the hello;'
+                " a connection whose policy says encrypt: false may stream in clear)"
+            )
+            self.server.counters["refused_clear"] += 1
         elif hello.svc is not None:
             port, error = self._service(hello)
         else:
@@ -312,10 +325,12 @@ class Receiver(asyncio.BufferedProtocol):
             self._attach(hello.shm)  # only for a hello that is accepted
         acks = error is None and can_ack
         proof = None
+        self._sealed = authenticating and hello.auth is not None and hello.enc and tcp
         if error is None and authenticating and auth is not None and hello.auth is not None:
             nonce = auth.nonce()
-            proof = (nonce, auth.receiver_proof(hello.auth, nonce, proof_names(hello)))
-        enc = proof is not None and hello.enc and not self._local()
+            parts = proof_parts(hello, self._sealed)
+            proof = (nonce, auth.receiver_proof(hello.auth, nonce, parts))
+        enc = proof is not None and self._sealed
         reply = encode_reply(error, shm=self.ring is not None, ack=acks, auth=proof, enc=enc)
         self.transport.write(reply)
         if error is not None or port is None:
@@ -358,10 +373,9 @@ class Receiver(asyncio.BufferedProtocol):
         auth = self.server.auth
         assert auth is not None
         proof = obj.get("auth") if isinstance(obj, dict) else None
-        names = proof_names(hello)
         key = None
         if type(proof) is bytes and hello.auth is not None:
-            key = auth.check_sender(nonce, hello.auth, names, proof)
+            key = auth.check_sender(nonce, hello.auth, proof_parts(hello, self._sealed), proof)
         if key is None or hello.auth is None:
             self._proving = None
             self.server.counters["refused_auth"] += 1
@@ -369,8 +383,8 @@ class Receiver(asyncio.BufferedProtocol):
             self.server.report("refused_auth", hello.conn, "the sender's proof does not hold")
             self.abort()
             return False
-        if hello.enc and not self._local():
-            self._encrypt(*stream_keys(key, hello.auth, nonce, names))
+        if self._sealed:
+            self._encrypt(*stream_keys(key, hello.auth, nonce, proof_names(hello)))
         return self._open()
 
     def _encrypt(self, receive_key: bytes, send_key: bytes) -> None:

@@ -40,6 +40,7 @@ from sdrpeer.dataplane.auth import DataAuth
 from sdrpeer.dataplane.frames import DEFAULT_MAX_FRAME, Hello
 from sdrpeer.dataplane.link import Link, dial
 from sdrpeer.dataplane.port_api import ServicePortLike
+from sdrpeer.dataplane.refusals import DialRefusals
 from sdrpeer.errors import FrameError
 
 __all__ = ["Call", "ServiceClient", "ServiceStream", "request_frame"]
@@ -148,6 +149,9 @@ class ServiceClient:
         self.counters: Counter[str] = Counter()
         """calls, replies, late (a reply after its caller gave up), lost (calls failed by a
         lost, re-pointed or closed socket), dials, refused (dials that failed)."""
+        self.refusals = DialRefusals(conn_id)
+        """Dials the provider's host refused (its error reply, a proof that does not hold),
+        told to its `on_refused` (sdrpeer.dataplane.refusals)."""
         self._link: Link | None = None
         self._dialing: asyncio.Future[Link] | None = None
         self._pending: dict[int, tuple[asyncio.Future[tuple[bool, Any]], Link]] = {}
@@ -250,6 +254,8 @@ class ServiceClient:
                 )
         except (OSError, TimeoutError, FrameError) as exc:
             self.counters["refused"] += 1
+            if isinstance(exc, FrameError) and exc.reason == "refused":
+                self.refusals.refused(exc.detail)
             text = str(exc) or type(exc).__name__
             raise ConnectionError(f"provider at {to}: {text}") from None
         finally:
@@ -259,6 +265,7 @@ class ServiceClient:
             link.transport.close()
             raise ConnectionError(f"re-pointed from {to} while connecting")
         self._link = link
+        self.refusals.through()
         log.info("service binding %s: connected to %s", self.conn_id, to)
         return link
 

@@ -13,7 +13,9 @@ How it works (pure: the route hands in what the agent knows, nothing here does I
   name it;
 - warnings, in both: a standby missing or not running, an instance whose robot is down, a
   constraint its robot fails now (battery, RSSI, a link between connected components), a
-  connection dropping frames (`lost_per_s`) or a `port.overflow` event.
+  connection dropping frames (`lost_per_s`) or a `port.overflow` event, a connection its
+  receiver refuses (the latest `conn.refused` event of each connection not followed by its
+  `conn.accepted`: why it sends nothing).
 Events come from the agent's own log and from the robots concerned (the route gathers them);
 `describe` picks those that name the subject as a whole word, newest last.
 """
@@ -336,6 +338,27 @@ def _component_warnings(
         last = overflows[-1]
         detail = json.dumps(last.get("detail"), sort_keys=True)
         out.append(f"port.overflow on {last.get('robot')}: {detail}")
+    out += refused_warnings(doc["events"])
+    return out
+
+
+def refused_warnings(events: Iterable[Mapping[str, Any]]) -> list[str]:
+    """One warning per connection whose latest refusal event (oldest first in `events`) is not
+    followed by its `conn.accepted`: its receiver refuses it, so it sends nothing."""
+    latest: dict[tuple[Any, Any], Mapping[str, Any]] = {}
+    for e in events:
+        if e.get("kind") in (EventKind.CONN_REFUSED, EventKind.CONN_ACCEPTED):
+            d = e.get("detail") or {}
+            latest[(e.get("robot"), d.get("conn"))] = e
+    out = []
+    for e in latest.values():
+        if e.get("kind") == EventKind.CONN_REFUSED:
+            d = e.get("detail") or {}
+            out.append(
+                f"{d.get('sender')} -> {d.get('to')} {d.get('port')} (connection "
+                f"{d.get('conn')} on {e.get('robot')}) is refused by its receiver: "
+                f"{d.get('error')}"
+            )
     return out
 
 

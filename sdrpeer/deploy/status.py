@@ -106,7 +106,8 @@ def status_doc(
 def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str, Any]]:
     """Each connection of the system with the bytes/s its sender's active instance sends now
     and the frames/s its outgoing connections lose to full buffers at either end (all its
-    OutPorts, like the bytes; None when not known), and the traffic the system file expects."""
+    OutPorts, like the bytes; None when not known), how many of them their receivers refuse
+    now (`refused`, likewise the instance's), and the traffic the system file expects."""
     if plan.system is None:
         return []
     sending: dict[str, InstanceInfo] = {}
@@ -125,6 +126,7 @@ def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str,
                 "bytes_per_s": None if sender is None else sender.out_bps,
                 "expected_bytes_per_s": c.traffic_bytes_per_s,
                 "lost_per_s": None if sender is None else sender.out_lost,
+                "refused": None if sender is None else sender.out_refused,
             }
         )
     return rows

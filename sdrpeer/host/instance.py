@@ -14,7 +14,12 @@ transition, a failing callback); the caller turns either into `reply ok=false`. 
 server's `resolve` is `in_port`, its `resolve_service` `service`. A `connect` whose `out` is one
 of our consumer service ports makes a service binding (sdrpeer.dataplane.service's
 `ServiceClient`, bound to the port's `ServiceCaller`) instead of a data stream; `disconnect` and
-`repoint` treat both alike. Provided services answer only while the component is ACTIVE.
+`repoint` treat both alike. Provided services answer only while the component is ACTIVE. A
+receiver refusing one of our data streams or service bindings is logged and reported to the
+agent (`refused`: the first refusal at once, then at most once per 30 s per connection,
+sdrpeer.dataplane.refusals; and once more, with no error, when it gets through again).
+`release_senders` (the host is exiting) lets a component blocked in `send()` go, so finalizing
+never waits on a receiver; `deactivate` does the same for the connections refused now.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from sdrpeer.control.messages import (
     Disconnect,
     Exit,
     Fault,
+    Refused,
     Repoint,
     Report,
     Reset,
@@ -47,6 +53,7 @@ from sdrpeer.control.messages import (
 )
 from sdrpeer.dataplane import Connection
 from sdrpeer.dataplane.auth import DataAuth
+from sdrpeer.dataplane.refusals import RefusalWatch
 from sdrpeer.dataplane.service import ServiceClient
 from sdrpeer.errors import CommandRefused, SdrpeerError
 from sdrpeer.host import handoff
@@ -118,6 +125,8 @@ class HostedInstance:
         }
         self.bindings: dict[str, tuple[ServiceClient, ServiceCaller]] = {}
         """Service bindings from our consumer ports, by connection id."""
+        self.refusals = RefusalWatch()
+        """Which refusals of our outgoing data streams to report (rate-limited)."""
         self.state = _state_name(runner.state)
         self._serve(self.state)
 
@@ -180,7 +189,12 @@ class HostedInstance:
             case Activate():
                 await maybe_await(self.runner.activate())
             case Deactivate():
-                await maybe_await(self.runner.deactivate())
+                refused = self._release_refused()
+                try:
+                    await maybe_await(self.runner.deactivate())
+                finally:
+                    for connection in refused:
+                        connection.hold()
             case Reset():
                 await maybe_await(self.runner.reset())
             case SetParams(params=params):
@@ -245,10 +259,55 @@ class HostedInstance:
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None
+        connection.refusals.on_refused = lambda reason: self._refused(
+            conn_id, f"{self.name}.{out}", to, in_port, reason
+        )
         connection.start()
         port.attach(connection)
         self.connections[conn_id] = (connection, port)
         log.info("connection %s: %s.%s -> %s %s", conn_id, self.name, out, to, in_port)
+
+    def _refused(self, conn_id: str, from_: str, to: str, in_port: str, reason: str | None) -> None:
+        """A receiver refused our connection or binding `conn_id` (None: it got through again):
+        log and report it to the agent when `refusals` says it is due."""
+        now = self.clock()
+        if reason is None:
+            told = self.refusals.accepted(conn_id)
+        else:
+            told = self.refusals.refused(now, conn_id, reason)
+        if told is None:
+            return
+        where = f"{from_} -> {to} {in_port}"
+        if told.error is None:
+            log.info("connection %s (%s): accepted again", conn_id, where)
+        else:
+            log.warning(
+                "connection %s (%s): refused by the receiver (%d time(s) since last said): %s",
+                conn_id,
+                where,
+                told.count,
+                told.error,
+            )
+        self.report(Refused(conn_id, from_, to, in_port, told.error, told.count, now))
+
+    def _release_refused(self) -> list[Connection]:
+        """Let a component blocked in `send()` on a connection its receiver refuses go (so that
+        `deactivate` gets the component's lock); the connections released. A connection that
+        is only down (reconnecting) keeps its writers waiting: a planned move loses nothing."""
+        refused = [
+            c
+            for c, _ in self.connections.values()
+            if isinstance(c, Connection) and c.refusals.last is not None
+        ]
+        for connection in refused:
+            connection.release()
+        return refused
+
+    def release_senders(self) -> None:
+        """The host is exiting: no component waits in `send()` for a connection any more."""
+        for connection, _ in self.connections.values():
+            if isinstance(connection, Connection):
+                connection.release()
 
     def _bind(self, conn: Conn) -> None:
         """Bind one of our consumer ports to a provider (a service binding)."""
@@ -270,6 +329,9 @@ class HostedInstance:
             )
         except ValueError as exc:
             raise CommandRefused(f"conn 'to': {exc}") from None
+        client.refusals.on_refused = lambda reason: self._refused(
+            conn.id, client.hello.from_, client.to, conn.in_port, reason
+        )
         caller.bind(client)
         self.bindings[conn.id] = (client, caller)
         log.info(
@@ -289,6 +351,7 @@ class HostedInstance:
 
     async def _disconnect(self, conn_id: str) -> None:
         """Close a data stream (or a service binding)."""
+        self.refusals.forget(conn_id)
         if conn_id in self.bindings:
             client, caller = self.bindings.pop(conn_id)
             caller.bind(None)

@@ -7,7 +7,10 @@ when standalone, activates at once and logs the port counters once a second. Com
 by the channel and run one at a time, in order, by `_serve_commands`, each answered by exactly one
 `reply` (`snapshot`'s state goes in `part` messages written with its reply, in one write).
 Whatever ends the host (`exit`, SIGTERM/SIGINT, the control channel closing, the parent dying)
-sets `stop`; then the runner finalizes (deactivating first if active) within the timeout,
+sets `stop` (`exit` at once, not behind a command still running, which is then abandoned and
+answered `ok: false`); then the outgoing connections stop making senders wait (a component
+blocked in `send()` on a receiver that refuses it, or is slow, lets go at once: finalizing
+waits for its lock), the runner finalizes (deactivating first if active) within the timeout,
 connections and the data server close, `exit` is answered, and the channel is closed after the
 last report is written.
 """
@@ -50,6 +53,8 @@ class Host:
         """The `exit` command that ends us (its id and itself), if one does."""
         self._queue: asyncio.Queue[Request | Refusal] = asyncio.Queue()
         self._server: DataServer | None = None
+        self._running: Request | None = None
+        """The command being carried out, if one is."""
         self._error = "finalize failed"
 
     async def run(self) -> int:
@@ -105,6 +110,7 @@ class Host:
         await self.stop.wait()
         for task in tasks:
             task.cancel()
+        self.inst.release_senders()
         code = await self._finalize(runner)
         await self.inst.close_connections()
         await maybe_await(server.close())
@@ -121,7 +127,18 @@ class Host:
             log.error("start failed: %s", exc)
 
     def _on_command(self, request: Request | Refusal) -> None:
-        """The channel decoded a command (or one it cannot read): queue it."""
+        """The channel decoded a command (or one it cannot read): queue it; but `exit` is
+        carried out at once, even while another command runs (the agent sends it when that one
+        timed out, e.g. a `deactivate` waiting for a component blocked in `send()`): that one
+        is abandoned and answered `ok: false`, like those still queued."""
+        if (
+            isinstance(request, Request)
+            and isinstance(request.command, Exit)
+            and self.exit_request is None
+        ):
+            self.exit_request = (request.id, request.command)
+            self.stop.set()
+            return
         self._queue.put_nowait(request)
 
     def _on_closed(self, reason: str) -> None:
@@ -158,10 +175,10 @@ class Host:
                 log.warning("%s (id %d) refused: %s", request.t, request.id, request.error)
                 self.channel.send(Reply(request.id, False, request.error))
                 continue
-            if isinstance(request.command, Exit):
-                self.exit_request = (request.id, request.command)
-                self.stop.set()
+            if isinstance(request.command, Exit):  # a second exit: answered on the way out
+                self._queue.put_nowait(request)
                 return
+            self._running = request
             try:
                 blob = await self.inst.execute(request)
             except Exception as exc:
@@ -173,6 +190,7 @@ class Host:
                 else:
                     done = Reply(request.id, True, size=len(blob))
                     self.channel.send(done, *parts(request.id, blob))
+            self._running = None  # (a command cancelled for the exit stays: _goodbye answers it)
 
     def _exit_timeout(self) -> float:
         """Seconds finalizing may take: the `exit` command's timeout, else the default."""
@@ -203,6 +221,9 @@ class Host:
         """Answer `exit` and close the channel once the last report is written."""
         if self.channel is None:
             return
+        if self._running is not None:  # abandoned for the exit
+            self.channel.send(Reply(self._running.id, False, "the host is exiting"))
+            self._running = None
         if self.exit_request is not None:
             error = None if code == 0 else self._error
             self.channel.send(Reply(self.exit_request[0], code == 0, error))

@@ -240,8 +240,8 @@ def _identity_changed(a: RobotRecord, b: RobotRecord) -> bool:
         b.launch,
     ):
         return True
-    return [(i.name, i.component, i.state, i.role, i.data) for i in a.instances] != [
-        (i.name, i.component, i.state, i.role, i.data) for i in b.instances
+    return [(i.name, i.component, i.state, i.role, i.data, i.out_refused) for i in a.instances] != [
+        (i.name, i.component, i.state, i.role, i.data, i.out_refused) for i in b.instances
     ]
 
 

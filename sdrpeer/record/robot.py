@@ -34,7 +34,7 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
                  [peer, rtt_10us, jitter_10us, loss_permille, ...]]   (at most MAX_LISTED)
     components= [component name, ...]                 (each distinct component once)
     instances = [[component_index, shared_prefix_len, name_rest, state, role, cpu_dpct,
-                  rss_kib, data_addr|nil, out_bytes_per_s, out_lost_per_s], ...]
+                  rss_kib, data_addr|nil, out_bytes_per_s, out_lost_per_s, out_refused], ...]
     loads     = [cpu_dpct, rss_kib, out_bytes_per_s, out_lost_per_s, ...]   (4 per instance,
                  in record order)
     election  = [epoch, leader|nil, claiming] | nil   (who this robot believes is the allocator)
@@ -45,10 +45,12 @@ Wire layout (msgpack arrays, not maps; fixed-point integers, not floats):
 starts with its component's name (`CameraRTC2` of `CameraRTC`), so only the differing tail is
 sent. Well-known states and roles are sent as a small index, any other as its string.
 Decoding returns the rounded values: `decode_record(encode_record(r))` equals `r` only once `r`
-is already on that grid. Format 4 (this one) added each instance's `out_lost_per_s` (frames its
-outgoing connections lose to full buffers) to format 3, which had added `launch` to format 2,
-which had replaced format 1 (whose record listed every link and a timestamp); a record of another
-format is refused, so a fleet is upgraded all at once.
+is already on that grid. Format 5 (this one) added each instance's `out_refused` (how many of
+its outgoing connections their receivers refuse now) to format 4, which had added each
+instance's `out_lost_per_s` (frames its outgoing connections lose to full buffers) to format
+3, which had added `launch` to format 2, which had replaced format 1 (whose record listed every
+link and a timestamp); a record of another format is refused, so a fleet is upgraded all at
+once.
 """
 
 from __future__ import annotations
@@ -63,7 +65,7 @@ from sdrpeer.launch.policy import DEFAULT_POLICY, LaunchPolicy
 from sdrpeer.record.limits import LIMITS, MAX_COORD_M
 from sdrpeer.vocabulary import InstanceRole, InstanceState, LifecycleState, ProcessState
 
-FORMAT = 4
+FORMAT = 5
 """Version of the wire layout above; a decoder refuses any other."""
 
 STATES: tuple[InstanceState, ...] = (
@@ -208,6 +210,9 @@ class InstanceInfo:
     out_lost: int = 0
     """Frames per second its outgoing connections lost to a full buffer at either end (a
     sender's queue or the receiving InPort; rounded up), over the last metrics interval."""
+    out_refused: int = 0
+    """How many of its outgoing connections (and service bindings) their receivers refuse now
+    (its host's `refused` reports): they carry nothing."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -380,6 +385,7 @@ def encode_record(r: RobotRecord) -> bytes:
                 inst.data,
                 max(0, int(inst.out_bps)),
                 max(0, int(inst.out_lost)),
+                max(0, int(inst.out_refused)),
             ]
         )
     e, p = r.election, r.plan
@@ -520,7 +526,9 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
     components = [_str(c, "component") for c in _list(comps, "components")]
     out = []
     for item in _list(x, "instances"):
-        ci, shared, rest, state, role, cpu, rss, data, out_bps, lost = _list(item, "instance", 10)
+        ci, shared, rest, state, role, cpu, rss, data, out_bps, lost, refused = _list(
+            item, "instance", 11
+        )
         component = components[_int(ci, "instance.component", 0, len(components) - 1)]
         prefix = component[: _int(shared, "instance.prefix", 0, len(component))]
         out.append(
@@ -534,6 +542,7 @@ def _instances(comps: object, x: object) -> tuple[InstanceInfo, ...]:
                 data=None if data is None else _str(data, "instance.data"),
                 out_bps=_int(out_bps, "instance.out_bps", 0, 1 << 40),
                 out_lost=_int(lost, "instance.out_lost", 0, 1 << 40),
+                out_refused=_int(refused, "instance.out_refused", 0, 1 << 20),
             )
         )
     return tuple(out)
@@ -688,6 +697,7 @@ def record_to_json(r: RobotRecord) -> dict[str, Any]:
                 "data": i.data,
                 "out_bps": i.out_bps,
                 "out_lost": i.out_lost,
+                "out_refused": i.out_refused,
             }
             for i in r.instances
         ],

@@ -11,7 +11,9 @@ only after `retry_after` seconds, so a refusing host is not hammered. `status()`
 what the API and the gossip record show; `on_change` tells the agent to publish at once. Trouble
 goes to the agent's recovery at once, by instance name: `on_fault(name, kind, detail)` for every
 fault a component reports, `on_instance_problem(name, cause, detail)` for `component_error` (ERROR)
-and `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems. `snapshot(name)` and
+and `crashed` (the host died unexpectedly); see sdrpeer.runtime.problems; `on_refused(name,
+report)` when a receiver refuses one of its outgoing connections (each instance's status shows
+the refusal under its connection). `snapshot(name)` and
 `restore(name, state)` pass through to the instance's supervisor, and `before_stop(name)`, when set,
 runs before an ACTIVE instance is stopped (bounded by `before_stop_timeout`): the agent hands the
 instance's last state to its successor there. The instance is deactivated first, so it takes no
@@ -40,6 +42,7 @@ from sdrpeer.control.messages import (
     DataKeys,
     Deactivate,
     Disconnect,
+    Refused,
     Repoint,
     Reset,
     Step,
@@ -79,6 +82,7 @@ class InstanceManager:
         retry_after: float = 1.0,
         on_fault: Callable[[str, str, str], None] = lambda name, kind, detail: None,
         on_instance_problem: Callable[[str, str, str], None] = lambda name, cause, detail: None,
+        on_refused: Callable[[str, Refused], None] = lambda name, report: None,
         policy: LaunchPolicy | None = None,
     ) -> None:
         self.data_dir = data_dir
@@ -89,6 +93,9 @@ class InstanceManager:
         self.on_fault = on_fault
         """Called at once with (instance name, kind, detail) for every fault reported."""
         self.on_instance_problem = on_instance_problem
+        self.on_refused = on_refused
+        """Called at once with (instance name, report) when a receiver refuses one of its
+        outgoing connections (rate-limited by the host), or takes it again (`error` None)."""
         """Called at once with (instance name, cause, detail): component_error or crashed, and
         the supervisor's last error (an exit code, or why it killed the host: "hung: ...")."""
         self.interval = interval
@@ -311,6 +318,7 @@ class InstanceManager:
                     on_problem=lambda s, cause: self.on_instance_problem(
                         s.name, cause, s.last_error or ""
                     ),
+                    on_refused=lambda s, report: self.on_refused(s.name, report),
                     data_keys=lambda: self.data_keys,
                 )
                 self._sups[a.instance] = sup
@@ -432,6 +440,7 @@ class InstanceManager:
                 data=sup.tcp_address(),
                 out_bps=round(sup.out_bps),
                 out_lost=math.ceil(sup.out_lost_ps),  # one frame lost in a while still shows
+                out_refused=sum(1 for c in sup.refusals if c in sup.connections),
             )
             for _, sup in sorted(self._sups.items())
         )
@@ -454,7 +463,8 @@ def status_dict(sup: Supervisor, spec: InstanceSpec | None) -> dict[str, Any]:
     desired = desired_to_json(spec.desired) if spec is not None else "removed"
     conns = []
     for cid, (conn, addr) in sorted(sup.connections.items()):
-        conns.append({**connection_to_json(conn), "id": cid, "addr": addr})
+        refused = sup.refusals.get(cid)  # None: not refused by its receiver now
+        conns.append({**connection_to_json(conn), "id": cid, "addr": addr, "refused": refused})
     return {
         "name": sup.name,
         "component": sup.spec.component,

@@ -14,8 +14,11 @@ States: STOPPED, STARTING (spawned, no INACTIVE yet), the host's own lifecycle s
 INACTIVE, ACTIVE, ERROR, FINALIZED), STOPPING, BACKOFF, FAILED; every change is timestamped.
 Trouble is passed on at once (sdrpeer.runtime.problems): each `fault` report is kept (the last
 `max_faults`) and goes to `on_fault(sup, kind, detail)`; an ERROR no fault caused and an exit
-nobody asked for go to `on_problem(sup, cause)`. `snapshot()`/`restore(state)` move a component's
-working state (sdrpeer.runtime.handoff), at most `max_state` bytes.
+nobody asked for go to `on_problem(sup, cause)`. A `refused` report (a receiver refuses one of
+the host's outgoing connections; rate-limited by the host) is kept per connection in `refusals`
+until the host says it got through, and goes to `on_refused(sup, report)` at once.
+`snapshot()`/`restore(state)` move a component's working state (sdrpeer.runtime.handoff), at
+most `max_state` bytes.
 """
 
 from __future__ import annotations
@@ -88,6 +91,7 @@ class Supervisor:
         *,
         on_fault: Callable[[Supervisor, str, str], None] = lambda s, k, d: None,
         on_problem: Callable[[Supervisor, str], None] = lambda s, c: None,
+        on_refused: Callable[[Supervisor, messages.Refused], None] = lambda s, r: None,
         data_keys: Callable[[], Sequence[bytes]] = tuple,
     ) -> None:
         self.spec = spec
@@ -98,6 +102,11 @@ class Supervisor:
         """Called at once with (self, kind, detail) for every fault the component reports."""
         self.on_problem = on_problem
         """Called at once with (self, cause): component_error or crashed (runtime.problems)."""
+        self.on_refused = on_refused
+        """Called at once with (self, report) for every `refused` report of the host."""
+        self.refusals: dict[str, dict[str, Any]] = {}
+        """Connection id -> why its receiver refuses it now: `{"error", "ts", "count"}` (the
+        last reason, when it was reported, refusals in all); gone once it got through."""
         self.data_keys = data_keys  # what a new host authenticates its data connections with
         self.faults: deque[problems.Fault] = deque(maxlen=config.max_faults)
         """The last faults reported, oldest first."""
@@ -315,6 +324,7 @@ class Supervisor:
         self.hello, self.ports, self.connections, self.start_latency = None, {}, {}, None
         self.port_rates = {}
         self.data_plane = {}
+        self.refusals = {}
         try:
             self._ps = psutil.Process(proc.pid)
             self._ps.cpu_percent(None)
@@ -346,6 +356,7 @@ class Supervisor:
         self.connections, self.ports, self.hello = {}, {}, None
         self.port_rates = {}
         self.data_plane = {}
+        self.refusals = {}
         self.cpu_pct, self.rss = 0.0, 0
         log.info("%s: host %s", self.name, exit_text(rc))
 
@@ -404,6 +415,8 @@ class Supervisor:
                 self._on_heartbeat(report)
             case messages.Fault():
                 self._on_fault(report)
+            case messages.Refused():
+                self._on_refused(report)
             case _:  # a reply is the channel's
                 pass
 
@@ -485,6 +498,29 @@ class Supervisor:
         log.warning("%s: %s", self.name, self.last_error)
         problems.call_hook("on_fault", self.on_fault, self, fault.kind, fault.detail)
         self.on_change(self)
+
+    def _on_refused(self, msg: messages.Refused) -> None:
+        if msg.error is None:
+            self.refusals.pop(msg.conn, None)
+            log.info("%s: connection %s is accepted again", self.name, msg.conn)
+        else:
+            before = self.refusals.get(msg.conn, {}).get("count", 0)
+            self.refusals[msg.conn] = {
+                "error": msg.error,
+                "ts": msg.ts,
+                "count": before + msg.count,
+            }
+            log.warning(
+                "%s: connection %s (%s -> %s %s) refused: %s",
+                self.name,
+                msg.conn,
+                msg.from_,
+                msg.to,
+                msg.in_port,
+                msg.error,
+            )
+        problems.call_hook("on_refused", self.on_refused, self, msg)
+        self.on_change(self)  # the gossip record counts the connections refused now
 
     def _problem(self, cause: str | None) -> None:
         if cause is not None:
