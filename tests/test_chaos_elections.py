@@ -21,7 +21,8 @@ def test_each_election_is_explained_by_what_befell_the_allocator_before_it() -> 
             ev(20.5, "election.stepped_down", "robot-2", epoch=4, reason="ineligible"),
         ],
         "robot-1": [ev(1.0, "election.elected", "robot-1", epoch=1, previous=None)],
-        "robot-3": [ev(6.0, "election.elected", "robot-3", epoch=2, previous=None)],
+        # robot-3's own log was lost with it: robot-5 learnt of its win
+        "robot-5": [ev(6.1, "election", "robot-5", epoch=2, leader="robot-3", previous=None)],
         "robot-4": [
             ev(13.0, "election.elected", "robot-4", epoch=3, previous=None),
             ev(14.0, "election.elected", "robot-2", epoch=4, previous="robot-4"),
@@ -33,7 +34,7 @@ def test_each_election_is_explained_by_what_befell_the_allocator_before_it() -> 
     report = elections(logs, faults, T0)
     assert [(r["epoch"], r["winner"], r["why"]) for r in report["list"]] == [
         (1, "robot-1", "first"),
-        (2, "robot-3", "allocator killed"),
+        (2, "robot-3", "allocator killed"),  # as robot-5 heard of it
         (3, "robot-4", "declared dead while alive"),
         (4, "robot-2", "other"),  # robot-4 lost the role and nothing in the logs says why
         (5, "robot-4", "stepped down: ineligible"),  # logged 0.3 s after the next win

@@ -16,9 +16,9 @@ previous allocator between its own win and the next one, first match wins:
 - `other`: none of these.
 
 A fleet whose members all live should hold one allocator: every election past the first that is
-not `allocator killed` or `partition` is churn. The robots killed during the soak take their own
-event logs with them; their wins are still seen through the others' `election` events only if
-they reported them, so the count is a floor.
+not `allocator killed` or `partition` is churn. A win is seen in the winner's own log or in any
+robot's `election` event naming the new leader (the robots killed during the soak take their own
+logs with them; a win no surviving robot learnt of is not counted, so the count is a floor).
 """
 
 from __future__ import annotations
@@ -47,10 +47,17 @@ def elections(
         for e in entries:
             kind, ts, robot = e.get("kind"), float(e.get("ts", 0.0)), str(e.get("robot", ""))
             detail = e.get("detail") or {}
-            if kind == "election.elected":
+            winner = (
+                robot
+                if kind == "election.elected"
+                else detail.get("leader")
+                if kind == "election"
+                else None
+            )
+            if winner:  # a win, as the winner logged it or as another robot learnt of it
                 epoch = int(detail.get("epoch", 0))
-                if epoch not in wins or (ts, robot) < wins[epoch]:
-                    wins[epoch] = (ts, robot)
+                if epoch not in wins or (ts, str(winner)) < wins[epoch]:
+                    wins[epoch] = (ts, str(winner))
             elif kind == "election.stepped_down":
                 stepped.append((ts, robot, str(detail.get("reason", "?"))))
             elif kind == "member.dead":
