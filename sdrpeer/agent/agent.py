@@ -720,7 +720,16 @@ class Agent:
                 self.events.add(wall, EventKind.VITALS_MALFORMED, event.name, error=str(e))
                 return
             self._vitals[event.name] = (event.version, event.revision, vitals)
+            before = self.records.get(event.name)
             self._overlay(event.name)
+            after = self.records.get(event.name)
+            if (
+                before is not None
+                and after is not None
+                and self.publisher.boundaries.crossed(before[1], after[1]) is not None
+            ):  # a value some decision compares with crossed its cut: judge it now, not at the
+                # next tick (a crossing less than record_gap after a record comes as vitals)
+                self._wake_coordinator()
         elif isinstance(event, MemberChanged):
             self._on_member(event, wall)
         elif isinstance(event, EventReceived) and event.kind == "trap":
