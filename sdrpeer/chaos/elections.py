@@ -27,6 +27,8 @@ from collections import Counter
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from sdrpeer.eventlog import EventKind
+
 WINDOW_AFTER_S = 1.0
 """A previous allocator's step-down logged this long after the next win still explains it (the
 winner may claim as soon as it hears of the step-down, before the loser logs it)."""
@@ -49,18 +51,18 @@ def elections(
             detail = e.get("detail") or {}
             winner = (
                 robot
-                if kind == "election.elected"
+                if kind == EventKind.ELECTION_ELECTED
                 else detail.get("leader")
-                if kind == "election"
+                if kind == EventKind.ELECTION
                 else None
             )
             if winner:  # a win, as the winner logged it or as another robot learnt of it
                 epoch = int(detail.get("epoch", 0))
                 if epoch not in wins or (ts, str(winner)) < wins[epoch]:
                     wins[epoch] = (ts, str(winner))
-            elif kind == "election.stepped_down":
+            elif kind == EventKind.ELECTION_STEPPED_DOWN:
                 stepped.append((ts, robot, str(detail.get("reason", "?"))))
-            elif kind == "member.dead":
+            elif kind == EventKind.MEMBER_DEAD:
                 dead.append((ts, robot))
     kills = [
         (t0_wall + float(f["t"]), str(f["robots"][0])) for f in faults if f["kind"] == "kill_agent"
