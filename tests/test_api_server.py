@@ -1,13 +1,30 @@
-"""The API's listening socket: connections beyond the limit are closed at accept, idle ones are
-closed by the server (before their first request and between two), and it serves on after."""
+"""The API's listening socket under floods (sdrpeer.api.server with sdrpeer.api.connections): a
+caller is answered while a flood holds every connection the API keeps, excess connections shed
+the oldest waiting one (a busy one never), idle and half-sent connections are closed on their
+deadlines, and the API serves on after."""
 
 from __future__ import annotations
 
 import asyncio
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
 
-from sdrpeer.api.server import serve_api
+from aiohttp import web
+
+from sdrpeer.api.app import Route
+from sdrpeer.api.connections import ApiLimits
+from sdrpeer.api.server import GuardedSite, serve_api
+from sdrpeer.client import AgentClient
 from tests.test_api import FakeView
 from tests.wait import until_async
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+
+from bench_api_flood import HEAD_START, Flood, raise_fd_limit
+
+TOKEN = "t" * 32
 
 
 async def closed_by_server(reader: asyncio.StreamReader, within: float = 20.0) -> bool:
@@ -17,30 +34,166 @@ async def closed_by_server(reader: asyncio.StreamReader, within: float = 20.0) -
             await reader.read()  # to EOF
     except TimeoutError:
         return False
+    except ConnectionError:
+        return True
     return True
 
 
-async def test_excess_and_idle_connections_are_closed_and_the_api_serves_on() -> None:
+async def members_status(port: int) -> int | str:
+    """`GET /v1/members` as the command line makes it (sdrpeer.client, in a thread: connect and
+    send at once): 200, another status, or why it failed."""
+    client = AgentClient(f"http://127.0.0.1:{port}", timeout=5.0)
+    try:
+        await asyncio.to_thread(client.get, "/v1/members")
+    except Exception as exc:  # the failure is the finding: say which
+        return f"{type(exc).__name__}: {exc}"
+    return 200
+
+
+async def get(port: int, path: str) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+    """A connection that has sent `GET path` (keep-alive) and not read the answer."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(f"GET {path} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+    await writer.drain()
+    return reader, writer
+
+
+@asynccontextmanager
+async def flooding(port: int, flood: Flood) -> AsyncIterator[Flood]:
+    """`flood` running against 127.0.0.1:port until the block ends."""
+    stop = asyncio.Event()
+    task = asyncio.create_task(flood.run(stop))
+    try:
+        yield flood
+    finally:
+        stop.set()
+        async with asyncio.timeout(30):
+            await task
+
+
+async def test_the_robot_is_answered_while_a_flood_holds_every_connection() -> None:
+    """Fails on the old code: the flood held the 256 connections the API keeps, and the
+    caller's connection was closed at accept (refused) with the flood's excess."""
+    raise_fd_limit(2048)
+    runner, site = await serve_api(FakeView(), TOKEN, "127.0.0.1", 0)
+    flood = Flood("127.0.0.1", site.port, 300, byte_interval=0.2, reopen=False)
+    try:
+        async with flooding(site.port, flood):
+            await until_async(
+                "the flood opened", lambda: flood.counts["opened"], lambda n: n >= 300
+            )
+            await until_async("the API full", lambda: len(site.connections()), lambda n: n >= 256)
+            for _ in range(5):
+                assert await members_status(site.port) == 200
+                assert len(site.connections()) >= 255  # the flood still holds the rest
+        assert (
+            site.table.counters["shed"] >= 44 + 1
+        )  # the excess of the flood, then room for the first call
+        assert site.refused == 0
+    finally:
+        await runner.cleanup()
+
+
+async def test_a_flood_that_reopens_what_is_shed_does_not_shed_a_caller_unread() -> None:
+    """The flood opens again every connection the API closes, so the API accepts (and sheds)
+    in bursts all the time: each caller's request is still read and answered."""
+    raise_fd_limit(2048)
+    runner, site = await serve_api(FakeView(), TOKEN, "127.0.0.1", 0)
+    flood = Flood("127.0.0.1", site.port, 600, byte_interval=0.2, max_opens=20_000)
+    try:
+        async with flooding(site.port, flood):
+            await until_async(
+                "the flood opened", lambda: flood.counts["opened"], lambda n: n >= 600
+            )
+            answers = []
+            for _ in range(10):
+                answers.append(await members_status(site.port))
+            churned = site.table.counters["shed"]
+        assert answers == [200] * 10
+        assert churned > 600  # the flood was reopening while the calls were made
+    finally:
+        await runner.cleanup()
+
+
+async def test_excess_connections_shed_the_oldest_waiting_one_never_a_busy_one() -> None:
+    release = asyncio.Event()
+
+    async def slow(request: web.Request) -> web.Response:
+        async with asyncio.timeout(30):
+            await release.wait()
+        return web.json_response({"slow": True})
+
+    limits = ApiLimits(max_connections=2)
     runner, site = await serve_api(
-        FakeView(), "t" * 32, "127.0.0.1", 0, max_connections=4, idle_timeout=0.5
+        FakeView(), TOKEN, "127.0.0.1", 0, extra_routes=[Route("GET", "/slow", slow)], limits=limits
     )
     try:
-        held = [await asyncio.open_connection("127.0.0.1", site.port) for _ in range(4)]
-        await until_async("four connections", lambda: len(site.connections()), lambda n: n >= 4)
-        extra = [await asyncio.open_connection("127.0.0.1", site.port) for _ in range(2)]
-        for reader, _ in extra:
-            async with asyncio.timeout(20):
-                assert await reader.read() == b""  # over the limit: closed at once, unanswered
-        assert site.refused == 2
-        for reader, _ in held:  # never sent a byte: closed once idle
-            assert await closed_by_server(reader)
-        reader, writer = await asyncio.open_connection("127.0.0.1", site.port)
-        writer.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
-        await writer.drain()
-        status = await reader.readline()
-        assert status.startswith(b"HTTP/1.1 200"), status
+        busy_reader, busy = await get(site.port, "/slow")
+        idle_reader, idle = await asyncio.open_connection("127.0.0.1", site.port)
+        await until_async("both kept", lambda: states(site), lambda s: s == ["busy", "idle"])
+        new_reader, new = await get(site.port, "/healthz")  # makes room: the idle one goes
+        assert await closed_by_server(idle_reader)
+        assert (await new_reader.readline()).startswith(b"HTTP/1.1 200")
+        assert site.table.counters["shed"] == 1
+        slow2_reader, slow2 = await get(site.port, "/slow")  # sheds `new`, waiting again
+        await until_async("both busy", lambda: states(site), lambda s: s == ["busy", "busy"])
+        refused_reader, refused = await asyncio.open_connection("127.0.0.1", site.port)
+        assert await closed_by_server(refused_reader)  # every kept connection is busy
+        assert site.refused == 1
+        release.set()
+        for reader in (busy_reader, slow2_reader):
+            assert (await reader.readline()).startswith(b"HTTP/1.1 200")
+        for writer in (busy, idle, new, slow2, refused):
+            writer.close()
+    finally:
+        await runner.cleanup()
+
+
+def states(site: GuardedSite) -> list[str]:
+    """The kept connections' states, sorted."""
+    server = site._runner.server
+    assert server is not None
+    kept = [site.table.state(h.transport) for h in server.connections if h.transport]
+    return sorted(s for s in kept if s is not None)
+
+
+async def test_a_half_sent_head_and_an_idle_connection_are_closed_on_their_deadlines() -> None:
+    runner, site = await serve_api(
+        FakeView(),
+        TOKEN,
+        "127.0.0.1",
+        0,
+        limits=ApiLimits(max_connections=8, idle_timeout=1.5, header_timeout=0.3),
+    )
+    try:
+        idle_reader, idle = await asyncio.open_connection("127.0.0.1", site.port)
+        slow_reader, slow = await asyncio.open_connection("127.0.0.1", site.port)
+        slow.write(HEAD_START)
+        closed = False
+        for _ in range(200):  # a byte every 0.05 s: never quiet, but its head never ends
+            try:
+                async with asyncio.timeout(0.05):
+                    closed = await slow_reader.read(1) == b""
+            except TimeoutError:
+                slow.write(b"a")
+            except ConnectionError:
+                closed = True
+            if closed:
+                break
+        assert closed
+        assert site.table.counters == {
+            "refused": 0,
+            "shed": 0,
+            "idle_closed": 0,
+            "header_closed": 1,
+        }
+        assert await closed_by_server(idle_reader)  # sent nothing: closed once idle
+        assert site.table.counters["idle_closed"] == 1
+        reader, writer = await get(site.port, "/healthz")
+        assert (await reader.readline()).startswith(b"HTTP/1.1 200")
         assert await closed_by_server(reader)  # idle after its request: closed too
-        for _, w in [*held, *extra, (reader, writer)]:
+        assert site.table.counters["idle_closed"] == 2
+        for w in (idle, slow, writer):
             w.close()
     finally:
         await runner.cleanup()
