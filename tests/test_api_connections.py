@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from sdrpeer.api.connections import ApiLimits, ConnectionTable
+from sdrpeer.api.config import ApiLimits
+from sdrpeer.api.connections import ConnectionTable
 
 LIMITS = ApiLimits(max_connections=3, idle_timeout=30.0, header_timeout=10.0)
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from aiohttp import web
 
 from sdrpeer.api.app import Route
-from sdrpeer.api.connections import ApiLimits
+from sdrpeer.api.config import ApiLimits
 from sdrpeer.api.server import GuardedSite, serve_api
 from sdrpeer.client import AgentClient
 from tests.test_api import FakeView

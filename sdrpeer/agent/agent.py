@@ -415,6 +415,7 @@ class Agent:
             port,
             extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES, *PORT_ROUTES, *KEY_ROUTES],
             peer_tokens=self.peer_tokens,
+            limits=self.tuning.api,
         )
         self.api_url = self.api_site.name
 

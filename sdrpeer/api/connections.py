@@ -22,48 +22,14 @@ connections it is told to close):
 from __future__ import annotations
 
 from collections.abc import Hashable
-from dataclasses import dataclass
 from typing import Generic, TypeVar
+
+from sdrpeer.api.config import ApiLimits
 
 K = TypeVar("K", bound=Hashable)
 
 COUNTERS = ("refused", "shed", "idle_closed", "header_closed")
 """The table's counters: connections closed at accept, to make room, idle, and mid-head."""
-
-
-@dataclass(frozen=True, slots=True)
-class ApiLimits:
-    """How many connections the API keeps and how long it lets one wait."""
-
-    max_connections: int = 256
-    """Connections kept open at once (the agent's other sockets need descriptors too)."""
-    idle_timeout: float = 30.0
-    """Seconds a connection may wait with nothing of a request received: longer than aiohttp
-    clients (agents' peer calls) keep an idle connection (15 s), so a client never reuses one
-    the server is closing."""
-    header_timeout: float = 10.0
-    """Seconds from a request's first byte to the end of its head (request line and headers):
-    a client sends a head in one write; a slowloris sender dribbling one is closed then."""
-    backlog: int = 1024
-    """The listening socket's accept queue (the kernel caps it at net.core.somaxconn): a burst
-    of connections waits there to be accepted (and shed) instead of having SYNs dropped, which
-    would cost a caller in the burst a 1 s retransmission."""
-
-    @property
-    def accept_batch(self) -> int:
-        """Connections accepted per event-loop turn (asyncio accepts up to its `backlog` argument
-        per turn): a quarter of `max_connections`. A newcomer is admitted, then its first bytes
-        are read, before at most two batches of newer connections are admitted, so half the
-        table is still younger than it when shedding could reach it: a caller that sends its
-        request at once is read before it is the oldest (with a batch of `backlog`, 1,024
-        newcomers, a caller was shed unread under a churning flood)."""
-        return max(1, self.max_connections // 4)
-
-    def __post_init__(self) -> None:
-        if self.max_connections < 1 or self.backlog < 1:
-            raise ValueError("max_connections and backlog must be at least 1")
-        if self.idle_timeout <= 0 or self.header_timeout <= 0:
-            raise ValueError("idle_timeout and header_timeout must be positive")
 
 
 class _Entry:

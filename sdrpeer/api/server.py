@@ -23,7 +23,8 @@ from typing import Any, cast
 from aiohttp import web
 
 from sdrpeer.api.app import Handler, Route, build_app
-from sdrpeer.api.connections import ApiLimits, ConnectionTable
+from sdrpeer.api.config import ApiLimits
+from sdrpeer.api.connections import ConnectionTable
 from sdrpeer.api.view import AgentView
 
 
