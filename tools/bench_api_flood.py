@@ -3,7 +3,8 @@
 
 Starts one real agent (`sdrpeer.lab.up`, one robot), then in two phases calls its
 `GET /v1/members` every `--interval` s for `--seconds` s, each call a fresh connection as the
-command line makes it (`sdrpeer.client`, 5 s timeout), and records latency and status:
+command line makes it (one HTTP/1.1 exchange, `Connection: close`, as `sdrpeer.client`; 5 s
+timeout), and records its latency, the TCP connect's part of it, and the status:
 - baseline: nobody else connects;
 - flood: a child process holds `--connections` TCP connections to the API (default 2,000),
   every `--dribble-every`-th (default 5th) sending a request head one byte every
@@ -27,6 +28,7 @@ import asyncio
 import json
 import multiprocessing
 import resource
+import socket
 import statistics
 import sys
 import tempfile
@@ -38,6 +40,7 @@ from typing import Any
 HEAD_START = b"GET /v1/members HTTP/1.1\r\nHost: robot\r\nX-Slow: "
 """What a dribbling connection sends at once; then one byte of its header value at a time."""
 TARGET_S = 1.0
+CALL_TIMEOUT = 5.0
 READY_WAIT = 120.0
 """Seconds the flood may take to open every connection once."""
 
@@ -182,11 +185,9 @@ async def _flood_main(
 
 # ------------------------------------------------------------------------- the robot's caller
 def probe(api: str, seconds: float, interval: float) -> list[dict[str, Any]]:
-    """Call GET /v1/members every `interval` s for `seconds` s: each call's latency and outcome."""
-    from sdrpeer.client import AgentClient  # noqa: PLC0415 - the flood's child does not need it
-    from sdrpeer.errors import ApiError  # noqa: PLC0415
-
-    client = AgentClient(api, timeout=5.0)
+    """Call GET /v1/members every `interval` s for `seconds` s: each call's latency (and of it,
+    the TCP connect), and its outcome."""
+    host, port = api.removeprefix("http://").rsplit(":", 1)
     calls = []
     start = time.monotonic()
     for i in range(max(1, round(seconds / interval))):
@@ -194,13 +195,40 @@ def probe(api: str, seconds: float, interval: float) -> list[dict[str, Any]]:
         if delay > 0:
             time.sleep(delay)
         t0 = time.perf_counter()
+        connect_s = None
         try:
-            members = client.get("/v1/members")
-            outcome = "200" if isinstance(members, list) and members else "200 but empty"
-        except ApiError as exc:
-            outcome = str(exc.status) if exc.status is not None else f"unreachable: {exc}"
-        calls.append({"latency_s": round(time.perf_counter() - t0, 4), "outcome": outcome})
+            with socket.create_connection((host, int(port)), CALL_TIMEOUT) as sock:
+                connect_s = time.perf_counter() - t0
+                outcome = _members(sock, f"{host}:{port}")
+        except OSError as exc:
+            outcome = f"{type(exc).__name__}: {exc}"
+        calls.append(
+            {
+                "latency_s": round(time.perf_counter() - t0, 4),
+                "connect_s": None if connect_s is None else round(connect_s, 4),
+                "outcome": outcome,
+            }
+        )
     return calls
+
+
+def _members(sock: socket.socket, netloc: str) -> str:
+    """One `GET /v1/members` on `sock` as `sdrpeer.client` makes it (HTTP/1.1, Connection:
+    close, the answer read to its end): "200", or what came back instead."""
+    sock.sendall(
+        f"GET /v1/members HTTP/1.1\r\nHost: {netloc}\r\nConnection: close\r\n"
+        "Accept: application/json\r\n\r\n".encode()
+    )
+    chunks = []
+    while chunk := sock.recv(1 << 16):
+        chunks.append(chunk)
+    head, _, body = b"".join(chunks).partition(b"\r\n\r\n")
+    status = head.split(b" ", 2)[1].decode() if head.startswith(b"HTTP/1.1 ") else ""
+    if not status:
+        return f"not HTTP: {head[:40]!r}"
+    if status == "200" and not body.strip().startswith(b"["):
+        return "200 but not a list"
+    return status
 
 
 def summary(calls: list[dict[str, Any]]) -> dict[str, Any]:
@@ -216,11 +244,20 @@ def summary(calls: list[dict[str, Any]]) -> dict[str, Any]:
         "ok": len(ok),
         "failed": len(calls) - len(ok),
         "failures": failures,
+        "connect_p95_s": _p95([c["connect_s"] for c in calls if c["connect_s"] is not None]),
+        "connect_max_s": max(
+            (c["connect_s"] for c in calls if c["connect_s"] is not None), default=None
+        ),
         "p50_s": round(statistics.median(lat), 4),
-        "p95_s": round(lat[min(len(lat) - 1, int(0.95 * len(lat)))], 4),
+        "p95_s": _p95(lat),
         "max_s": lat[-1],
         "over_target": sum(1 for c in calls if c["latency_s"] > TARGET_S),
     }
+
+
+def _p95(values: list[float]) -> float | None:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))] if ordered else None
 
 
 def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
@@ -282,14 +319,14 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
 def table(report: dict[str, Any]) -> str:
     """The figures as a text table."""
     rows = [
-        "phase        calls  ok  failed  p50 ms  p95 ms  max ms  over 1 s",
+        "phase        calls  ok  failed  p50 ms  p95 ms  max ms  over 1 s  connect p95/max ms",
     ]
     for phase in ("baseline", "under_flood"):
         s = report[phase]
         rows.append(
             f"{phase:<12} {s['calls']:>5} {s['ok']:>3} {s['failed']:>7} "
             f"{s['p50_s'] * 1000:>7.1f} {s['p95_s'] * 1000:>7.1f} {s['max_s'] * 1000:>7.1f} "
-            f"{s['over_target']:>9}"
+            f"{s['over_target']:>9}  {_ms(s['connect_p95_s'])}/{_ms(s['connect_max_s'])}"
         )
         if s["failures"]:
             rows.append(f"  failures: {s['failures']}")
@@ -304,6 +341,10 @@ def table(report: dict[str, Any]) -> str:
     met = "MET" if report["target"]["met"] else "NOT MET"
     rows.append(f"target (every call under the flood 200 within {TARGET_S:g} s): {met}")
     return "\n".join(rows)
+
+
+def _ms(seconds: float | None) -> str:
+    return "-" if seconds is None else f"{seconds * 1000:.1f}"
 
 
 def main(argv: list[str] | None = None) -> int:
