@@ -115,6 +115,33 @@ async def test_a_flood_that_reopens_what_is_shed_does_not_shed_a_caller_unread()
         await runner.cleanup()
 
 
+async def test_a_flood_from_one_address_sheds_its_own_connections_not_another_addresss() -> None:
+    """A flood from 127.0.0.2 (another host) fills the table; a caller from 127.0.0.1 is answered
+    and its keep-alive connection, soon the oldest of all, outlives the flood's growth. Fails on
+    the old code (the caller was refused at accept)."""
+    runner, site = await serve_api(
+        FakeView(), TOKEN, "127.0.0.1", 0, limits=ApiLimits(max_connections=16)
+    )
+    first = Flood("127.0.0.1", site.port, 16, reopen=False, byte_interval=0.2, source="127.0.0.2")
+    more = Flood("127.0.0.1", site.port, 32, reopen=False, byte_interval=0.2, source="127.0.0.2")
+    try:
+        async with flooding(site.port, first):
+            await until_async("the API full", lambda: len(site.connections()), lambda n: n >= 16)
+            reader, writer = await get(site.port, "/healthz")  # keep-alive, from 127.0.0.1
+            assert (await reader.readuntil(b"\r\n\r\n")).startswith(b"HTTP/1.1 200")
+            await reader.readuntil(b"}")  # the JSON body; the connection waits for another request
+            async with flooding(site.port, more):
+                await until_async(
+                    "32 more opened", lambda: more.counts["opened"], lambda n: n >= 32
+                )
+                await until_async("shed 33", lambda: site.table.counters["shed"], lambda n: n >= 33)
+                writer.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+                assert (await reader.readuntil(b"\r\n\r\n")).startswith(b"HTTP/1.1 200")
+            writer.close()
+    finally:
+        await runner.cleanup()
+
+
 async def test_excess_connections_shed_the_oldest_waiting_one_never_a_busy_one() -> None:
     release = asyncio.Event()
 

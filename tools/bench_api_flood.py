@@ -59,7 +59,8 @@ class Flood:
     """`connections` TCP connections held to host:port; every `dribble_every`-th (0: none)
     dribbles a request head, one byte per `byte_interval` s; the others send nothing. A
     connection the server closes is opened again while `reopen`, for at most `max_opens` opens in
-    all (each slot's loop is bounded by it and by `stop`)."""
+    all (each slot's loop is bounded by it and by `stop`). `source`: the local address to
+    connect from (another loopback address stands for another host)."""
 
     def __init__(
         self,
@@ -71,8 +72,9 @@ class Flood:
         byte_interval: float = 1.0,
         reopen: bool = True,
         max_opens: int = 1_000_000,
+        source: str | None = None,
     ) -> None:
-        self.host, self.port, self.connections = host, port, connections
+        self.host, self.port, self.connections, self.source = host, port, connections, source
         self.dribble_every, self.byte_interval = dribble_every, byte_interval
         self.reopen, self.max_opens = reopen, max_opens
         self.counts = {"opened": 0, "open_failed": 0, "closed_by_server": 0, "bytes_dribbled": 0}
@@ -91,7 +93,10 @@ class Flood:
     async def _slot(self, dribbles: bool, stop: asyncio.Event) -> None:
         while not stop.is_set() and self.counts["opened"] < self.max_opens:
             try:
-                reader, writer = await asyncio.open_connection(self.host, self.port)
+                local = None if self.source is None else (self.source, 0)
+                reader, writer = await asyncio.open_connection(
+                    self.host, self.port, local_addr=local
+                )
             except OSError:
                 self.counts["open_failed"] += 1
                 await _wait(stop, 0.1)
