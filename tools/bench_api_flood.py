@@ -60,7 +60,8 @@ class Flood:
     dribbles a request head, one byte per `byte_interval` s; the others send nothing. A
     connection the server closes is opened again while `reopen`, for at most `max_opens` opens in
     all (each slot's loop is bounded by it and by `stop`). `source`: the local address to
-    connect from (another loopback address stands for another host)."""
+    connect from (another loopback address stands for another host). `opening`: at most this
+    many connects under way at once (None: all at once, a burst)."""
 
     def __init__(
         self,
@@ -73,8 +74,10 @@ class Flood:
         reopen: bool = True,
         max_opens: int = 1_000_000,
         source: str | None = None,
+        opening: int | None = None,
     ) -> None:
         self.host, self.port, self.connections, self.source = host, port, connections, source
+        self._opening = None if opening is None else asyncio.Semaphore(opening)
         self.dribble_every, self.byte_interval = dribble_every, byte_interval
         self.reopen, self.max_opens = reopen, max_opens
         self.counts = {"opened": 0, "open_failed": 0, "closed_by_server": 0, "bytes_dribbled": 0}
@@ -93,10 +96,7 @@ class Flood:
     async def _slot(self, dribbles: bool, stop: asyncio.Event) -> None:
         while not stop.is_set() and self.counts["opened"] < self.max_opens:
             try:
-                local = None if self.source is None else (self.source, 0)
-                reader, writer = await asyncio.open_connection(
-                    self.host, self.port, local_addr=local
-                )
+                reader, writer = await self._open()
             except OSError:
                 self.counts["open_failed"] += 1
                 await _wait(stop, 0.1)
@@ -117,6 +117,13 @@ class Flood:
                 self.counts["closed_by_server"] += 1
             if not self.reopen:
                 await stop.wait()
+
+    async def _open(self) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        local = None if self.source is None else (self.source, 0)
+        if self._opening is None:
+            return await asyncio.open_connection(self.host, self.port, local_addr=local)
+        async with self._opening:
+            return await asyncio.open_connection(self.host, self.port, local_addr=local)
 
     async def _dribble(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, stop: asyncio.Event

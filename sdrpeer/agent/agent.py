@@ -862,7 +862,7 @@ class Agent:
             },
             "rejected": {r: codec.get(r, 0) for r in REASONS},
             "api_connections": {
-                "open": 0 if site is None else len(site.connections()),
+                "open": 0 if site is None else site.open_connections(),
                 **(dict.fromkeys(COUNTERS, 0) if site is None else site.table.counters),
             },
             "clock": {

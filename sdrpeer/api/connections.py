@@ -21,7 +21,7 @@ connections it is told to close):
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterator
 from typing import Generic, TypeVar
 
 from sdrpeer.api.config import ApiLimits
@@ -60,6 +60,9 @@ class ConnectionTable(Generic[K]):
 
     def __len__(self) -> int:
         return len(self._entries)
+
+    def __iter__(self) -> Iterator[K]:
+        return iter(list(self._entries))
 
     def open(self, key: K, addr: str, now: float) -> list[K]:
         """A connection was accepted from `addr`: the connections to close now (one shed to make

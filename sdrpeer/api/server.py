@@ -4,7 +4,8 @@ How it works: a `GuardedSite` listens like aiohttp's `TCPSite`, but every accept
 goes through a `ConnectionTable` (`sdrpeer.api.connections`, the rules: at most
 `max_connections`, the idlest connection of the address holding the most shed to make room for
 a newcomer, an idle deadline and a request-head deadline). This module is its shell: each
-connection's protocol (`_Guarded`) tells the table when it opens, receives bytes and closes; a
+connection's protocol (`_Guarded`) tells the table when it opens, receives bytes and closes (and
+makes aiohttp's request handler only once bytes arrive); a
 middleware tells it when a request is being served; one timer, re-armed when the table's next
 deadline changes, closes what has expired. aiohttp's own keep-alive timeout stays as a backstop
 only (twice the idle deadline). A robot is a small computer: whoever can reach the API must not
@@ -29,24 +30,29 @@ from sdrpeer.api.view import AgentView
 
 
 class _Guarded(asyncio.Protocol):
-    """One API connection: aiohttp's request handler, with the site's table told what happens."""
+    """One API connection: aiohttp's request handler, with the site's table told what happens.
+    The handler (its parser, its task, its timer) is made when the first bytes arrive: a
+    connection that sends nothing costs its socket and a table entry, nothing more."""
 
     def __init__(self, guard: ConnectionGuard, server: web.Server) -> None:
         self._guard, self._server = guard, server
         self._handler: asyncio.Protocol | None = None
         self._transport: asyncio.Transport | None = None
+        self._kept = False
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self._transport = cast(asyncio.Transport, transport)
-        if self._guard.admit(self._transport):
-            self._handler = self._server()
-            self._handler.connection_made(transport)
+        self._kept = self._guard.admit(self._transport)
 
     def data_received(self, data: bytes) -> None:
-        if self._handler is not None:
-            assert self._transport is not None
-            self._guard.received(self._transport)
-            self._handler.data_received(data)
+        if not self._kept:
+            return
+        assert self._transport is not None
+        self._guard.received(self._transport)
+        if self._handler is None:
+            self._handler = self._server()
+            self._handler.connection_made(self._transport)
+        self._handler.data_received(data)
 
     def eof_received(self) -> bool | None:
         return None if self._handler is None else self._handler.eof_received()
@@ -75,6 +81,7 @@ class ConnectionGuard:
         """The connections kept, and why others were closed (`table.counters`)."""
         self._timer: asyncio.TimerHandle | None = None
         self._armed: float | None = None
+        self._stopped = False
 
     def admit(self, transport: asyncio.Transport) -> bool:
         """A connection was accepted: whether it is kept (the table may close another)."""
@@ -112,14 +119,21 @@ class ConnectionGuard:
             self._rearm()
 
     def stop(self) -> None:
-        """Disarm the timer (the site stopped)."""
+        """The site stopped: disarm the timer for good and close every waiting connection (one
+        that never sent a byte has no aiohttp handler for the runner's shutdown to close; busy
+        ones are the runner's to finish)."""
+        self._stopped = True
         if self._timer is not None:
             self._timer.cancel()
         self._timer = self._armed = None
+        for transport in self.table:
+            if self.table.state(transport) != "busy":
+                self.table.closed(transport)
+                transport.close()
 
     def _rearm(self) -> None:
         deadline = self.table.next_deadline()
-        if deadline == self._armed:
+        if deadline == self._armed or self._stopped:
             return
         if self._timer is not None:
             self._timer.cancel()
@@ -160,10 +174,14 @@ class GuardedSite(web.BaseSite):
         """Connections closed at accept because every kept connection was busy."""
         return self.guard.table.counters["refused"]
 
-    def connections(self) -> list[object]:
-        """The connections open now (their aiohttp request handlers)."""
+    def open_connections(self) -> int:
+        """The connections kept open now."""
+        return len(self.guard.table)
+
+    def connections_with_handler(self) -> int:
+        """The connections that have an aiohttp request handler (they have sent bytes)."""
         server = self._runner.server
-        return [] if server is None else list(server.connections)
+        return 0 if server is None else len(server.connections)
 
     @property
     def name(self) -> str:
