@@ -33,9 +33,12 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
+
+import psutil
 
 HEAD_START = b"GET /v1/members HTTP/1.1\r\nHost: robot\r\nX-Slow: "
 """What a dribbling connection sends at once; then one byte of its header value at a time."""
@@ -267,6 +270,17 @@ def summary(calls: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def measured(agent: psutil.Process, phase: Callable[[], list[dict[str, Any]]]) -> dict[str, Any]:
+    """`phase`'s calls summed up, with the agent's CPU time over it (s, and % of one core) and
+    its RSS at the end (MiB)."""
+    cpu0, t0 = sum(agent.cpu_times()[:2]), time.monotonic()
+    result = summary(phase())
+    cpu = sum(agent.cpu_times()[:2]) - cpu0
+    result["agent_cpu_pct_of_core"] = round(100 * cpu / (time.monotonic() - t0), 1)
+    result["agent_rss_mib_at_end"] = round(agent.memory_info().rss / 2**20, 1)
+    return result
+
+
 def _p95(values: list[float]) -> float | None:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))] if ordered else None
@@ -279,8 +293,9 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
 
     running = start_lab(UpOptions(robots=1, lab_dir=lab_dir, timeout=30.0), say=print)
     robot = running.lab.robots[0]
-    assert robot.api is not None
-    host, port = robot.api.removeprefix("http://").rsplit(":", 1)
+    api = robot.api
+    assert api is not None
+    host, port = api.removeprefix("http://").rsplit(":", 1)
     settings = {
         "connections": args.connections,
         "dribble_every": args.dribble_every,
@@ -288,9 +303,10 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
         "reopen": not args.no_reopen,
     }
     report: dict[str, Any] = {"api": robot.api, "flood": dict(settings)}
+    agent = psutil.Process(running.procs[robot.name].pid)
     try:
         print(f"baseline: GET /v1/members every {args.interval:g} s for {args.seconds:g} s")
-        report["baseline"] = summary(probe(robot.api, args.seconds, args.interval))
+        report["baseline"] = measured(agent, lambda: probe(api, args.seconds, args.interval))
         ctx = multiprocessing.get_context("spawn")
         ours, theirs = ctx.Pipe()
         child = ctx.Process(
@@ -304,7 +320,7 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
             _, ready_s, counts, held = ours.recv()
             report["flood"].update(ready_s=ready_s, at_ready=counts, held_at_ready=held)
             print(f"flood: {args.connections} connections opened in {ready_s} s; measuring")
-            report["under_flood"] = summary(probe(robot.api, args.seconds, args.interval))
+            report["under_flood"] = measured(agent, lambda: probe(api, args.seconds, args.interval))
             ours.send("stop")
             if ours.poll(60):
                 _, counts, held = ours.recv()
@@ -313,7 +329,7 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
             child.join(30)
             if child.is_alive():
                 child.kill()
-        report["agent_api_connections"] = AgentClient(robot.api).get("/v1/agent")["api_connections"]
+        report["agent_api_connections"] = AgentClient(api).get("/v1/agent")["api_connections"]
     except BaseException:
         print(f"agent log tail:\n{log_tail(Path(robot.log))}", file=sys.stderr)
         raise
@@ -331,14 +347,16 @@ def run(args: argparse.Namespace, lab_dir: Path) -> dict[str, Any]:
 def table(report: dict[str, Any]) -> str:
     """The figures as a text table."""
     rows = [
-        "phase        calls  ok  failed  p50 ms  p95 ms  max ms  over 1 s  connect p95/max ms",
+        "phase        calls  ok  failed  p50 ms  p95 ms  max ms  over 1 s  connect p95/max ms"
+        "  agent CPU %  RSS MiB",
     ]
     for phase in ("baseline", "under_flood"):
         s = report[phase]
         rows.append(
             f"{phase:<12} {s['calls']:>5} {s['ok']:>3} {s['failed']:>7} "
             f"{s['p50_s'] * 1000:>7.1f} {s['p95_s'] * 1000:>7.1f} {s['max_s'] * 1000:>7.1f} "
-            f"{s['over_target']:>9}  {_ms(s['connect_p95_s'])}/{_ms(s['connect_max_s'])}"
+            f"{s['over_target']:>9}  {_ms(s['connect_p95_s']) + '/' + _ms(s['connect_max_s']):>18}"
+            f"  {s['agent_cpu_pct_of_core']:>11.1f}  {s['agent_rss_mib_at_end']:>7.1f}"
         )
         if s["failures"]:
             rows.append(f"  failures: {s['failures']}")
