@@ -4,13 +4,14 @@ How it works: a `GuardedSite` listens like aiohttp's `TCPSite`, but every accept
 goes through a `ConnectionTable` (`sdrpeer.api.connections`, the rules: at most
 `max_connections`, the idlest connection of the address holding the most shed to make room for
 a newcomer, an idle deadline and a request-head deadline). This module is its shell: each
-connection's protocol (`_Guarded`) tells the table when it opens, receives bytes and closes (and
-makes aiohttp's request handler only once bytes arrive); a
-middleware tells it when a request is being served; one timer, re-armed when the table's next
-deadline changes, closes what has expired. aiohttp's own keep-alive timeout stays as a backstop
-only (twice the idle deadline). A robot is a small computer: whoever can reach the API must not
-be able to hold every file descriptor of the agent, nor keep the robot's own tools and the other
-agents from being answered.
+connection's protocol (`_Guarded`) tells the table when it opens, receives bytes and closes, and
+makes aiohttp's request handler only once bytes arrive; a middleware tells it when a request is
+being served; one timer, re-armed when the table's next deadline changes, closes what has
+expired. The listening socket accepts `accept_batch` connections per event-loop turn while the
+kernel queues up to `backlog` (`sdrpeer.api.config`). aiohttp's own keep-alive timeout stays as
+a backstop only (twice the idle deadline). A robot is a small computer: whoever can reach the
+API must not be able to hold every file descriptor of the agent, nor keep the robot's own tools
+and the other agents from being answered.
 """
 
 from __future__ import annotations
