@@ -237,3 +237,19 @@ async def test_stopping_the_api_closes_connections_that_never_sent_a_byte() -> N
     assert await closed_by_server(reader)
     assert site.open_connections() == 0
     writer.close()
+
+
+async def test_a_malformed_head_is_answered_400_and_forgotten() -> None:
+    """Garbage on a kept connection reaches aiohttp's parser through the table's wrapper: a 400,
+    the connection closed and forgotten, and the API serves on."""
+    runner, site = await serve_api(FakeView(), TOKEN, "127.0.0.1", 0)
+    try:
+        reader, writer = await asyncio.open_connection("127.0.0.1", site.port)
+        writer.write(b"\x00\xff NOT HTTP \x01\r\n\r\n")
+        assert (await reader.readline()).split(b" ")[1] == b"400"  # aiohttp answers HTTP/1.0
+        assert await closed_by_server(reader)
+        await until_async("forgotten", site.open_connections, lambda n: n == 0)
+        assert await members_status(site.port) == 200
+        writer.close()
+    finally:
+        await runner.cleanup()
