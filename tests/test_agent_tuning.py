@@ -16,6 +16,7 @@ import pytest
 from sdrpeer.agent import timers as agent_timers
 from sdrpeer.agent import tuning
 from sdrpeer.agent.agent import Agent
+from sdrpeer.api import config as api_config
 from sdrpeer.cli.agent import add_agent_parser, agent_flag_values
 from sdrpeer.cli.main import build_parser
 from sdrpeer.config import LAB_PRESET, PRESET_NAMES, PRESETS_SAID, build_config
@@ -35,6 +36,7 @@ PARTS = {
     "supervisor": runtime,
     "deploy": deploy,
     "agent": agent_timers,
+    "api": api_config,
 }
 """Each sub-config of the tree and the module that declares it (and its presets)."""
 SDRPEER = Path(__file__).resolve().parent.parent / "sdrpeer"
@@ -69,6 +71,7 @@ def test_fast_test_is_faster_where_loopback_allows() -> None:
     # the same where nothing on loopback is quicker
     assert fast.deploy == lan.deploy
     assert fast.agent == lan.agent
+    assert fast.api == lan.api
 
 
 @pytest.mark.parametrize(("n", "lab_at_least"), [(5, 1.9), (20, 2.5)])
@@ -89,7 +92,12 @@ def test_the_lab_preset_suspects_a_silent_robot_only_after_seconds(
     assert lab.supervisor.heartbeat_timeout > lan.supervisor.heartbeat_timeout
     assert lab.election.grace > lan.election.grace
     # what no stall trips is lan's
-    assert (lab.recovery, lab.deploy, lab.agent) == (lan.recovery, lan.deploy, lan.agent)
+    assert (lab.recovery, lab.deploy, lab.agent, lab.api) == (
+        lan.recovery,
+        lan.deploy,
+        lan.agent,
+        lan.api,
+    )
     assert lab.gossip.with_(probe_interval=0.15, probe_timeout=0.075, suspicion_mult=3.2) == (
         lan.gossip
     )
@@ -195,5 +203,7 @@ async def test_the_preset_flag_reaches_every_part_of_an_agent(tmp_path: Path, na
         assert coordinator.election.config == tree.election
         assert coordinator.health.config == tree.recovery
         assert coordinator.local.config == tree.recovery
+        assert agent.api_site is not None
+        assert agent.api_site.table.limits == tree.api
     finally:
         await agent.stop(leave=False)

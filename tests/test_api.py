@@ -86,6 +86,13 @@ class FakeView:
                 "bytes_out_per_s": 55.0,
             },
             "rejected": {"bad_mac": 2},
+            "api_connections": {
+                "open": 3,
+                "refused": 0,
+                "shed": 5,
+                "idle_closed": 1,
+                "header_closed": 2,
+            },
             "members": {"alive": 1, "suspect": 1, "dead": 0, "left": 0},
         }
 
@@ -235,6 +242,8 @@ EXPECTED_FAMILIES = {
     "sdrpeer_gossip_messages": "counter",
     "sdrpeer_gossip_bytes": "counter",
     "sdrpeer_gossip_rejected": "counter",
+    "sdrpeer_api_connections": "gauge",
+    "sdrpeer_api_connections_closed": "counter",
     "sdrpeer_members": "gauge",
     "sdrpeer_health_score": "gauge",
     "sdrpeer_uptime_seconds": "gauge",
@@ -273,6 +282,13 @@ async def test_metrics_families_types_and_values(
     }
     assert samples("sdrpeer_gossip_bytes")[(("direction", "out"),)] == 1100.0
     assert samples("sdrpeer_gossip_rejected") == {(("reason", "bad_mac"),): 2.0}
+    assert samples("sdrpeer_api_connections") == {(): 3.0}
+    assert samples("sdrpeer_api_connections_closed") == {
+        (("reason", "refused"),): 0.0,
+        (("reason", "shed"),): 5.0,
+        (("reason", "idle_closed"),): 1.0,
+        (("reason", "header_closed"),): 2.0,
+    }
     assert samples("sdrpeer_members")[(("state", "suspect"),)] == 1.0
     assert samples("sdrpeer_health_score") == {(): 1.0}
     assert samples("sdrpeer_uptime_seconds") == {(): 12.0}

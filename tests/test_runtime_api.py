@@ -204,3 +204,32 @@ async def test_a_starting_agent_answers_503_not_404(tmp_path):
         view.ready = True  # type: ignore[attr-defined]
         assert (await client.get("/v1/instances")).status == 404
         assert (await client.get("/v1/status")).status == 404
+
+
+async def test_followed_logs_are_capped_and_a_slot_frees_when_a_follower_leaves(setup, monkeypatch):
+    """Fails on the old code (no cap: the third follow was answered 200). A followed log holds a
+    connection the API never sheds, and reading is open: uncapped, followers could hold all."""
+    from sdrpeer.api import app as api_app  # noqa: PLC0415
+
+    monkeypatch.setattr(api_app, "MAX_FOLLOWS", 2, raising=False)  # raising: the old code had none
+    client, _ = setup
+    await client.post("/v1/instances", json={"instances": [fake("A")]}, headers=AUTH)
+    await until_answer("A ACTIVE", lambda: states(client), lambda s: s.get("A") == "ACTIVE")
+    follow = {"tail": "1", "follow": "1"}
+    held = [await client.get("/v1/instances/A/logs", params=follow) for _ in range(2)]
+    assert [r.status for r in held] == [200, 200]
+    over = await client.get("/v1/instances/A/logs", params=follow)
+    assert over.status == 503
+    assert await over.json() == {"error": "at most 2 logs followed at once"}
+    plain = await client.get("/v1/instances/A/logs", params={"tail": "1"})
+    assert plain.status == 200  # a tail without follow is not counted
+    held[0].close()  # the follower goes away; its handler notices and ends
+
+    async def again() -> int:
+        resp = await client.get("/v1/instances/A/logs", params=follow)
+        resp.close()
+        status: int = resp.status
+        return status
+
+    await until_answer("a slot free again", again, lambda status: status == 200)
+    held[1].close()

@@ -34,7 +34,8 @@ from sdrpeer.agent.keyadmin import KeyAdmin
 from sdrpeer.agent.keyroutes import ROUTES as KEY_ROUTES
 from sdrpeer.agent.tuning import Tuning, preset
 from sdrpeer.api import peer_client
-from sdrpeer.api.server import BoundedSite, serve_api
+from sdrpeer.api.connections import COUNTERS
+from sdrpeer.api.server import GuardedSite, serve_api
 from sdrpeer.config import AgentConfig, parse_hostport
 from sdrpeer.dashboard.feed import Feed
 from sdrpeer.dashboard.routes import ROUTES as DASHBOARD_ROUTES
@@ -139,7 +140,7 @@ class Agent:
         self.traps = TrapDetector()
         self.meter = ProcessTreeMeter(os.getpid(), max_age=METER_MAX_AGE)
         self._runner: AppRunner | None = None
-        self.api_site: BoundedSite | None = None
+        self.api_site: GuardedSite | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = time.time()
         self._started = 0.0
@@ -421,6 +422,7 @@ class Agent:
             port,
             extra_routes=[*DEPLOY_ROUTES, *DASHBOARD_ROUTES, *PORT_ROUTES, *KEY_ROUTES],
             peer_tokens=self.peer_tokens,
+            limits=self.tuning.api,
         )
         self.api_url = self.api_site.name
 
@@ -895,8 +897,8 @@ class Agent:
             },
             "rejected": {r: codec.get(r, 0) for r in REASONS},
             "api_connections": {
-                "open": 0 if site is None else len(site.connections()),
-                "refused": 0 if site is None else site.refused,
+                "open": 0 if site is None else site.open_connections(),
+                **(dict.fromkeys(COUNTERS, 0) if site is None else site.table.counters),
             },
             "clock": {
                 "offset_ms": self.shell.codec.clock.offset_ms,

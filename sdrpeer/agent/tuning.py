@@ -3,7 +3,8 @@
 How it works: each part keeps its own configuration dataclass and presets, declared and documented
 next to the code that reads them: `sdrpeer.gossip.config`, `sdrpeer.election.config`,
 `sdrpeer.recovery.config`, `sdrpeer.runtime.config` (the instance supervisors),
-`sdrpeer.deploy.config` (the coordinator) and `sdrpeer.agent.timers` (the agent itself). A
+`sdrpeer.deploy.config` (the coordinator), `sdrpeer.agent.timers` (the agent itself) and
+`sdrpeer.api.config` (the connections its HTTP API keeps, and their deadlines). A
 `Tuning` holds one of each, and a preset of the tree is built one way: the same-named preset of
 every part. The agent's `--preset` (or `preset:` in its config file) names one of
 `sdrpeer.config.PRESET_NAMES` (the configuration checks names without loading every part); the
@@ -18,6 +19,8 @@ from typing import Any
 
 from sdrpeer.agent import timers as agent_timers
 from sdrpeer.agent.timers import AgentTimers
+from sdrpeer.api import config as api
+from sdrpeer.api.config import ApiLimits
 from sdrpeer.deploy import config as deploy
 from sdrpeer.deploy.config import DeployConfig
 from sdrpeer.election import config as election
@@ -50,6 +53,8 @@ class Tuning:
     """The coordinator: its step periods, waits and retries."""
     agent: AgentTimers
     """The agent itself: record pacing, leaving, stopping."""
+    api: ApiLimits
+    """The HTTP API's connections: how many are kept, the idle and request-head deadlines."""
 
     def with_(self, **changes: Any) -> Tuning:
         """A copy with some sub-configs changed."""
@@ -68,6 +73,7 @@ def lan() -> Tuning:
         supervisor=runtime.lan(),
         deploy=deploy.lan(),
         agent=agent_timers.lan(),
+        api=api.lan(),
     )
 
 
@@ -85,6 +91,7 @@ def fast_test() -> Tuning:
         supervisor=runtime.fast_test(),
         deploy=deploy.fast_test(),
         agent=agent_timers.fast_test(),
+        api=api.fast_test(),
     )
 
 
@@ -104,6 +111,7 @@ def lab() -> Tuning:
         supervisor=runtime.lab(),
         deploy=deploy.lab(),
         agent=agent_timers.lab(),
+        api=api.lab(),
     )
 
 

@@ -16,6 +16,7 @@ import json
 import logging
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from aiohttp import web
@@ -208,6 +209,12 @@ async def post_robot(request: web.Request) -> web.Response:
 # --- component instances (sdrpeer.runtime) ----------------------------------------------------
 LOG_FOLLOW_POLL = 0.2
 LOG_FOLLOW_MAX_S = 3600
+MAX_FOLLOWS = 16
+"""Logs followed at once (`?follow=1`, 503 beyond): each holds a connection the API never sheds
+(a request in progress), and reading is open to whoever can reach the API, so uncapped they
+could hold every connection it keeps (docs/security.md, "The API under a connection flood")."""
+FOLLOWS_KEY = web.AppKey("follows", list[int])
+"""One count: the logs being followed now."""
 
 
 def instances_of(request: web.Request) -> InstancesView:
@@ -291,6 +298,17 @@ async def get_instance_logs(request: web.Request) -> web.StreamResponse:
     if request.query.get("follow", "0") in ("0", "false", ""):
         return web.Response(body=logfile.tail(path, lines), content_type="text/plain")
     max_s = _int_param(request, "max_s", LOG_FOLLOW_MAX_S, 1, LOG_FOLLOW_MAX_S)
+    follows = request.app[FOLLOWS_KEY]
+    if follows[0] >= MAX_FOLLOWS:
+        raise web.HTTPServiceUnavailable(reason=f"at most {MAX_FOLLOWS} logs followed at once")
+    follows[0] += 1
+    try:
+        return await _follow(request, path, lines, max_s)
+    finally:
+        follows[0] -= 1
+
+
+async def _follow(request: web.Request, path: Path, lines: int, max_s: int) -> web.StreamResponse:
     response = web.StreamResponse(headers={"Content-Type": "text/plain; charset=utf-8"})
     response.enable_chunked_encoding()
     await response.prepare(request)
@@ -355,5 +373,6 @@ def build_app(
     if peer_tokens is not None:
         app[PEER_TOKEN_KEY] = peer_tokens
     app[REGISTRY_KEY] = []
+    app[FOLLOWS_KEY] = [0]
     add_routes(app, [*ROUTES, *extra_routes])
     return app

@@ -14,6 +14,7 @@ from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
+from sdrpeer.api.connections import COUNTERS
 from sdrpeer.api.view import AgentView
 from sdrpeer.record.robot import state_to_wire
 from sdrpeer.vocabulary import LifecycleState, MemberState, ProcessState
@@ -127,6 +128,7 @@ class ViewCollector(Collector):
         for reason, count in sorted((agent.get("rejected") or {}).items()):
             rejected.add_metric([str(reason)], _number(count) or 0.0)
         yield rejected
+        yield from _api_connection_families(agent.get("api_connections") or {})
         counts = agent.get("members") or {}
         members = GaugeMetricFamily(
             "sdrpeer_members", "Members this agent knows, by state.", labels=["state"]
@@ -140,6 +142,22 @@ class ViewCollector(Collector):
         ):
             value = _number(agent.get(key))
             yield GaugeMetricFamily(name, text, value=value if value is not None else 0.0)
+
+
+def _api_connection_families(conns: dict[str, Any]) -> Iterator[Metric]:
+    """The HTTP API's connections: open now, and closed by the agent by reason."""
+    open_now = GaugeMetricFamily("sdrpeer_api_connections", "HTTP API connections open now.")
+    open_now.add_metric([], _number(conns.get("open")) or 0.0)
+    yield open_now
+    closed = CounterMetricFamily(
+        "sdrpeer_api_connections_closed",
+        "HTTP API connections the agent closed: refused (all busy), shed (room for a newcomer), "
+        "idle_closed, header_closed (a request head unfinished in time).",
+        labels=["reason"],
+    )
+    for reason in COUNTERS:
+        closed.add_metric([reason], _number(conns.get(reason)) or 0.0)
+    yield closed
 
 
 def make_registry(view: AgentView) -> CollectorRegistry:

@@ -35,8 +35,8 @@ class AgentView(Protocol):
 
         Keys: name, addr, api, version, uptime_s, insecure (bool), preset, health_score,
         messages {in, out, bytes_in, bytes_out, bytes_in_per_s, bytes_out_per_s},
-        rejected {reason: count}, api_connections {open, refused}, members {alive, suspect, dead,
-        left}.
+        rejected {reason: count}, api_connections {open, refused, shed, idle_closed,
+        header_closed} (`sdrpeer.api.connections`), members {alive, suspect, dead, left}.
         """
         ...
 
