@@ -45,6 +45,12 @@ class ReplayGuard:
         """Number of senders tracked."""
         return len(self._senders)
 
+    def newer(self, sender: str, seq: int) -> bool:
+        """Whether `seq` is above every seq accepted from `sender` (True for a sender not
+        tracked): a replay of recorded traffic never is once what followed it was accepted."""
+        state = self._senders.get(sender)
+        return state is None or seq > state[0]
+
     def check(self, sender: str, seq: int, ts_ms: int, now_ms: int) -> str | None:
         """None if acceptable (the seq is then recorded), else "stale" or "replayed"."""
         if now_ms - ts_ms > self.freshness_ms:

@@ -1,0 +1,70 @@
+"""Issue 30: gossip captured on its way to one robot and replayed to the others (a raw socket on
+loopback, root). Three real agents; the datagrams to robot-2 are captured and sent, within
+seconds, to robot-1 and robot-3: every one is refused there and counted as `wrong_receiver`,
+and nothing of them reaches the membership core (no `misdirected`, no `self_loop`). Before
+datagrams were bound to their receiver, all of them were accepted (robot-1 counted them past
+the codec as misdirected pings and its own datagrams coming back)."""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any
+
+import pytest
+
+from tests.capture import ROOT_ONLY, Capture
+from tests.realnet import Agent, RealCluster, send_udp
+
+pytestmark = [pytest.mark.realnet, ROOT_ONLY]
+
+CAPTURED = 40
+"""Datagrams to robot-2 captured and replayed (the issue's capture had 56 over 8 s)."""
+
+
+def counters(agent: Agent) -> dict[str, Any]:
+    """The agent's rejections by reason, its core's counters and its datagrams in."""
+    info = agent.agent_info()
+    return {
+        "rejected": dict(info["rejected"]),
+        "gossip": dict(info["gossip"]),
+        "in": int(info["messages"]["in"]),
+    }
+
+
+def refused_all(reason: str, before: dict[str, Any], now: dict[str, Any]) -> bool:
+    """Whether `now` counts every captured datagram more under rejected[`reason`]."""
+    return bool(now["rejected"].get(reason, 0) >= before["rejected"].get(reason, 0) + CAPTURED)
+
+
+def test_gossip_replayed_to_another_robot_is_refused_as_wrong_receiver(
+    cluster: RealCluster,
+) -> None:
+    one, two, three = cluster.start_many(3)
+    port = two.gossip_addr[1]
+    with Capture([port]) as capture:
+        cluster.wait_until(
+            lambda: len(capture.to_port(port)), lambda n: n >= CAPTURED, "datagrams to robot-2"
+        )
+    captured = capture.to_port(port)[:CAPTURED]
+    before = {a.name: counters(a) for a in (one, two, three)}
+    for victim in (one, three, two):  # robot-2 has seen them all: replayed there
+        send_udp(victim.gossip_addr, *captured)
+    for victim, reason in ((one, "wrong_receiver"), (three, "wrong_receiver"), (two, "replayed")):
+        was = before[victim.name]
+        now = cluster.wait_until(
+            partial(counters, victim),
+            partial(refused_all, reason, was),
+            f"{victim.name} to refuse the {CAPTURED} datagrams to robot-2 as {reason}",
+            timeout=10.0,
+        )
+        refused = {
+            r: n - was["rejected"].get(r, 0)
+            for r, n in now["rejected"].items()
+            if n != was["rejected"].get(r, 0)
+        }
+        assert refused == {reason: CAPTURED}, (victim.name, refused)
+        for key in ("misdirected", "self_loop"):
+            assert now["gossip"].get(key, 0) == was["gossip"].get(key, 0), (victim.name, key)
+    for agent in (one, two, three):
+        cluster.wait_states(agent, dict.fromkeys(("robot-1", "robot-2", "robot-3"), "alive"))
+        assert "Traceback" not in agent.log.read_text()
