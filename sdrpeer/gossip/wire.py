@@ -32,17 +32,17 @@ A datagram is a fixed 23-byte header, then the msgpack body encrypted with AES-2
   preallocate megabytes of nested lists; and a packet's size is exactly its head plus the sum of
   `encoded_size(u)` of its updates.
 
-Checks on receive, cheapest and safest first: size, magic, version, key id + tag (the body is
-decrypted and authenticated before it is parsed; a receiver id not ours first), body (every field
-type-checked), then freshness
-(ts no older than the window before the cluster time, below) and replay (per-sender sliding window
-of the last `REPLAY_WINDOW` seqs, as in IPsec).
+Checks on receive, cheapest and safest first: size, magic, version, key id, receiver id (ours or
+none), tag (the body is decrypted and authenticated before it is parsed), body (every field
+type-checked), then freshness (ts no older than the window before the cluster time, below) and
+replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs, as in IPsec; the windows are
+this robot's own, which is why a datagram must be bound to its receiver).
 
 Time: timestamps are in cluster time (`replay.ClusterClock`: the wall clock plus an offset that
 only grows to the newest authenticated timestamp accepted), so robots need no common clock;
-`WireError.sender_behind` tells the shell when an authenticated datagram addressed to us was stale
-and newer than anything its sender sent us before (its sender is behind; a replay of recorded
-traffic is never newer than what followed it, so it is not answered).
+`WireError.sender_behind` tells the shell when an authenticated datagram was stale and newer than
+anything its sender sent us before (its sender is behind; a replay of recorded traffic is never
+newer than what followed it, so it is not answered).
 
 A failure raises `WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else
 escapes `decode`.
