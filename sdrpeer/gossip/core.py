@@ -41,6 +41,10 @@ How it works:
   pings, to each peer until it acknowledges one, and are ordered by (record version, revision).
 - Anti-entropy starts with a digest of the member table; only a peer whose table differs gets
   the full exchange.
+- Receivers: every packet names the robot it is addressed to (`to`; the codec binds the datagram
+  to it, so a replay to another robot does not open). Only a join or reconnect to a seed's
+  address, whose robot we do not know yet, goes to no robot: it piggybacks no update, and from
+  a probe's target it is no proof of life (it could be a replay made elsewhere).
 """
 
 from __future__ import annotations
