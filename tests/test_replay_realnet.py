@@ -36,6 +36,12 @@ def refused_all(reason: str, before: dict[str, Any], now: dict[str, Any]) -> boo
     return bool(now["rejected"].get(reason, 0) >= before["rejected"].get(reason, 0) + CAPTURED)
 
 
+def refused_since(before: dict[str, Any], now: dict[str, Any]) -> dict[str, int]:
+    """The rejections counted between `before` and `now`, by reason (those that moved)."""
+    was = before["rejected"]
+    return {r: n - was.get(r, 0) for r, n in now["rejected"].items() if n != was.get(r, 0)}
+
+
 def test_gossip_replayed_to_another_robot_is_refused_as_wrong_receiver(
     cluster: RealCluster,
 ) -> None:
@@ -57,14 +63,41 @@ def test_gossip_replayed_to_another_robot_is_refused_as_wrong_receiver(
             f"{victim.name} to refuse the {CAPTURED} datagrams to robot-2 as {reason}",
             timeout=10.0,
         )
-        refused = {
-            r: n - was["rejected"].get(r, 0)
-            for r, n in now["rejected"].items()
-            if n != was["rejected"].get(r, 0)
-        }
+        refused = refused_since(was, now)
         assert refused == {reason: CAPTURED}, (victim.name, refused)
         for key in ("misdirected", "self_loop"):
             assert now["gossip"].get(key, 0) == was["gossip"].get(key, 0), (victim.name, key)
     for agent in (one, two, three):
         cluster.wait_states(agent, dict.fromkeys(("robot-1", "robot-2", "robot-3"), "alive"))
         assert "Traceback" not in agent.log.read_text()
+
+
+def test_gossip_sent_to_a_robots_previous_life_is_refused_in_its_new_one(
+    cluster: RealCluster,
+) -> None:
+    """robot-2 is killed and started again (its replay windows are gone): the datagrams
+    captured on their way to its previous life, replayed to the new one within seconds, are
+    refused as stale, and the new robot-2 is a member as before."""
+    one, two, three = cluster.start_many(3)
+    port = two.gossip_addr[1]
+    with Capture([port]) as capture:
+        cluster.wait_until(
+            lambda: len(capture.to_port(port)), lambda n: n >= CAPTURED, "datagrams to robot-2"
+        )
+    captured = capture.to_port(port)[:CAPTURED]
+    cluster.kill(two)
+    again = cluster.start("robot-2", join=[one], run=1)
+    for agent in (one, three, again):
+        cluster.wait_states(agent, dict.fromkeys(("robot-1", "robot-2", "robot-3"), "alive"))
+    was = counters(again)
+    send_udp(again.gossip_addr, *captured)
+    now = cluster.wait_until(
+        partial(counters, again),
+        partial(refused_all, "stale", was),
+        f"the new robot-2 to refuse the {CAPTURED} datagrams to its previous life as stale",
+        timeout=10.0,
+    )
+    refused = refused_since(was, now)
+    assert refused == {"stale": CAPTURED}, refused
+    for agent in (one, three, again):
+        cluster.wait_states(agent, dict.fromkeys(("robot-1", "robot-2", "robot-3"), "alive"))

@@ -439,6 +439,23 @@ def test_binding_holds_across_a_key_rotation() -> None:
     rejects(one, data, "wrong_receiver")
 
 
+def test_what_was_sent_to_an_earlier_life_is_stale_in_the_new_one() -> None:
+    """robot-2 restarts (its replay windows are gone): a datagram addressed to its previous
+    life, replayed well within the freshness window, is refused as stale, not taken again;
+    what is sent after the new life began is taken."""
+    two, three = robots("robot-2", "robot-3")
+    before = three.encode(Gossip("robot-3", UPDATES, "robot-2"), T)
+    assert two.decode(before, T) == Gossip("robot-3", UPDATES, "robot-2")
+    (again,) = robots("robot-2")
+    again.clock.offset_ms = two.clock.offset_ms  # the agent keeps it across restarts
+    again.begin_life(T + 5)
+    error = rejects(again, before, "stale", T + 6)
+    assert error.sender_behind  # its seq is new here: answered once (the shell's nudge)
+    after = three.encode(Gossip("robot-3", UPDATES, "robot-2"), T + 5.5)
+    assert again.decode(after, T + 6) == Gossip("robot-3", UPDATES, "robot-2")
+    rejects(again, before, "stale", T + 7)
+
+
 def test_a_stale_replay_is_not_taken_for_a_sender_behind() -> None:
     """Only a stale datagram newer than all its sender sent us says its clock is behind (the
     shell answers it); a stale replay of recorded traffic, once newer traffic came, does not."""

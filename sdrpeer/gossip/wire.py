@@ -34,9 +34,10 @@ A datagram is a fixed 23-byte header, then the msgpack body encrypted with AES-2
 
 Checks on receive, cheapest and safest first: size, magic, version, key id, receiver id (ours or
 none), tag (the body is decrypted and authenticated before it is parsed), body (every field
-type-checked), then freshness (ts no older than the window before the cluster time, below) and
-replay (per-sender sliding window of the last `REPLAY_WINDOW` seqs, as in IPsec; the windows are
-this robot's own, which is why a datagram must be bound to its receiver).
+type-checked), then freshness (ts no older than the window before the cluster time, nor than
+this robot's life: `begin_life`) and replay (per-sender sliding window of the last
+`REPLAY_WINDOW` seqs, as in IPsec; the windows are this robot's own and this life's, which is
+why a datagram must be bound to its receiver, and why one sent before this life is stale).
 
 Time: timestamps are in cluster time (`replay.ClusterClock`: the wall clock plus an offset that
 only grows to the newest authenticated timestamp accepted), so robots need no common clock;
@@ -446,6 +447,12 @@ class Codec:
     def secure(self) -> bool:
         """Whether datagrams are signed and verified."""
         return self.keyring is not None
+
+    def begin_life(self, now_wall: float) -> None:
+        """This robot's life begins at `now_wall` (call it once the cluster-time offset is
+        loaded): a datagram stamped earlier was sent to an earlier life of this robot, whose
+        replay windows are gone, and is refused as stale from now on."""
+        self.guard.life_start_ms = self.clock.now_ms(now_wall)
 
     def reject(
         self, reason: str, detail: str = "", *, sender_behind: bool = False, sender: str = ""
