@@ -42,16 +42,23 @@ def refused_since(before: dict[str, Any], now: dict[str, Any]) -> dict[str, int]
     return {r: n - was.get(r, 0) for r, n in now["rejected"].items() if n != was.get(r, 0)}
 
 
+def capture_to(cluster: RealCluster, agent: Agent) -> list[bytes]:
+    """The first `CAPTURED` gossip datagrams seen on their way to `agent`."""
+    port = agent.gossip_addr[1]
+    with Capture([port]) as capture:
+        cluster.wait_until(
+            lambda: len(capture.to_port(port)),
+            lambda n: n >= CAPTURED,
+            f"datagrams to {agent.name}",
+        )
+    return capture.to_port(port)[:CAPTURED]
+
+
 def test_gossip_replayed_to_another_robot_is_refused_as_wrong_receiver(
     cluster: RealCluster,
 ) -> None:
     one, two, three = cluster.start_many(3)
-    port = two.gossip_addr[1]
-    with Capture([port]) as capture:
-        cluster.wait_until(
-            lambda: len(capture.to_port(port)), lambda n: n >= CAPTURED, "datagrams to robot-2"
-        )
-    captured = capture.to_port(port)[:CAPTURED]
+    captured = capture_to(cluster, two)
     before = {a.name: counters(a) for a in (one, two, three)}
     for victim in (one, three, two):  # robot-2 has seen them all: replayed there
         send_udp(victim.gossip_addr, *captured)
@@ -79,12 +86,7 @@ def test_gossip_sent_to_a_robots_previous_life_is_refused_in_its_new_one(
     captured on their way to its previous life, replayed to the new one within seconds, are
     refused as stale, and the new robot-2 is a member as before."""
     one, two, three = cluster.start_many(3)
-    port = two.gossip_addr[1]
-    with Capture([port]) as capture:
-        cluster.wait_until(
-            lambda: len(capture.to_port(port)), lambda n: n >= CAPTURED, "datagrams to robot-2"
-        )
-    captured = capture.to_port(port)[:CAPTURED]
+    captured = capture_to(cluster, two)
     cluster.kill(two)
     again = cluster.start("robot-2", join=[one], run=1)
     for agent in (one, three, again):
