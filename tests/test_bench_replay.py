@@ -1,5 +1,6 @@
 """The replay benchmark, small: 10 datagrams captured on their way to robot-2 of a real lab,
-replayed to every robot; every figure written, none accepted by another robot."""
+replayed to every robot, then 10 more to robot-2's new life after a restart; every figure
+written, none accepted by another robot or by the new life."""
 
 from __future__ import annotations
 
@@ -42,4 +43,7 @@ def test_a_small_replay_run_refuses_every_datagram_at_another_robot(tmp_path: Pa
         assert figures["refused"] == {reason: 10}, (name, figures)
         assert figures["core"] == {"misdirected": 0, "self_loop": 0}, (name, figures)
     assert "stale" not in doc
+    restart = doc["restart"]
+    assert (restart["replayed"], restart["accepted"]) == (10, 0), restart
+    assert restart["refused"] == {"stale": 10}, restart
     assert "accepted by robots other than robot-2: 0" in done.stdout

@@ -2,7 +2,7 @@
 """Gossip replayed to another robot (issue 30): how many captured datagrams are accepted.
 
 Usage: python tools/bench_replay.py [--robots 3] [--datagrams 56] [--preset lan] [--no-stale]
-       [--json PATH]            (root: the capture is a raw socket on lo)
+       [--no-restart] [--json PATH]            (root: the capture is a raw socket on lo)
 
 How it works: a lab of `--robots` real agents on loopback (`sdrpeer lab up`, one cluster key).
 A raw socket on `lo` (sdrpeer.netlab.capture) records the first `--datagrams` gossip datagrams
@@ -19,6 +19,11 @@ Then (unless `--no-stale`) the stale replay: once the captured datagrams are old
 from as many spoofed addresses), and the answers coming back within 2 s of the last are counted
 (a robot answers a stale datagram newer than anything its sender sent before with an empty
 gossip, so that a robot whose clock is behind catches up; a replay should get nothing).
+
+Then (unless `--no-restart`) the restart: `--datagrams` more are captured on their way to
+robot-2, robot-2 is killed (SIGKILL) and started again with the same data dir (its replay
+windows are gone), and once it sees every robot alive the captured datagrams are sent to its new
+life: accepted, and refused by reason, as above.
 
 The table prints, per robot, the datagrams replayed, accepted and refused by reason; `--json`
 writes the same figures.
@@ -41,6 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from sdrpeer.client import AgentClient  # noqa: E402
+from sdrpeer.errors import ApiError  # noqa: E402
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab  # noqa: E402
 from sdrpeer.netlab.capture import Capture  # noqa: E402
 
@@ -81,9 +87,12 @@ def capture_to(port: int, count: int, within: float) -> tuple[list[bytes], float
     raise RuntimeError(f"only {len(capture.to_port(port))} datagrams to port {port} in {within} s")
 
 
-def replay(running: RunningLab, datagrams: list[bytes], wait: float) -> dict[str, Any]:
-    """Send `datagrams` to every robot; per robot, what its counters say of them."""
-    robots = running.lab.robots
+def replay(
+    running: RunningLab, datagrams: list[bytes], wait: float, only: str = ""
+) -> dict[str, Any]:
+    """Send `datagrams` to every robot (or `only` that one); per robot, what its counters say
+    of them."""
+    robots = [r for r in running.lab.robots if not only or r.name == only]
     before = {r.name: counters(str(r.api)) for r in robots}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         for robot in robots:
@@ -113,6 +122,37 @@ def replay(running: RunningLab, datagrams: list[bytes], wait: float) -> dict[str
     return out
 
 
+def restart_replay(running: RunningLab, count: int, wait: float) -> dict[str, Any]:
+    """Capture `count` datagrams to robot-2, kill it, start it again, replay them to it."""
+    two = running.lab.robot("robot-2")
+    proc = running.process("robot-2")
+    assert two is not None
+    assert proc is not None
+    captured, first_seen = capture_to(hostport(two.gossip)[1], count, within=60.0)
+    proc.kill()
+    proc.wait(timeout=10)
+    running.restart("robot-2")
+    running.wait_started("robot-2", timeout=30)
+    names = {r.name for r in running.lab.robots}
+    deadline = time.monotonic() + 30
+    while not names <= alive_at(str(two.api)):
+        if time.monotonic() > deadline:
+            raise RuntimeError("the restarted robot-2 does not see every robot alive in 30 s")
+        time.sleep(0.1)
+    age = round(time.monotonic() - first_seen, 2)
+    out = replay(running, captured, wait, only="robot-2")["robot-2"]
+    return {"age_s": age, **out}
+
+
+def alive_at(api: str) -> set[str]:
+    """The members `api`'s agent sees alive (none while it does not answer)."""
+    try:
+        members = AgentClient(api, timeout=2).members()
+    except ApiError:
+        return set()
+    return {str(m["name"]) for m in members if m.get("state") == "alive"}
+
+
 def stale_answers(target: tuple[str, int], datagrams: list[bytes]) -> dict[str, int]:
     """Send each datagram to `target` from its own socket; the answers within 2 s of the last."""
     socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in datagrams]
@@ -140,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--preset", default="lan", help="the agents' preset (default lan)")
     p.add_argument("--wait", type=float, default=5.0, help="seconds to wait for the counts")
     p.add_argument("--no-stale", action="store_true", help="skip the stale replay (36 s)")
+    p.add_argument("--no-restart", action="store_true", help="skip the replay to a restart")
     p.add_argument("--json", type=Path, metavar="PATH", help="write the figures here")
     args = p.parse_args(argv)
     if os.geteuid() != 0:
@@ -161,6 +202,8 @@ def main(argv: list[str] | None = None) -> int:
                 time.sleep(max(0.0, first_seen + FRESHNESS_S + 6 - time.monotonic()))
                 doc["stale_age_s"] = round(time.monotonic() - first_seen, 1)
                 doc["stale"] = stale_answers(hostport(two.gossip), captured)
+            if not args.no_restart:
+                doc["restart"] = restart_replay(running, args.datagrams, args.wait)
         finally:
             running.stop(grace=5)
     print(
@@ -184,10 +227,19 @@ def main(argv: list[str] | None = None) -> int:
             f"stale replay to robot-2 ({doc['stale_age_s']} s old) from {s['sources']} source "
             f"ports: {s['answers']} answers, {s['answer_bytes']} bytes"
         )
+    if "restart" in doc:
+        r = doc["restart"]
+        refused = ", ".join(f"{k} {v}" for k, v in sorted(r["refused"].items())) or "none"
+        print(
+            f"robot-2 killed and started again: {r['replayed']} datagrams captured on their way "
+            f"to its previous life, replayed {r['age_s']} s after the first was captured: "
+            f"{r['accepted']} accepted, refused: {refused}"
+        )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(doc, indent=2) + "\n")
-    return 0 if others == 0 else 1
+    restart_accepted = doc.get("restart", {}).get("accepted", 0)
+    return 0 if others == 0 and restart_accepted == 0 else 1
 
 
 if __name__ == "__main__":
