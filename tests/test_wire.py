@@ -401,6 +401,20 @@ def test_a_datagram_replayed_to_another_robot_is_refused_as_wrong_receiver() -> 
         assert len(other.guard) == 0
 
 
+def test_receiver_ids_differ_per_robot_and_per_key_and_are_never_none() -> None:
+    """Keyed: another cluster key gives other ids (no one without the key can compute them);
+    stable for one key; never the all-zero id of a datagram to no robot."""
+    ring = Keyring([KEY_A, KEY_B])
+    names = [f"robot-{i}" for i in range(500)]
+    ids_a = [ring.receiver_ids(n)[0] for n in names]
+    ids_b = [ring.receiver_ids(n, key_id(KEY_B))[0] for n in names]
+    assert len(set(ids_a)) == len(names)
+    assert not set(ids_a) & set(ids_b)
+    assert ids_a == [Keyring([KEY_A]).receiver_ids(n)[0] for n in names]
+    assert bytes(4) not in ids_a + ids_b
+    assert ring.receiver_ids("robot-1", bytes(4)) == ()  # no key with that id
+
+
 def test_a_receiver_id_pasted_from_another_robots_traffic_does_not_open() -> None:
     """Someone who watched robot-1's traffic knows its receiver id (it is in clear): put into
     a datagram sealed for robot-2, it passes the id check and fails the tag (the associated
