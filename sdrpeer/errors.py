@@ -99,12 +99,16 @@ class MalformedError(SdrpeerError):
 
 class WireError(MalformedError):
     """A gossip datagram was not accepted. `sender_behind`: it was authenticated (its sender holds
-    a cluster key) and refused as older than the freshness window: the sender's cluster time is
-    behind ours, not an attack (the shell tells it so)."""
+    a cluster key), refused as older than the freshness window and newer than anything its
+    sender sent before: the sender's cluster time is behind ours, not an attack (the shell tells
+    it so). `sender`: the robot that sent it, when its body was read ("" before)."""
 
-    def __init__(self, reason: str, detail: str = "", *, sender_behind: bool = False) -> None:
+    def __init__(
+        self, reason: str, detail: str = "", *, sender_behind: bool = False, sender: str = ""
+    ) -> None:
         super().__init__(reason, detail)
         self.sender_behind = sender_behind
+        self.sender = sender
 
 
 class RecordError(MalformedError):

@@ -281,14 +281,21 @@ def test_direct_probe_measures_rtt() -> None:
     assert all(r == pytest.approx(0.008) for r in rtts if r is not None)
 
 
-def test_failed_probe_goes_indirect_then_confirms_then_suspects_and_raises_local_health() -> None:
-    core = with_peers()
+def first_ping(core: Membership) -> tuple[float, Ping]:
+    """Run the core's timers in 10 ms steps until it pings someone: (when, the ping)."""
     t = 0.0
-    ping = None
-    while ping is None:
+    for _ in range(1000):
         t = round(t + 0.01, 6)
         core.handle_timer(t)
         ping = next((p for _, p in core.datagrams_to_send() if isinstance(p, Ping)), None)
+        if ping is not None:
+            return t, ping
+    raise AssertionError("no ping in 10 s")
+
+
+def test_failed_probe_goes_indirect_then_confirms_then_suspects_and_raises_local_health() -> None:
+    core = with_peers()
+    t, ping = first_ping(core)
     target = ping.target
     core.handle_timer(t + 0.075)  # probe timeout: second ping + 3 PingReqs
     out = core.datagrams_to_send()
@@ -548,3 +555,54 @@ def test_a_member_back_from_the_dead_is_no_longer_a_reconnect_target() -> None:
         targets += [dst for dst, p in answer_pings(core, t) if isinstance(p, Digest)]
     assert len(targets) > 60
     assert targets.count(addr(9)) / len(targets) < 0.25  # a peer like any other, not 1 in 3
+
+
+# ------------------------------------------------------------------ receivers (issue 30)
+
+
+def test_every_datagram_is_addressed_to_the_robot_at_its_address_but_a_join_by_address() -> None:
+    """What the codec binds each datagram to: the robot at the address it goes to; only what
+    goes to a seed's address before its name is known is addressed to no robot, and that is a
+    Sync or Digest carrying no piggybacked update (a replay of it can spread no fact)."""
+    net = Net(delay=0.005)
+    seed = net.add(0)
+    joiners = [net.add(i) for i in range(1, 6)]
+    seen: list[tuple[Addr, Addr, Packet]] = []
+
+    def record(src: Addr, dst: Addr, p: Packet) -> bool:
+        seen.append((src, dst, p))
+        return False
+
+    net.drop = record
+    for core in joiners:
+        core.join(0.0, [seed.addr])
+        core.set_record(0.0, b"r")
+    net.run(5.0)
+    net.remove(joiners[-1])  # suspicions, indirect probes, nacks, a death, dead-address syncs
+    net.run(25.0)
+    assert joiners[0].state_of("r5") == DEAD
+    kinds = {type(p).__name__ for _, _, p in seen if p.to}
+    assert kinds == {"Ping", "PingReq", "Ack", "Nack", "Gossip", "Sync", "Digest"}
+    unbound = [(dst, p) for _, dst, p in seen if not p.to]
+    assert unbound, "the joins went to the seed by address"
+    for dst, p in unbound:
+        assert dst == seed.addr, p
+        assert isinstance(p, (Sync, Digest)), p
+        assert not p.updates, p
+    for _, dst, p in seen:
+        if p.to:
+            assert dst == addr(int(p.to[1:])), (dst, p)
+
+
+@pytest.mark.parametrize(("to", "proves"), [("r0", True), ("", False)])
+def test_only_a_datagram_addressed_to_us_proves_the_target_alive(to: str, proves: bool) -> None:
+    """A datagram to no robot in particular (a join by address) may be a replay of one made
+    for another robot: from the target of a probe, it is no proof of life; one bound to us is."""
+    core = with_peers()
+    t, ping = first_ping(core)
+    core.receive(t + 0.01, addr(int(ping.target[1:])), Sync(ping.target, False, (), (), to))
+    core.datagrams_to_send()
+    core.handle_timer(t + 0.075)  # the probe timeout: unproven, the target is probed indirectly
+    out = core.datagrams_to_send()
+    indirect = [p for _, p in out if isinstance(p, PingReq) and p.target == ping.target]
+    assert (indirect == []) == proves

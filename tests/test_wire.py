@@ -20,6 +20,7 @@ from sdrpeer.gossip.messages import (
     Ack,
     Alive,
     Dead,
+    Digest,
     Event,
     Gossip,
     Nack,
@@ -80,7 +81,7 @@ PACKETS: tuple[Packet, ...] = (
         UPDATES,
     ),
 )
-INSECURE_HEADER = b"SP" + bytes([PROTOCOL_VERSION]) + bytes(16)
+INSECURE_HEADER = b"SP" + bytes([PROTOCOL_VERSION]) + bytes(20)
 
 
 def pair(
@@ -154,8 +155,8 @@ def test_every_update_round_trips_and_size_is_exact(update: Update) -> None:
 
 
 def test_header_fits_the_configured_overhead() -> None:
-    assert HEADER_SIZE == 19
-    assert OVERHEAD == 35 <= GossipConfig().packet_overhead
+    assert HEADER_SIZE == 23
+    assert OVERHEAD == 39 <= GossipConfig().packet_overhead
 
 
 def test_nonces_are_unique_per_datagram_and_per_codec() -> None:
@@ -192,14 +193,21 @@ updates = st.one_of(
 )
 update_tuples = st.lists(updates, max_size=8).map(tuple)
 entries = st.tuples(names, addrs, uints, st.sampled_from([ALIVE, SUSPECT, DEAD]), uints)
+receivers = st.one_of(st.just(""), names)
+"""A packet's `to`: no robot (a seed by address) or any robot name."""
 packets = st.one_of(
     st.builds(Ping, st.just("a"), uints, names, update_tuples),
-    st.builds(PingReq, st.just("a"), uints, names, addrs, st.booleans(), update_tuples),
-    st.builds(Ack, st.just("a"), uints, update_tuples),
-    st.builds(Nack, st.just("a"), uints, update_tuples),
-    st.builds(Gossip, st.just("a"), update_tuples),
+    st.builds(PingReq, st.just("a"), uints, names, addrs, st.booleans(), update_tuples, receivers),
+    st.builds(Ack, st.just("a"), uints, update_tuples, receivers),
+    st.builds(Nack, st.just("a"), uints, update_tuples, receivers),
+    st.builds(Gossip, st.just("a"), update_tuples, receivers),
     st.builds(
-        Sync, st.just("a"), st.booleans(), st.lists(entries, max_size=5).map(tuple), update_tuples
+        Sync,
+        st.just("a"),
+        st.booleans(),
+        st.lists(entries, max_size=5).map(tuple),
+        update_tuples,
+        receivers,
     ),
 )
 
@@ -207,8 +215,10 @@ packets = st.one_of(
 @settings(max_examples=300, deadline=None)
 @given(packets)
 def test_any_valid_packet_round_trips(packet: Packet) -> None:
-    a, b = pair([KEY_A], [KEY_A])
-    assert b.decode(a.encode(packet, T), T) == packet
+    """Decoded by its receiver (any robot, for a packet to none), it is the packet sent."""
+    a = Codec("a", Keyring([KEY_A]), seq_start=1)
+    receiver = Codec(packet.to or "robot-9", Keyring([KEY_A]))
+    assert receiver.decode(a.encode(packet, T), T) == packet
 
 
 # --- keys ----------------------------------------------------------------------------------
@@ -329,7 +339,7 @@ def test_wrong_key_is_unknown_key() -> None:
     rejects(b, a.encode(Gossip("a"), T), "unknown_key")
 
 
-@pytest.mark.parametrize("where", [HEADER_SIZE, -1, 8, 18, 2 + 1 + 4 + 12 + 3])
+@pytest.mark.parametrize("where", [HEADER_SIZE, -1, 8, 18])
 def test_tampered_body_tag_or_nonce_is_unauthenticated(where: int) -> None:
     a, b = pair([KEY_A], [KEY_A])
     data = bytearray(a.encode(Ping("a", 1, "b", UPDATES), T))
@@ -358,6 +368,120 @@ def test_replayed_datagram_is_dropped() -> None:
     data = a.encode(Ack("a", 3), T)
     assert b.decode(data, T) == Ack("a", 3)
     rejects(b, data, "replayed", T + 1)
+
+
+# --- binding to the receiver ------------------------------------------------------------------
+
+
+def robots(*names: str, keys: tuple[bytes, ...] = (KEY_A,)) -> list[Codec]:
+    """A codec per robot name, every one holding `keys`."""
+    return [Codec(name, Keyring(list(keys)), seq_start=1) for name in names]
+
+
+def test_a_datagram_replayed_to_another_robot_is_refused_as_wrong_receiver() -> None:
+    """Issue 30: the datagrams robot-3 and robot-1 sent robot-2, replayed to robot-1 and to a
+    fourth robot at once (well within the freshness window), are refused there, counted as
+    wrong_receiver, and none reaches the replay windows of the robots they were replayed to."""
+    one, two, three, four = robots("robot-1", "robot-2", "robot-3", "robot-4")
+    sent = [
+        three.encode(Ping("robot-3", 1, "robot-2", UPDATES), T),
+        three.encode(Gossip("robot-3", UPDATES, "robot-2"), T),
+        three.encode(Ack("robot-3", 4, (), "robot-2"), T),
+        three.encode(Sync("robot-3", True, (), (), "robot-2"), T),
+        one.encode(Digest("robot-1", 7, 3, (), "robot-2"), T),  # back to its own sender
+        one.encode(PingReq("robot-1", 5, "robot-3", ("h", 1), True, (), "robot-2"), T),
+    ]
+    for data in sent:
+        assert two.decode(data, T).to == "robot-2"
+    for other in (one, four):
+        for data in sent:
+            rejects(other, data, "wrong_receiver", T + 1)
+        assert other.counters["wrong_receiver"] == len(sent)
+        assert other.counters["accepted"] == 0
+        assert len(other.guard) == 0
+
+
+def test_receiver_ids_differ_per_robot_and_per_key_and_are_never_none() -> None:
+    """Keyed: another cluster key gives other ids (no one without the key can compute them);
+    stable for one key; never the all-zero id of a datagram to no robot."""
+    ring = Keyring([KEY_A, KEY_B])
+    names = [f"robot-{i}" for i in range(500)]
+    ids_a = [ring.receiver_ids(n)[0] for n in names]
+    ids_b = [ring.receiver_ids(n, key_id(KEY_B))[0] for n in names]
+    assert len(set(ids_a)) == len(names)
+    assert not set(ids_a) & set(ids_b)
+    assert ids_a == [Keyring([KEY_A]).receiver_ids(n)[0] for n in names]
+    assert bytes(4) not in ids_a + ids_b
+    assert ring.receiver_ids("robot-1", bytes(4)) == ()  # no key with that id
+
+
+def test_a_receiver_id_pasted_from_another_robots_traffic_does_not_open() -> None:
+    """Someone who watched robot-1's traffic knows its receiver id (it is in clear): put into
+    a datagram sealed for robot-2, it passes the id check and fails the tag (the associated
+    data holds the receiver's own name); made unbound (zeros), it fails the tag too."""
+    one, two, three = robots("robot-1", "robot-2", "robot-3")
+    to_one = three.encode(Gossip("robot-3", (), "robot-1"), T)
+    to_two = bytearray(three.encode(Gossip("robot-3", UPDATES, "robot-2"), T))
+    rid = slice(HEADER_SIZE - 4, HEADER_SIZE)
+    to_two[rid] = to_one[rid]
+    rejects(one, bytes(to_two), "unauthenticated")
+    to_two[rid] = bytes(4)
+    rejects(one, bytes(to_two), "unauthenticated")
+    rejects(two, bytes(to_two), "unauthenticated")
+
+
+def test_a_datagram_to_no_robot_opens_anywhere_once() -> None:
+    """A join by address (the seed's name unknown): any robot holding the key takes it, once."""
+    one, two, three = robots("robot-1", "robot-2", "robot-3")
+    join = three.encode(Sync("robot-3", True, (("robot-3", ("h", 1), 0, ALIVE, 1),)), T)
+    for robot in (one, two):
+        packet = robot.decode(join, T)
+        assert isinstance(packet, Sync)
+        assert packet.to == ""
+        assert packet.reply
+        rejects(robot, join, "replayed", T + 1)
+
+
+def test_binding_holds_across_a_key_rotation() -> None:
+    """The sender seals with the new key, which the receiver holds second: its receiver id
+    under that key is found, and a replay elsewhere is still refused."""
+    (sender,) = robots("robot-3", keys=(KEY_B, KEY_A))
+    one, two = robots("robot-1", "robot-2", keys=(KEY_A, KEY_B))
+    data = sender.encode(Gossip("robot-3", UPDATES, "robot-2"), T)
+    assert data[3:7] == key_id(KEY_B)
+    assert two.decode(data, T) == Gossip("robot-3", UPDATES, "robot-2")
+    rejects(one, data, "wrong_receiver")
+
+
+def test_what_was_sent_to_an_earlier_life_is_stale_in_the_new_one() -> None:
+    """robot-2 restarts (its replay windows are gone): a datagram addressed to its previous
+    life, replayed well within the freshness window, is refused as stale, not taken again;
+    what is sent after the new life began is taken."""
+    two, three = robots("robot-2", "robot-3")
+    before = three.encode(Gossip("robot-3", UPDATES, "robot-2"), T)
+    assert two.decode(before, T) == Gossip("robot-3", UPDATES, "robot-2")
+    (again,) = robots("robot-2")
+    again.clock.offset_ms = two.clock.offset_ms  # the agent keeps it across restarts
+    again.begin_life(T + 5)
+    error = rejects(again, before, "stale", T + 6)
+    assert error.sender_behind  # its seq is new here: answered once (the shell's nudge)
+    after = three.encode(Gossip("robot-3", UPDATES, "robot-2"), T + 5.5)
+    assert again.decode(after, T + 6) == Gossip("robot-3", UPDATES, "robot-2")
+    rejects(again, before, "stale", T + 7)
+
+
+def test_a_stale_replay_is_not_taken_for_a_sender_behind() -> None:
+    """Only a stale datagram newer than all its sender sent us says its clock is behind (the
+    shell answers it); a stale replay of recorded traffic, once newer traffic came, does not."""
+    a, b = pair([KEY_A], [KEY_A])
+    recorded = a.encode(Gossip("a", (), "b"), T)
+    assert b.decode(a.encode(Gossip("a", (), "b"), T + 5), T + 5).sender == "a"
+    error = rejects(b, recorded, "stale", T + 36)
+    assert not error.sender_behind
+    assert error.sender == "a"
+    behind = rejects(b, a.encode(Gossip("a", (), "b"), T + 6), "stale", T + 40)
+    assert behind.sender_behind
+    assert behind.sender == "a"
 
 
 @pytest.mark.parametrize("delay", [30.001, 3600.0])

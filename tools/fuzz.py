@@ -12,8 +12,9 @@ How it works: each surface gets `--inputs` inputs, a third each of
 - structure mutations: a valid message decoded, one node of its msgpack tree replaced by a
   hostile value (huge, negative or fractional numbers, NaN, long strings, bytes, deep nesting,
   wrong types), removed or duplicated, and encoded again.
-Gossip inputs are sealed with the cluster key after mutation (with a fresh sequence number), so
-they get past authentication and reach the parser, the replay guard, the membership core (which
+Gossip inputs are sealed with the cluster key after mutation (with a fresh sequence number, by
+the codec's `seal`, addressed to the robot fuzzed or to no robot at random), so they get past
+authentication and reach the parser, the replay guard, the membership core (which
 processes them, with its timers run every 64 inputs) and the record decoder. Control inputs go
 to the agent's report decoder and to the host's command decoder; stream inputs to the receiver's
 hello (with acknowledgement and authentication fields) and frame decoder, and replies to the
@@ -80,7 +81,7 @@ from sdrpeer.gossip.messages import (
     Suspect,
     Sync,
 )
-from sdrpeer.gossip.wire import MAGIC, PROTOCOL_VERSION, Codec, format_key, packet_body
+from sdrpeer.gossip.wire import Codec, format_key, packet_body
 from sdrpeer.keys.keyring import Keyring
 from sdrpeer.monitor.scenario import Scenario
 from sdrpeer.monitor.virtual import RobotFile
@@ -216,6 +217,7 @@ class GossipSurface:
         self.core = Membership("robot-1", ("10.0.0.1", 7946), lan(), now=0.0, rng=rng)
         self.now = 0.0
         self.seq = 1
+        self.sealed = 0
         record = encode_record(reference_record(peers=3, instances=3))
         alive = Alive("robot-2", ("10.0.0.2", 7946), 1)
         trap = Event("robot-2", 9, "trap", b"\x93\x01\x02\x03")
@@ -251,9 +253,8 @@ class GossipSurface:
                 self.seq += 1
                 values[0][2], values[0][3] = self.seq, int(NOW * 1000)
                 body = pack_all(values) or body
-        nonce = os.urandom(12)
-        header = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0] + nonce
-        return header + self.keyring.seal(nonce, body, header)
+        self.sealed += 1  # the nonce's seq: unique per datagram, whatever the body's says
+        return self.sender.seal(body, self.rng.choice(("robot-1", "")), self.sealed)
 
     def feed(self, data: bytes) -> None:
         packet = self.codec.decode(data, NOW)

@@ -239,9 +239,10 @@ class Agent:
         host, port = parse_hostport(cfg.bind)
         first = agent_files.seq_start(cfg.data_dir, time.time_ns() // 1000)
         codec = Codec(cfg.name, self.keyring, max_datagram=gossip.datagram_limit, seq_start=first)
+        wall = self.robot.file.wall if self.robot is not None else time.time
         if self.keyring is not None:
             codec.clock.offset_ms = self._saved_offset = agent_files.load_clock_offset(cfg.data_dir)
-        wall = self.robot.file.wall if self.robot is not None else time.time
+            codec.begin_life(wall())  # what was sent to an earlier life of this robot is stale
         self.shell, addr = await open_gossip(
             host, port, codec, self._on_core_event, self._on_reject, wall=wall
         )

@@ -60,7 +60,8 @@ class GossipConfig:
     limit, `sdrpeer.gossip.wire.Codec`): a bigger one is refused as oversized. Near the UDP maximum:
     a robot must still take a large record that a peer sent alone."""
     packet_overhead: int = 48
-    """Bytes the wire envelope adds to every datagram (header, key id, MAC)."""
+    """Bytes the wire envelope adds to every datagram, budgeted (the header with its key id,
+    nonce and receiver id, and the AEAD tag: 39 bytes, `sdrpeer.gossip.wire.OVERHEAD`)."""
 
     def with_(self, **changes: Any) -> GossipConfig:
         """A copy with some fields changed."""

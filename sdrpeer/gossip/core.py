@@ -41,6 +41,10 @@ How it works:
   pings, to each peer until it acknowledges one, and are ordered by (record version, revision).
 - Anti-entropy starts with a digest of the member table; only a peer whose table differs gets
   the full exchange.
+- Receivers: every packet names the robot it is addressed to (`to`; the codec binds the datagram
+  to it, so a replay to another robot does not open). Only a join or reconnect to a seed's
+  address, whose robot we do not know yet, goes to no robot: it piggybacks no update, and from
+  a probe's target it is no proof of life (it could be a replay made elsewhere).
 """
 
 from __future__ import annotations
@@ -176,7 +180,8 @@ class Membership:
         self._seq = 0
         self._probes: dict[int, Probe] = {}
         self._probing: dict[str, Probe] = {}
-        self._fwd: dict[int, tuple[Addr, int, bool]] = {}
+        self._fwd: dict[int, tuple[Addr, int, bool, str]] = {}
+        """Our probe seq -> (requester's address, its seq, want_nack, its name) of a PingReq."""
         self._gossip_armed = False
         self._urgent_at = float("-inf")
         self._urgent_armed = False
@@ -238,7 +243,7 @@ class Membership:
                 updates = self._take(self._budget)
                 if not updates:
                     break
-                self._out.append((self._members[name].addr, Gossip(self.name, updates)))
+                self._out.append((self._members[name].addr, Gossip(self.name, updates, name)))
         if self._queue and not self._gossip_armed:
             self._gossip_armed = True
             self._at(self._now + self.config.gossip_interval, GOSSIP, None)
@@ -351,7 +356,7 @@ class Membership:
             return
         seq = self._ping(probe)  # a second direct ping, then k indirect ones
         for name in self._peers.sample(self.rng, self.config.indirect_checks, exclude=m.name):
-            req = PingReq(self.name, seq, m.name, m.addr, True, self._take(self._budget))
+            req = PingReq(self.name, seq, m.name, m.addr, True, self._take(self._budget), name)
             self._out.append((self._members[name].addr, req))
             probe.want_nacks += 1
 
@@ -390,7 +395,7 @@ class Membership:
         if m is not None and m.state != ALIVE:
             buddy.append(self._fact_about(m))
         updates = tuple(buddy) + self._take(self._budget - 64 * len(buddy))
-        self._out.append((src, Ack(self.name, ping.seq, updates)))
+        self._out.append((src, Ack(self.name, ping.seq, updates, ping.sender)))
 
     def _on_ack(self, ack: Ack) -> None:
         probe = self._probes.get(ack.seq)
@@ -406,11 +411,11 @@ class Membership:
             return
         fwd = self._fwd.pop(ack.seq, None)
         if fwd is not None:
-            self._out.append((fwd[0], Ack(self.name, fwd[1], self._take(self._budget))))
+            self._out.append((fwd[0], Ack(self.name, fwd[1], self._take(self._budget), fwd[3])))
 
     def _on_ping_req(self, src: Addr, req: PingReq) -> None:
         seq = self._next_seq()
-        self._fwd[seq] = (src, req.seq, req.want_nack)
+        self._fwd[seq] = (src, req.seq, req.want_nack, req.sender)
         m = self._members.get(req.target)
         updates = self._piggyback(m) if m is not None else self._take(self._budget)
         self._out.append((req.target_addr, Ping(self.name, seq, req.target, updates)))
@@ -419,7 +424,7 @@ class Membership:
     def _fwd_end(self, seq: int) -> None:
         fwd = self._fwd.pop(seq, None)
         if fwd is not None and fwd[2]:
-            self._out.append((fwd[0], Nack(self.name, fwd[1])))
+            self._out.append((fwd[0], Nack(self.name, fwd[1], (), fwd[3])))
 
     def _adjust_health(self, delta: int) -> None:
         self.health_score = min(max(0, self.health_score + delta), self.config.awareness_max - 1)
@@ -430,23 +435,27 @@ class Membership:
         self._at(self._now + self._sync_interval() * self.rng.uniform(0.5, 1.5), SYNC, None)
         if self.leaving:
             return
-        target: Addr | None = None
+        target: tuple[Addr, str] | None = None
         horizon = self._now - self.config.reconnect_time
         for name, (_, died) in list(self._dead_addrs.items()):
             if died < horizon:
                 del self._dead_addrs[name]
-        lost = [addr for addr, _ in self._dead_addrs.values()]
+        lost = [(addr, name) for name, (addr, _) in self._dead_addrs.items()]
         if self._seeds:  # a seed is worth a reconnect only if it is not already a live peer
             live = {self._members[name].addr for name in self._peers.names()}
-            lost += [seed for seed in self._seeds if seed not in live]
+            lost += [(seed, "") for seed in self._seeds if seed not in live]
         if lost and (not self._peers or self.rng.random() < 1 / 3):
             target = self.rng.choice(lost)
         elif self._peers:
-            target = self._members[self._peers.sample(self.rng, 1)[0]].addr
+            name = self._peers.sample(self.rng, 1)[0]
+            target = (self._members[name].addr, name)
         if target is not None:
-            n = self.num_alive()
-            digest = Digest(self.name, self.table_digest(), n, self._take(self._budget - 32))
-            self._out.append((target, digest))
+            dest, to = target
+            # To a seed by address (to == ""): nothing piggybacked, so a replay carries no fact.
+            updates = self._take(self._budget - 32) if to else ()
+            self._out.append(
+                (dest, Digest(self.name, self.table_digest(), self.num_alive(), updates, to))
+            )
 
     def _on_digest(self, src: Addr, d: Digest) -> None:
         if d.digest == self.table_digest():
@@ -456,22 +465,22 @@ class Membership:
         last = self._sync_replied.get(d.sender)
         if last is None or self._now - last >= SYNC_REPLY_GAP:
             self._sync_replied[d.sender] = self._now
-            self._send_state(src, reply=True)
+            self._send_state(src, d.sender, reply=True)
 
-    def _pull(self, dest: Addr) -> None:
-        """Ask the peer at `dest` for what we lack now (rate-limited per peer)."""
+    def _pull(self, dest: Addr, to: str) -> None:
+        """Ask the peer `to` at `dest` for what we lack now (rate-limited per peer)."""
         last = self._pulled.get(dest)
         if last is not None and self._now - last < SYNC_REPLY_GAP:
             return
         self._pulled[dest] = self._now
         self._count("pulls")
-        self._send_state(dest, reply=True)
+        self._send_state(dest, to, reply=True)
 
     def _retry_join(self, delay: float) -> None:
         if len(self._members) > 1 or not self._seeds:
             return
         for seed in self._seeds:
-            self._send_state(seed, reply=True)
+            self._send_state(seed, "", reply=True)
         delay = min(delay * 2, 5.0)
         self._at(self._now + delay, JOIN, delay)
 
@@ -483,18 +492,19 @@ class Membership:
             out.append((m.name, m.addr, m.incarnation, m.state, rec[0] if rec else 0))
         return out
 
-    def _send_state(self, dest: Addr, *, reply: bool) -> None:
+    def _send_state(self, dest: Addr, to: str, *, reply: bool) -> None:
+        """Our whole member table to `to` at `dest` ("": a seed by address), in chunks."""
         chunk: list[SyncEntry] = []
         used = 0
         for e in self._entries():
             size = len(e[0]) + len(e[1][0]) + SYNC_ENTRY_OVERHEAD
             if chunk and used + size > self._budget:
-                self._out.append((dest, Sync(self.name, reply, tuple(chunk))))
+                self._out.append((dest, Sync(self.name, reply, tuple(chunk), (), to)))
                 chunk, used = [], 0
             chunk.append(e)
             used += size
         if chunk:
-            self._out.append((dest, Sync(self.name, reply, tuple(chunk))))
+            self._out.append((dest, Sync(self.name, reply, tuple(chunk), (), to)))
 
     def _on_sync(self, src: Addr, sync: Sync) -> None:
         push: list[Update] = []
@@ -517,25 +527,25 @@ class Membership:
             elif name == self.name and mine is not None and rec_version > mine[0]:
                 self._store_own_record(rec_version + 1, mine[1])
                 push.append(Record(name, rec_version + 1, mine[1]))
-        self._push_records(src, push)
+        self._push_records(src, sync.sender, push)
         if sync.reply:
             last = self._sync_replied.get(sync.sender)
             if last is None or self._now - last >= SYNC_REPLY_GAP:
                 self._sync_replied[sync.sender] = self._now
-                self._send_state(src, reply=False)
+                self._send_state(src, sync.sender, reply=False)
 
-    def _push_records(self, dest: Addr, records: list[Update]) -> None:
+    def _push_records(self, dest: Addr, to: str, records: list[Update]) -> None:
         batch: list[Update] = []
         used = 0
         for r in records:
             size = self._size(r)
             if batch and used + size > self._budget:
-                self._out.append((dest, Gossip(self.name, tuple(batch))))
+                self._out.append((dest, Gossip(self.name, tuple(batch), to)))
                 batch, used = [], 0
             batch.append(r)
             used += size
         if batch:
-            self._out.append((dest, Gossip(self.name, tuple(batch))))
+            self._out.append((dest, Gossip(self.name, tuple(batch), to)))
 
     # ============================================== merges, records, events, timers
 
@@ -545,7 +555,7 @@ class Membership:
         self._now = now
         self._seeds = [s for s in seeds if s != self.addr]
         for seed in self._seeds:
-            self._send_state(seed, reply=True)
+            self._send_state(seed, "", reply=True)
         if self._seeds:
             self._at(now + 1.0, JOIN, 1.0)
 
@@ -581,7 +591,7 @@ class Membership:
         dead = Dead(self.name, self.incarnation, self.name)
         self._enqueue(("m", self.name), dead)
         for name in self._peers.names():
-            self._out.append((self._members[name].addr, Gossip(self.name, (dead,))))
+            self._out.append((self._members[name].addr, Gossip(self.name, (dead,), name)))
 
     def set_record(self, now: float, payload: bytes) -> int:
         """Publish a new version of our own record (spread to everyone); returns its version."""
@@ -622,13 +632,15 @@ class Membership:
             self._count("self_loop")
             return
         probe = self._probing.get(sender)
-        if probe is not None and not isinstance(packet, Ack):
-            self._probe_succeeded(probe)  # any datagram from the target proves it alive
+        if probe is not None and packet.to == self.name and not isinstance(packet, Ack):
+            # Any datagram from the target addressed to us proves it alive; one to whoever
+            # listens at our address (a join by address) may be a replay made elsewhere.
+            self._probe_succeeded(probe)
         if packet.updates:
-            self._merge_updates(packet.updates, src)
+            self._merge_updates(packet.updates, src, sender)
         if isinstance(packet, Ping):
             if packet.vitals is not None and self._merge_vitals(sender, packet.vitals):
-                self._pull(src)  # they revise a record we never got: fetch it now
+                self._pull(src, sender)  # they revise a record we never got: fetch it now
             self._on_ping(src, packet)
         elif isinstance(packet, Ack):
             self._on_ack(packet)
@@ -713,7 +725,7 @@ class Membership:
         return len(self._queue)
 
     # ----------------------------------------------------------------- merging
-    def _merge_updates(self, updates: tuple[Update, ...], src: Addr) -> None:
+    def _merge_updates(self, updates: tuple[Update, ...], src: Addr, sender: str) -> None:
         corrections: list[Update] = []
         members = self._members
         for u in updates:
@@ -734,14 +746,14 @@ class Membership:
                 if u.name == self.name and not self.leaving:  # type: ignore[union-attr]
                     corrections.append(Alive(self.name, self.addr, self.incarnation))
                     if t is Dead:
-                        self._pull(src)  # we were cut off: fetch what the fleet decided
+                        self._pull(src, sender)  # we were cut off: fetch what the fleet decided
             elif t is Record:
                 self._merge_record(u)  # type: ignore[arg-type]
             elif t is Event:
                 self._merge_event(u)  # type: ignore[arg-type]
         if corrections:
             self._count("corrections")
-            self._out.append((src, Gossip(self.name, tuple(corrections))))
+            self._out.append((src, Gossip(self.name, tuple(corrections), sender)))
 
     def _stale(self, name: str, incarnation: int) -> Alive | None:
         """Our newer Alive when a suspicion or death about `name` is out of date, else None.
@@ -815,7 +827,7 @@ class Membership:
         # Buddy system: tell the suspect at once so it can refute before anyone times out (the
         # accuser always; others with a probability that keeps ~4 direct notices per suspicion).
         if s.source == self.name or self.rng.random() < 4.0 / n:
-            self._out.append((m.addr, Gossip(self.name, (s,))))
+            self._out.append((m.addr, Gossip(self.name, (s,), m.name)))
 
     def _merge_dead(self, d: Dead) -> None:
         if d.name == self.name:
@@ -934,7 +946,7 @@ class Membership:
         m = self._members.get(name)
         if m is not None and m.suspicion is susp:
             self._out.append(
-                (m.addr, Gossip(self.name, (Suspect(name, m.incarnation, self.name),)))
+                (m.addr, Gossip(self.name, (Suspect(name, m.incarnation, self.name),), name))
             )
             self._at(self._now + susp.min_t / 4, RECHECK, (name, susp))
 

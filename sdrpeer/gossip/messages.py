@@ -8,6 +8,13 @@ Two layers:
 
 A ping may also carry the sender's `VitalsRevision`: the newest revision of the measured part of
 its record, sent directly to the robot probed (until it acknowledges one as new), never spread.
+
+Every packet also names its *receiver*, `to`: the robot it is addressed to, which the codec binds
+the sealed datagram to (sdrpeer.gossip.wire), so a datagram replayed to another robot does not
+open there. A ping's receiver is its target. `to == ""` addresses whoever listens at the
+destination address: only what a robot sends to an address whose robot it does not know yet (a
+seed it joins by address); such a datagram carries no piggybacked update and proves no life.
+A decoded packet's `to` is the receiving robot's name when it was bound to it, else "".
 """
 
 from __future__ import annotations
@@ -104,6 +111,11 @@ class Ping:
     updates: tuple[Update, ...] = ()
     vitals: VitalsRevision | None = None
 
+    @property
+    def to(self) -> str:
+        """The robot this ping is addressed to: its target."""
+        return self.target
+
 
 @dataclass(frozen=True, slots=True)
 class PingReq:
@@ -115,6 +127,8 @@ class PingReq:
     target_addr: Addr
     want_nack: bool
     updates: tuple[Update, ...] = ()
+    to: str = ""
+    """The robot this packet is addressed to ("": whoever listens at the address)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +138,8 @@ class Ack:
     sender: str
     seq: int
     updates: tuple[Update, ...] = ()
+    to: str = ""
+    """The robot this packet is addressed to ("": whoever listens at the address)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,6 +149,8 @@ class Nack:
     sender: str
     seq: int
     updates: tuple[Update, ...] = ()
+    to: str = ""
+    """The robot this packet is addressed to ("": whoever listens at the address)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,6 +159,8 @@ class Gossip:
 
     sender: str
     updates: tuple[Update, ...] = ()
+    to: str = ""
+    """The robot this packet is addressed to ("": whoever listens at the address)."""
 
 
 SyncEntry = tuple[str, Addr, int, MemberState, int]
@@ -159,6 +179,8 @@ class Sync:
     reply: bool
     entries: tuple[SyncEntry, ...]
     updates: tuple[Update, ...] = ()
+    to: str = ""
+    """The robot this packet is addressed to ("": whoever listens at the address)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,6 +193,8 @@ class Digest:
     count: int
     """Members alive or suspect in the digest (shown in logs; not compared)."""
     updates: tuple[Update, ...] = ()
+    to: str = ""
+    """The robot this packet is addressed to ("": whoever listens at the address)."""
 
 
 Packet = Ping | PingReq | Ack | Nack | Gossip | Sync | Digest

@@ -5,8 +5,10 @@ bitmap of the `REPLAY_WINDOW` seqs below it. A datagram is refused as "stale" wh
 is older than the freshness window before `now` (the cluster time: sdrpeer.gossip.wire's codec keeps
 it at the newest authenticated timestamp it has seen, so a datagram dated *later* than now is
 not refused — a replay can only be older), and as "replayed" when its seq was seen already or
-is older than the window. Time is passed in; at most `max_senders` senders are tracked (the least
-recently seen is forgotten first), so a flood of forged names cannot exhaust memory.
+is older than the window. The windows live in memory only, so a restarted robot would take again
+what was sent to its previous life: `life_start_ms` (set when this life begins) refuses as
+"stale" anything stamped before it. Time is passed in; at most `max_senders` senders are tracked
+(the least recently seen is forgotten first), so a flood of forged names cannot exhaust memory.
 
 Time (`ClusterClock`): robots far from any NTP server cannot keep their clocks within the window
 of each other, so the codec keeps a *cluster time*: its own wall clock plus an offset that only
@@ -38,6 +40,9 @@ class ReplayGuard:
             raise ValueError("freshness_s must be > 0 and max_senders >= 1")
         self.freshness_ms = int(freshness_s * 1000)
         self.max_senders = max_senders
+        self.life_start_ms = 0
+        """Cluster time this robot's life began (`Codec.begin_life`): anything stamped earlier
+        was sent to an earlier life, whose windows are gone."""
         # sender -> [highest seq, bitmap]; bit i set = seq (highest - i) was accepted.
         self._senders: OrderedDict[str, list[int]] = OrderedDict()
 
@@ -45,9 +50,15 @@ class ReplayGuard:
         """Number of senders tracked."""
         return len(self._senders)
 
+    def newer(self, sender: str, seq: int) -> bool:
+        """Whether `seq` is above every seq accepted from `sender` (True for a sender not
+        tracked): a replay of recorded traffic never is once what followed it was accepted."""
+        state = self._senders.get(sender)
+        return state is None or seq > state[0]
+
     def check(self, sender: str, seq: int, ts_ms: int, now_ms: int) -> str | None:
         """None if acceptable (the seq is then recorded), else "stale" or "replayed"."""
-        if now_ms - ts_ms > self.freshness_ms:
+        if now_ms - ts_ms > self.freshness_ms or ts_ms < self.life_start_ms:
             return "stale"
         state = self._senders.get(sender)
         if state is None:

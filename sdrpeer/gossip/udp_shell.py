@@ -6,9 +6,12 @@ encoded and sent, its events are passed to `on_event`, and a single `call_at` ti
 at the core's next deadline. A datagram that fails authentication or parsing is dropped and
 counted by reason, with at most one log line per reason every ten seconds: a hostile peer can
 cost us a few microseconds per datagram, never a crash or a stall. An authenticated datagram
-refused as stale comes from a robot whose clock is behind the cluster time (sdrpeer.gossip.wire): it
-gets an empty gossip back, at most every 5 s per address, so it catches up even when nobody
-else talks to it (a robot joining with a wrong clock).
+refused as stale and newer than anything its sender sent us before comes from a robot whose
+clock is behind the cluster time (sdrpeer.gossip.wire): it gets an empty gossip back, addressed
+to it, at most every 5 s per sender, so it catches up even when nobody else talks to it (a robot
+joining with a wrong clock). A replay of recorded traffic is never newer than what followed it
+and is not answered; the per-sender limit bounds what one replayed sender costs, whatever
+source addresses the replays are sent from.
 """
 
 from __future__ import annotations
@@ -59,7 +62,8 @@ class GossipShell(asyncio.DatagramProtocol):
         ("vitals"), and piggybacked updates sent per kind ("updates.record", ...): where the
         traffic goes (`GET /v1/agent`)."""
         self._logged: dict[str, float] = {}
-        self._nudged: dict[Addr, float] = {}
+        self._nudged: dict[str, float] = {}
+        """Sender name -> when we last nudged it."""
 
     # asyncio.DatagramProtocol
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -76,7 +80,7 @@ class GossipShell(asyncio.DatagramProtocol):
             packet = self.codec.decode(data, self._wall())
         except WireError as e:
             if e.sender_behind:
-                self._nudge(addr)
+                self._nudge(addr, e.sender)
             self._rejected(e, addr)
             return
         src: Addr = (str(addr[0]), int(addr[1]))
@@ -178,21 +182,22 @@ class GossipShell(asyncio.DatagramProtocol):
             self.core.handle_timer(self._loop.time())
             self.flush()
 
-    def _nudge(self, addr: tuple[str | int, ...]) -> None:
-        """An authenticated sender whose clock is behind the cluster's: send it an empty gossip
-        (it adopts our time from its timestamp), at most once per `_NUDGE_EVERY` per address."""
+    def _nudge(self, addr: tuple[str | int, ...], sender: str) -> None:
+        """`sender`, authenticated, has a clock behind the cluster's: send it an empty gossip at
+        `addr` (it adopts our time from its timestamp), at most once per `_NUDGE_EVERY` per
+        sender name, wherever it claims to be."""
         now = self._loop.time()
         dest: Addr = (str(addr[0]), int(addr[1]))
-        if now - self._nudged.get(dest, float("-inf")) < _NUDGE_EVERY:
+        if now - self._nudged.get(sender, float("-inf")) < _NUDGE_EVERY:
             return
         if len(self._nudged) >= _NUDGE_MAX:
             self._nudged.clear()
-        self._nudged[dest] = now
+        self._nudged[sender] = now
         transport = self._transport
         if transport is None or transport.is_closing():
             return
         try:
-            data = self.codec.encode(Gossip(self.codec.sender), self._wall())
+            data = self.codec.encode(Gossip(self.codec.sender, (), sender), self._wall())
         except Exception:  # a nudge is a courtesy: it never stops the shell
             self.counters["encode_errors"] += 1
             return

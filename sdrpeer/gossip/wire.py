@@ -2,18 +2,28 @@
 
 How it works
 ------------
-A datagram is a fixed 19-byte header, then the msgpack body encrypted with AES-256-GCM and its
-16-byte tag (35 bytes in all besides the body; the HMAC of protocol 2 took 39)::
+A datagram is a fixed 23-byte header, then the msgpack body encrypted with AES-256-GCM and its
+16-byte tag (39 bytes in all besides the body)::
 
-    b"SP" | version (1) | key id (4) | nonce (12) | AES-GCM(body) | tag (16)
+    b"SP" | version (1) | key id (4) | nonce (12) | receiver id (4) | AES-GCM(body) | tag (16)
 
 - *version* is `PROTOCOL_VERSION`; any other value is dropped as "version".
 - *key id* is the first 4 bytes of sha256(key) of the cluster key that sealed; all zeros when
   not sealed (`--insecure`: then the body follows the header in clear, without a tag).
 - *nonce* is the codec's 4 random bytes (drawn when it is made) and the datagram's 8-byte seq:
   unique per datagram under one key without coordination (seqs only rise, also across
-  restarts). The header is the additional authenticated data: version, key id and nonce cannot
-  be altered either. Nothing of the body — names, metrics, plans — is readable without the key.
+  restarts).
+- *receiver id* names the robot the datagram is addressed to (the packet's `to`) by a keyed
+  pseudonym (`Keyring.receiver_ids`: BLAKE2b of its name under a key derived from the cluster
+  key), or is all zeros for a datagram to whoever listens at an address (a seed joined by
+  address, whose name the sender does not know yet). A receiver drops a datagram bound to
+  another robot as "wrong_receiver" before any decryption. The associated data of the AEAD is
+  the header *and the receiver's name* (nothing for an unbound datagram): a datagram captured on
+  its way to one robot and replayed to another does not open there, even if two robots'
+  pseudonyms collided, and no header byte can be altered either. Nothing of the body — names,
+  metrics, plans — is readable without the key; the pseudonym only tells which datagrams go to
+  the same robot, as their destination address does. In clear (`--insecure`) the receiver id
+  only says bound (all 0xff) or not (zeros): nothing is authenticated there anyway.
 - *body* is a short *stream* of msgpack arrays, not one nested array:
   the head ``[tag, sender, seq, ts_ms, *fields]``, then (Sync only) one array per entry, then
   one array per piggybacked update ``[utag, *fields]``. A ping's head may end with the sender's
@@ -22,15 +32,18 @@ A datagram is a fixed 19-byte header, then the msgpack body encrypted with AES-2
   preallocate megabytes of nested lists; and a packet's size is exactly its head plus the sum of
   `encoded_size(u)` of its updates.
 
-Checks on receive, cheapest and safest first: size, magic, version, key id + tag (the body is
-decrypted and authenticated before it is parsed), body (every field type-checked), then freshness
-(ts no older than the window before the cluster time, below) and replay (per-sender sliding window
-of the last `REPLAY_WINDOW` seqs, as in IPsec).
+Checks on receive, cheapest and safest first: size, magic, version, key id, receiver id (ours or
+none), tag (the body is decrypted and authenticated before it is parsed), body (every field
+type-checked), then freshness (ts no older than the window before the cluster time, nor than
+this robot's life: `begin_life`) and replay (per-sender sliding window of the last
+`REPLAY_WINDOW` seqs, as in IPsec; the windows are this robot's own and this life's, which is
+why a datagram must be bound to its receiver, and why one sent before this life is stale).
 
 Time: timestamps are in cluster time (`replay.ClusterClock`: the wall clock plus an offset that
 only grows to the newest authenticated timestamp accepted), so robots need no common clock;
-`WireError.sender_behind` tells the shell when an authenticated datagram was stale (its sender is
-behind).
+`WireError.sender_behind` tells the shell when an authenticated datagram was stale and newer than
+anything its sender sent us before (its sender is behind; a replay of recorded traffic is never
+newer than what followed it, so it is not answered).
 
 A failure raises `WireError(reason)` and is counted in `Codec.counters[reason]`; nothing else
 escapes `decode`.
@@ -77,7 +90,9 @@ from sdrpeer.keys.keyring import (
     INSECURE_KEY_ID,
     KEY_ID_SIZE,
     MIN_KEY_SIZE,
+    NO_RECEIVER,
     NONCE_SIZE,
+    RECEIVER_ID_SIZE,
     TAG_SIZE,
     Keyring,
     format_key,
@@ -107,14 +122,15 @@ __all__ = [  # the keyring and replay guard live in their own modules; re-export
     "parse_key",
 ]
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 """Bumped on any incompatible change of the header or body layout (2: digests, vitals on pings,
-format-2 records; 3: AES-GCM instead of an HMAC, format-3 records)."""
+format-2 records; 3: AES-GCM instead of an HMAC, format-3 records; 4: datagrams bound to their
+receiver)."""
 MAGIC = b"SP"
-HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + NONCE_SIZE
-"""Bytes the envelope adds before the body (19)."""
+HEADER_SIZE = len(MAGIC) + 1 + KEY_ID_SIZE + NONCE_SIZE + RECEIVER_ID_SIZE
+"""Bytes the envelope adds before the body (23)."""
 OVERHEAD = HEADER_SIZE + TAG_SIZE
-"""Bytes a sealed datagram adds to its body (35; `GossipConfig.packet_overhead` budgets 48)."""
+"""Bytes a sealed datagram adds to its body (39; `GossipConfig.packet_overhead` budgets 48)."""
 MAX_FIELDS = 32
 """Largest msgpack array or map accepted anywhere in a body (a head has at most 8 fields)."""
 MAX_NAME = 255
@@ -126,6 +142,7 @@ REASONS = (
     "version",
     "unauthenticated",
     "unknown_key",
+    "wrong_receiver",
     "stale",
     "replayed",
 )
@@ -147,7 +164,10 @@ _PACKER = msgpack.Packer(use_bin_type=True)
 _pack = _PACKER.pack
 _SEQ_MASK = (1 << 64) - 1
 _KID = slice(len(MAGIC) + 1, len(MAGIC) + 1 + KEY_ID_SIZE)
-_NONCE = slice(_KID.stop, HEADER_SIZE)
+_NONCE = slice(_KID.stop, _KID.stop + NONCE_SIZE)
+_TO = slice(_NONCE.stop, HEADER_SIZE)
+_BOUND_IN_CLEAR = b"\xff" * RECEIVER_ID_SIZE
+"""The receiver id of a bound datagram in clear (`--insecure`: no key to name the receiver)."""
 
 
 def encode_update(u: Update) -> list[object]:
@@ -313,8 +333,10 @@ def _new_unpacker(max_size: int) -> msgpack.Unpacker:
     )
 
 
-def _parse_body(unpacker: msgpack.Unpacker, body: bytes) -> tuple[Packet, int, int, int]:
-    """(packet, seq, ts_ms, unknown updates skipped) from a body in clear.
+def _parse_body(
+    unpacker: msgpack.Unpacker, body: bytes, to: str = ""
+) -> tuple[Packet, int, int, int]:
+    """(packet, seq, ts_ms, unknown updates skipped) from a body in clear, addressed `to`.
 
     `unpacker` must be empty; it is empty again on success (on failure, throw it away).
     """
@@ -363,20 +385,21 @@ def _parse_body(unpacker: msgpack.Unpacker, body: bytes) -> tuple[Packet, int, i
             _addr(head[6]),
             _bool(head[7], "want_nack"),
             ups,
+            to,
         )
     elif tag == T_ACK:
-        packet = Ack(sender, _uint(head[4], "probe seq"), ups)
+        packet = Ack(sender, _uint(head[4], "probe seq"), ups, to)
     elif tag == T_NACK:
-        packet = Nack(sender, _uint(head[4], "probe seq"), ups)
+        packet = Nack(sender, _uint(head[4], "probe seq"), ups, to)
     elif tag == T_GOSSIP:
-        packet = Gossip(sender, ups)
+        packet = Gossip(sender, ups, to)
     elif tag == T_DIGEST:
         digest = _uint(head[4], "digest")
         if digest > _DIGEST_MAX:
             raise _bad("digest", digest)
-        packet = Digest(sender, digest, _uint(head[5], "count"), ups)
+        packet = Digest(sender, digest, _uint(head[5], "count"), ups, to)
     else:
-        packet = Sync(sender, _bool(head[4], "reply"), entries, ups)
+        packet = Sync(sender, _bool(head[4], "reply"), entries, ups, to)
     return packet, seq, ts_ms, unknown
 
 
@@ -425,13 +448,22 @@ class Codec:
         """Whether datagrams are signed and verified."""
         return self.keyring is not None
 
-    def reject(self, reason: str, detail: str = "", *, sender_behind: bool = False) -> WireError:
+    def begin_life(self, now_wall: float) -> None:
+        """This robot's life begins at `now_wall` (call it once the cluster-time offset is
+        loaded): a datagram stamped earlier was sent to an earlier life of this robot, whose
+        replay windows are gone, and is refused as stale from now on."""
+        self.guard.life_start_ms = self.clock.now_ms(now_wall)
+
+    def reject(
+        self, reason: str, detail: str = "", *, sender_behind: bool = False, sender: str = ""
+    ) -> WireError:
         """Count a rejection under `reason` and return the error to raise."""
         self.counters[reason] += 1
-        return WireError(reason, detail, sender_behind=sender_behind)
+        return WireError(reason, detail, sender_behind=sender_behind, sender=sender)
 
     def encode(self, packet: Packet, now_wall: float) -> bytes:
-        """The datagram carrying `packet`, with the next seq and `now_wall` as its timestamp."""
+        """The datagram carrying `packet`, with the next seq and `now_wall` as its timestamp,
+        bound to its receiver `packet.to` (none when "")."""
         if packet.sender != self.sender:
             raise ValueError(f"codec of {self.sender!r} cannot send as {packet.sender!r}")
         seq = int(now_wall * 1e6) if self._seq is None else self._seq
@@ -444,11 +476,19 @@ class Codec:
                 f"{type(packet).__name__} of {len(body) + OVERHEAD} bytes > {self.max_datagram}",
             )
         self.counters["sent"] += 1
+        return self.seal(body, packet.to, seq)
+
+    def seal(self, body: bytes, to: str, seq: int) -> bytes:
+        """The datagram around `body` (a packet body in clear) bound to receiver `to` ("": to
+        whoever listens at the address), its nonce made of `seq` (`encode` uses it; tools/fuzz.py
+        seals mutated bodies with it)."""
         if self.keyring is None:
-            return self._insecure_header + body
+            rid = _BOUND_IN_CLEAR if to else NO_RECEIVER
+            return self._insecure_header[: _TO.start] + rid + body
         nonce = self._nonce_prefix + (seq & _SEQ_MASK).to_bytes(8, "big")
-        header = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0] + nonce
-        return header + self.keyring.seal(nonce, body, header)
+        rid = self.keyring.receiver_ids(to)[0] if to else NO_RECEIVER
+        header = MAGIC + bytes([PROTOCOL_VERSION]) + self.keyring.key_ids[0] + nonce + rid
+        return header + self.keyring.seal(nonce, body, header + to.encode())
 
     def decode(self, data: bytes | bytearray | memoryview, now_wall: float) -> Packet:
         """The packet in datagram `data`, received at `now_wall`; else WireError (counted)."""
@@ -462,9 +502,12 @@ class Codec:
         if data[2] != PROTOCOL_VERSION:
             raise self.reject("version", f"protocol version {data[2]}, {PROTOCOL_VERSION} known")
         kid = data[_KID]
+        to = self.sender
         if self.keyring is None:
             if kid != INSECURE_KEY_ID:
                 raise self.reject("unknown_key", f"sealed under key id {kid.hex()}: no key here")
+            if data[_TO] == NO_RECEIVER:
+                to = ""  # else bound to a robot a clear datagram cannot name: taken as us
             body = data[HEADER_SIZE:]
         else:
             if kid == INSECURE_KEY_ID:
@@ -473,12 +516,18 @@ class Codec:
                 raise self.reject("unknown_key", f"key id {kid.hex()}")
             if size < OVERHEAD:
                 raise self.reject("malformed", "shorter than a tag")
-            opened = self.keyring.open(kid, data[_NONCE], data[HEADER_SIZE:], data[:HEADER_SIZE])
+            rid = data[_TO]
+            if rid == NO_RECEIVER:
+                to = ""  # to whoever listens at our address: a join by address
+            elif rid not in self.keyring.receiver_ids(to, kid):
+                raise self.reject("wrong_receiver", f"receiver id {rid.hex()}: not ours")
+            header = data[:HEADER_SIZE]
+            opened = self.keyring.open(kid, data[_NONCE], data[HEADER_SIZE:], header + to.encode())
             if opened is None:
                 raise self.reject("unauthenticated", f"bad tag under key id {kid.hex()}")
             body = opened
         try:
-            packet, seq, ts_ms, unknown = _parse_body(self._unpacker, body)
+            packet, seq, ts_ms, unknown = _parse_body(self._unpacker, body, to)
         except BaseException as e:
             self._unpacker = _new_unpacker(self.max_datagram)  # it may hold half a body
             if isinstance(e, WireError):
@@ -492,9 +541,10 @@ class Codec:
             raise self.reject("stale", f"from {packet.sender!r}: ts {ts_ms} ms in the future")
         reason = self.guard.check(packet.sender, seq, ts_ms, cluster_ms)
         if reason is not None:
-            behind = reason == "stale" and secure
+            # Stale and newer than all its sender sent us: its clock is behind, not a replay.
+            behind = reason == "stale" and secure and self.guard.newer(packet.sender, seq)
             detail = f"from {packet.sender!r}, seq {seq}, ts {ts_ms} ms"
-            raise self.reject(reason, detail, sender_behind=behind)
+            raise self.reject(reason, detail, sender_behind=behind, sender=packet.sender)
         if secure and self.clock.observe(ts_ms, cluster_ms):
             self.counters["clock_advanced"] += 1
         self.counters["accepted"] += 1

@@ -3,6 +3,9 @@
 How it works: a cluster key (keyring.py) is never used as it is; each use gets its own key, one
 way, so no secret of one use opens another:
 - `gossip_key`: the AES-256-GCM key gossip datagrams are sealed with (HKDF-SHA256, `GOSSIP_INFO`);
+- `receiver_key`: what the receiver id in a gossip datagram's header is computed with (a keyed
+  BLAKE2b of the receiving robot's name; HKDF-SHA256, `RECEIVER_INFO`), so the header names the
+  receiver by a pseudonym only the fleet can compute;
 - `peer_token(s)`: the bearer token agents present to each other's API (HMAC-SHA256 of a fixed
   label): one per key of the ring is accepted, so a key rotation needs no restart. Without a key
   (`--insecure`) no robot shares a secret: an agent accepts no peer token and presents a random
@@ -32,11 +35,13 @@ __all__ = [
     "gossip_key",
     "peer_token",
     "peer_tokens",
+    "receiver_key",
     "stream_keys",
     "transport_key",
 ]
 
 GOSSIP_INFO: Final = b"sdrpeer gossip aes-256-gcm v1"
+RECEIVER_INFO: Final = b"sdrpeer gossip receiver id v1"
 _PEER_LABEL: Final = b"sdrpeer peer api v1"
 _DATA_PERSON: Final = b"sdrpeer-data-v1"
 _STREAM_INFO: Final = b"sdrpeer data stream aes-256-gcm v1"
@@ -68,6 +73,11 @@ def _hkdf(key: bytes, length: int, salt: bytes | None, info: bytes) -> bytes:
 def gossip_key(cluster_key: bytes) -> bytes:
     """The AES-256-GCM key gossip is sealed with under `cluster_key`."""
     return _hkdf(cluster_key, 32, None, GOSSIP_INFO)
+
+
+def receiver_key(cluster_key: bytes) -> bytes:
+    """The BLAKE2b key gossip receiver ids are computed with under `cluster_key`."""
+    return _hkdf(cluster_key, 32, None, RECEIVER_INFO)
 
 
 def transport_key(cluster_key: bytes) -> bytes:

@@ -5,12 +5,13 @@ How it works: a key is at least 16 random bytes, identified on the wire by the f
 its SHA-256 (the key id). Gossip is sealed with AES-256-GCM (authenticated encryption, as Serf
 does), under a key derived from each cluster key with HKDF-SHA256 (`GOSSIP_INFO`), from the
 `cryptography` package: `Keyring.seal` uses the first key, `Keyring.open` looks the key up by id
-(two keys whose ids collide are both tried). Rotation: add the new key second everywhere (both
-open), move it first everywhere (it seals, the old one still opens), then remove the old
-(`with_key`, `with_primary`, `without` make each step's ring; `sdrpeer key add|primary|retire`
-spreads one to the fleet, sdrpeer.agent.keyadmin). Key files hold one key a line, hex or base64
-(a `hex:`/`base64:` prefix says which), `#` comments. `cryptography` is imported only when a
-keyring first seals or opens.
+(two keys whose ids collide are both tried); `Keyring.receiver_ids` names the robot a datagram
+is addressed to by a keyed pseudonym (sdrpeer.gossip.wire binds datagrams to it). Rotation: add
+the new key second everywhere (both open), move it first everywhere (it seals, the old one still
+opens), then remove the old (`with_key`, `with_primary`, `without` make each step's ring;
+`sdrpeer key add|primary|retire` spreads one to the fleet, sdrpeer.agent.keyadmin). Key files
+hold one key a line, hex or base64 (a `hex:`/`base64:` prefix says which), `#` comments.
+`cryptography` is imported only when a keyring first seals or opens.
 """
 
 from __future__ import annotations
@@ -25,9 +26,14 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.errors import ConfigError
-from sdrpeer.keys.derive import gossip_key
+from sdrpeer.keys.derive import gossip_key, receiver_key
 
 KEY_ID_SIZE = 4
+RECEIVER_ID_SIZE = 4
+"""Bytes of a receiver id: the keyed pseudonym of the robot a gossip datagram is addressed to."""
+NO_RECEIVER = b"\0" * RECEIVER_ID_SIZE
+"""The receiver id of a datagram addressed to whoever listens at an address (a seed)."""
+_RECEIVER_CACHE = 4096
 NONCE_SIZE = 12
 """AES-GCM's nonce: unique per datagram under one key (the codec makes it; see
 sdrpeer.gossip.wire)."""
@@ -86,6 +92,8 @@ class Keyring:
             raise ConfigError("keyring: a key has the all-zero key id of unsigned datagrams")
         self._aeads: dict[bytes, list[Any]] | None = None
         """Key id -> the AES-GCM ciphers of the keys with that id (built on first use)."""
+        self._receiver_keys: dict[bytes, list[bytes]] | None = None
+        self._receiver_ids: dict[tuple[bytes, str], tuple[bytes, ...]] = {}
 
     @property
     def signing_key(self) -> bytes:
@@ -141,6 +149,29 @@ class Keyring:
                 continue
             return data
         return None
+
+    def receiver_ids(self, name: str, kid: bytes | None = None) -> tuple[bytes, ...]:
+        """The receiver ids of robot `name` under the keys with id `kid` (default: the sealing
+        key; one id unless two keys' ids collide): a keyed BLAKE2b of the name, never all
+        zeros (`NO_RECEIVER`), and empty for a key id the ring does not hold."""
+        kid = self._ids[0] if kid is None else kid
+        cached = self._receiver_ids.get((kid, name))
+        if cached is not None:
+            return cached
+        if self._receiver_keys is None:
+            rkeys: dict[bytes, list[bytes]] = {}
+            for i, key in zip(self._ids, self._keys, strict=True):
+                rkeys.setdefault(i, []).append(receiver_key(key))
+            self._receiver_keys = rkeys
+        ids = tuple(
+            hashlib.blake2b(name.encode(), key=k, digest_size=RECEIVER_ID_SIZE).digest()
+            for k in self._receiver_keys.get(kid, ())
+        )
+        ids = tuple(NO_RECEIVER[:-1] + b"\1" if r == NO_RECEIVER else r for r in ids)
+        if len(self._receiver_ids) >= _RECEIVER_CACHE:
+            self._receiver_ids.clear()  # a flood of names cannot grow it without bound
+        self._receiver_ids[(kid, name)] = ids
+        return ids
 
     def find(self, kid: bytes) -> bytes | None:
         """The first key of the ring with id `kid`, or None."""

@@ -1,1 +1,2 @@
-"""The network-namespace lab: each robot in its own namespace on a private bridge (root)."""
+"""The network lab: each robot in its own namespace on a private bridge (root), and a packet
+capture on an interface (`capture`: what an eavesdropper reads and could replay)."""
