@@ -446,3 +446,36 @@ def test_a_bad_component_name_is_reported_once(profiles: Path) -> None:
 def test_empty_file(text: str) -> None:
     with pytest.raises(SystemFileError, match=r"^sys\.yaml(:1)?: expected a mapping with version"):
         parse_system(text, "sys.yaml")
+
+
+LONG = "N" * 200_224
+"""A 200 kB name, as in issue 30."""
+CUT = f"'{'N' * 60}'... (200,224 characters)"
+"""How every error message shows it: its first 60 characters and its length."""
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            f"name: s\ncomponents:\n  - {{name: {LONG}, target: {CAM}}}\n",
+            "sys.yaml:3: field 'components[0].name': expected a name of [A-Za-z0-9_.-] (1-128), "
+            f"got {CUT}",
+        ),
+        (
+            HEAD + f"connections:\n  - {{from: {LONG}.out, to: D.image}}\n",
+            f"sys.yaml:6: field 'connections[0].from': no component {CUT} (known: C, D)",
+        ),
+        (  # YAML keys stop at 1024 characters
+            HEAD + f"{'K' * 1000}: 1\n",
+            f"sys.yaml:5: field '{'K' * 60}'... (1,000 characters): unknown field",
+        ),
+    ],
+    ids=["component name", "connection end", "unknown key"],
+)
+def test_an_error_about_a_huge_value_shows_its_start_and_length(text: str, message: str) -> None:
+    with pytest.raises(SystemFileError) as info:
+        parse_system(text, "sys.yaml")
+    assert message in str(info.value)
+    assert all(len(p) < 300 for p in info.value.problems)
+    assert len(str(info.value)) < 600

@@ -17,7 +17,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -333,6 +333,22 @@ def _prepare(options: UpOptions) -> Lab:
     return Lab(robots=robots, key_file=str(key_file))
 
 
+def _check_scenario(path: Path | None, lab: Lab) -> None:
+    """Refuse a scenario that this lab's robots cannot play before any agent starts: a step for
+    a robot the lab does not have (ScenarioError naming file, line and robot), a ramp or move
+    with nothing to start from. Each agent alone knows only its own robot, and would skip the
+    others' steps without a word."""
+    if path is None:
+        return
+    from sdrpeer.monitor.scenario import Scenario  # noqa: PLC0415 - YAML: only with a scenario
+    from sdrpeer.monitor.virtual import RobotFile  # noqa: PLC0415
+
+    files = [
+        replace(RobotFile.load(Path(r.data_dir) / "robot.yaml"), name=r.name) for r in lab.robots
+    ]
+    Scenario.load(path, robots=files)
+
+
 def _check_launchers(names: tuple[str, ...]) -> None:
     """Refuse an unknown launcher name before any agent starts (each agent would refuse it)."""
     if not names:
@@ -355,6 +371,7 @@ def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> Running
         raise SdrpeerError("--discover needs --netns: loopback carries no multicast")
     _check_launchers(options.allow_launchers)
     lab = _prepare(options)
+    _check_scenario(options.scenario, lab)
     running = RunningLab(options.lab_dir, lab, options=options)
     deadline = time.monotonic() + options.timeout
     try:
