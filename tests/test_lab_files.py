@@ -29,7 +29,7 @@ from sdrpeer.lab.files import (
 from sdrpeer.lab.procs import is_agent_process, lab_down, lab_status, running_pids
 from sdrpeer.lab.up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
-from tests.realnet import lab_survivors
+from tests.realnet import kill_all, lab_survivors
 from tests.wait import until
 
 # A stand-in whose command line looks like `python -m sdrpeer agent --data-dir D`.
@@ -266,7 +266,4 @@ def test_down_stops_what_the_lab_spawned_but_never_recorded(tmp_path: Path) -> N
         )
         assert lab_survivors(lab_dir) == []
     finally:
-        for proc in procs:
-            if proc.poll() is None:
-                proc.kill()
-            proc.wait()
+        kill_all(procs)

@@ -90,7 +90,8 @@ def lab_lock(lab_dir: Path, timeout: float | None = None) -> Iterator[bool]:
         os.close(fd)  # closing the descriptor releases the lock
 
 
-def _is_agent_cmdline(cmdline: list[str]) -> bool:
+def is_agent_command(cmdline: list[str]) -> bool:
+    """Whether a command line runs `sdrpeer agent` (`python -m sdrpeer agent`, `sdrpeer agent`)."""
     return any(a.endswith("sdrpeer") and b == "agent" for a, b in itertools.pairwise(cmdline))
 
 
@@ -116,7 +117,7 @@ def is_agent_process(pid: int, robot: LabRobot) -> bool:
         return False
     if robot.started is not None and abs(started - robot.started) > STARTED_SLACK:
         return False
-    return _is_agent_cmdline(cmdline) and os.path.realpath(robot.data_dir) in _data_dirs(cmdline)
+    return is_agent_command(cmdline) and os.path.realpath(robot.data_dir) in _data_dirs(cmdline)
 
 
 def running_pids(lab: Lab) -> dict[str, int]:
@@ -140,7 +141,7 @@ def lab_processes(lab_dir: Path) -> list[psutil.Process]:
             if proc.status() == psutil.STATUS_ZOMBIE:
                 continue
             cmdline = proc.cmdline()
-            ours = _is_agent_cmdline(cmdline) and any(
+            ours = is_agent_command(cmdline) and any(
                 d.startswith(inside) for d in _data_dirs(cmdline)
             )
             if not ours:
@@ -221,7 +222,7 @@ def _describe(proc: psutil.Process, lab: Lab) -> str:
         return "a process (gone)"
     dirs = _data_dirs(cmdline)
     for robot in lab.robots:
-        if _is_agent_cmdline(cmdline) and os.path.realpath(robot.data_dir) in dirs:
+        if is_agent_command(cmdline) and os.path.realpath(robot.data_dir) in dirs:
             return robot.name
     return f"a process ({Path(cmdline[0]).name if cmdline else '?'})"
 
