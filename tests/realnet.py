@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import re
 import shutil
 import signal
 import socket
@@ -389,28 +388,6 @@ def kill_all(procs: Iterable[subprocess.Popen[Any]]) -> None:
         if proc.poll() is None:
             proc.kill()
         proc.wait()
-
-
-def lab_survivors(lab_dir: Path) -> list[str]:
-    """Every live process (this one excepted) whose command line or environment names `lab_dir`
-    or a path inside it: what a lab left behind. One line each, its pid and command line. Read
-    from /proc, whatever the lab's own code records or marks."""
-    mark = os.path.realpath(lab_dir).encode()
-    names_it = re.compile(re.escape(mark) + rb"(?:/|\x00|$)")
-    found = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit() or int(entry.name) == os.getpid():
-            continue
-        try:
-            cmdline = (entry / "cmdline").read_bytes()
-            environ = (entry / "environ").read_bytes()
-            state = (entry / "stat").read_bytes().rpartition(b")")[2].split()[0]
-        except (OSError, IndexError):
-            continue  # gone meanwhile, or not ours to read
-        if state != b"Z" and (names_it.search(cmdline) or names_it.search(environ)):
-            shown = cmdline.replace(b"\x00", b" ").decode(errors="replace").strip()
-            found.append(f"{entry.name}: {shown}")
-    return found
 
 
 def send_udp(addr: tuple[str, int], *datagrams: bytes) -> None:

@@ -27,9 +27,10 @@ from sdrpeer.lab.files import (
     write_robot_file,
 )
 from sdrpeer.lab.procs import is_agent_process, lab_down, lab_status, running_pids
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
-from tests.realnet import kill_all, lab_survivors
+from tests.realnet import kill_all
 from tests.wait import until
 
 # A stand-in whose command line looks like `python -m sdrpeer agent --data-dir D`.

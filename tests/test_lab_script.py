@@ -15,10 +15,11 @@ import pytest
 
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.script import Conductor
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.monitor.scenario import Scenario, Step
-from tests.realnet import NETNS_ONLY, REPO, lab_survivors
+from tests.realnet import NETNS_ONLY, REPO
 from tests.wait import until
 
 pytestmark = pytest.mark.realnet

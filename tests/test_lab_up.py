@@ -18,9 +18,10 @@ from sdrpeer.cli.main import main
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError, SdrpeerError
 from sdrpeer.lab.files import lab_path, read_lab
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import UpOptions, start_lab
 from sdrpeer.netlab import net
-from tests.realnet import NETNS_ONLY, lab_survivors
+from tests.realnet import NETNS_ONLY
 from tests.wait import until
 
 FAKE_AGENT = Path(__file__).parent / "fake_agent"

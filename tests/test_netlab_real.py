@@ -14,9 +14,10 @@ import pytest
 
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
-from tests.realnet import NETNS_ONLY, lab_survivors
+from tests.realnet import NETNS_ONLY
 from tests.wait import until
 
 pytestmark = [pytest.mark.realnet, NETNS_ONLY]

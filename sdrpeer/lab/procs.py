@@ -23,6 +23,7 @@ import contextlib
 import fcntl
 import itertools
 import os
+import re
 import signal
 import time
 from collections.abc import Iterator, Mapping
@@ -161,6 +162,29 @@ def _parent(proc: psutil.Process) -> int | None:
         return int(proc.ppid())
     except psutil.Error:
         return None
+
+
+def processes_naming(path: Path) -> list[str]:
+    """Every live process (this one excepted) whose command line or environment names `path`
+    or a path inside it, one line each (its pid and command line). Read from /proc, whatever the
+    lab records or marks: the check that a lab left nothing behind (tests, tools/bench_lab_down.py),
+    independent of `lab_processes`, the scan `lab down` relies on."""
+    mark = os.path.realpath(path).encode()
+    names_it = re.compile(re.escape(mark) + rb"(?:/|\x00|$)")
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            cmdline = (entry / "cmdline").read_bytes()
+            environ = (entry / "environ").read_bytes()
+            state = (entry / "stat").read_bytes().rpartition(b")")[2].split()[0]
+        except (OSError, IndexError):
+            continue  # gone meanwhile, or not ours to read
+        if state != b"Z" and (names_it.search(cmdline) or names_it.search(environ)):
+            shown = cmdline.replace(b"\x00", b" ").decode(errors="replace").strip()
+            found.append(f"{entry.name}: {shown}")
+    return found
 
 
 def _kill_group(proc: psutil.Process) -> None:
