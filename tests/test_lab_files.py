@@ -26,7 +26,7 @@ from sdrpeer.lab.files import (
     write_lab,
     write_robot_file,
 )
-from sdrpeer.lab.procs import is_agent_process, lab_down, lab_status, running_pids
+from sdrpeer.lab.procs import is_agent_process, lab_down, lab_status, running_pids, start_time
 from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
@@ -268,3 +268,16 @@ def test_down_stops_what_the_lab_spawned_but_never_recorded(tmp_path: Path) -> N
         assert lab_survivors(lab_dir) == []
     finally:
         kill_all(procs)
+
+
+def test_a_recorded_start_time_tells_a_reused_pid_apart(
+    tmp_path: Path, spawn: list[subprocess.Popen[str]]
+) -> None:
+    entry = robot(tmp_path, "robot-1")
+    entry.pid = start_fake(spawn, entry.data_dir).pid
+    entry.started = start_time(entry.pid)
+    assert entry.started is not None
+    assert is_agent_process(entry.pid, entry)
+    entry.started -= 60.0  # lab.json's agent started a minute before this process did
+    assert not is_agent_process(entry.pid, entry)
+    assert running_pids(Lab(robots=[entry], key_file="k")) == {}
