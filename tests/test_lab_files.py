@@ -9,6 +9,7 @@ import stat
 import subprocess
 import sys
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -26,7 +27,15 @@ from sdrpeer.lab.files import (
     write_lab,
     write_robot_file,
 )
-from sdrpeer.lab.procs import is_agent_process, lab_down, lab_status, running_pids, start_time
+from sdrpeer.lab.procs import (
+    LOCK_FILE,
+    is_agent_process,
+    lab_down,
+    lab_lock,
+    lab_status,
+    running_pids,
+    start_time,
+)
 from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
@@ -281,3 +290,39 @@ def test_a_recorded_start_time_tells_a_reused_pid_apart(
     entry.started -= 60.0  # lab.json's agent started a minute before this process did
     assert not is_agent_process(entry.pid, entry)
     assert running_pids(Lab(robots=[entry], key_file="k")) == {}
+
+
+def lock_holders(path: Path) -> int:
+    """How many of this process's file descriptors are open on `path`."""
+    fds = Path("/proc/self/fd").iterdir()
+    return sum(1 for fd in fds if os.path.realpath(fd) == os.path.realpath(path))
+
+
+def test_down_waits_for_a_lab_up_still_spawning_then_stops_what_it_spawned(
+    tmp_path: Path,
+) -> None:
+    """`lab down` asked while `lab up` holds the lab's lock (it is spawning agents) waits for it,
+    so an agent spawned after down was asked is stopped too, not left behind."""
+    lab_dir = tmp_path / "lab"
+    entry = robot(lab_dir.resolve(), "robot-1")
+    Path(entry.data_dir).mkdir(parents=True)
+    running = RunningLab(lab_dir, Lab(robots=[entry], key_file="k"))
+    write_lab(lab_dir, running.lab)
+    agent = [sys.executable, "-c", FAKE_AGENT.format(setup=""), "-m", "sdrpeer", "agent"]
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            with lab_lock(lab_dir):  # as lab up holds it while it spawns
+                down = pool.submit(lab_down, lab_dir, grace=2)
+                until(  # its own descriptor of lab.lock open beside ours: it is waiting
+                    "lab down waiting for the lock",
+                    lambda: lock_holders(lab_dir / LOCK_FILE),
+                    lambda n: n == 2 and not down.done(),
+                    within=5,
+                    poll=0.02,
+                )
+                running.spawn(entry, [*agent, "--data-dir", entry.data_dir])
+            report = down.result(timeout=60)
+            assert report == [f"robot-1: pid {entry.pid} stopped"]
+            assert lab_survivors(lab_dir) == []
+        finally:
+            kill_all(running.procs.values())
