@@ -144,6 +144,12 @@ CASES: list[tuple[str, str, str]] = [
         "sys.yaml:5: field 'components[2].pin': expected a robot name",
     ),
     (
+        "pin longer than a robot name",
+        HEAD + f"  - {{name: E, target: {CAM}, pin: {'r' * 256}}}\n",
+        "sys.yaml:5: field 'components[2].pin': a robot name has at most 255 characters, got "
+        f"'{'r' * 60}'... (256 characters)",
+    ),
+    (
         "prefer twice",
         HEAD + f"  - {{name: E, target: {CAM}, prefer: [r1, r1]}}\n",
         "sys.yaml:5: field 'components[2].prefer': 'r1' is listed twice",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -249,3 +250,16 @@ def test_a_battery_in_no_known_form_is_refused_naming_the_field(written: object)
         r.set(100.0, {"battery": written, "rssi": "-60dBm"})
     assert r.sample(100.0).battery_pct == 100.0
     assert r.sample(100.0).rssi_dbm == -45.0  # all or nothing
+
+
+def test_a_robot_name_longer_than_the_gossip_wire_carries_is_refused() -> None:
+    long = "r" * 256
+    with pytest.raises(
+        ConfigError,
+        match=re.escape(
+            f"r.yaml:1: field 'name': a robot name has at most 255 characters, "
+            f"got '{'r' * 60}'... (256 characters)"
+        ),
+    ):
+        RobotFile.parse(f"name: {long}\nmemory: 1GB\n", "r.yaml")
+    assert RobotFile.parse(f"name: {'r' * 255}\nmemory: 1GB\n").name == "r" * 255

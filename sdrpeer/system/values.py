@@ -12,7 +12,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from sdrpeer.config import NAME_RE
+from sdrpeer.config import MAX_NAME, NAME_RE
+from sdrpeer.errors import shown
 from sdrpeer.units import parse_size
 
 MAX_RATE = 100e9
@@ -75,7 +76,9 @@ def integer(low: int, high: int) -> Callable[[object], int]:
 def robot_name(value: object) -> str:
     """A robot's name ([A-Za-z0-9_.-]+); robots are not known at load time, only the form is."""
     if not isinstance(value, str) or not NAME_RE.fullmatch(value):
-        raise ValueError(f"expected a robot name of [A-Za-z0-9_.-], got {value!r}")
+        raise ValueError(f"expected a robot name of [A-Za-z0-9_.-], got {shown(value)}")
+    if len(value) > MAX_NAME:
+        raise ValueError(f"a robot name has at most {MAX_NAME} characters, got {shown(value)}")
     return value
 
 
