@@ -21,7 +21,7 @@ from sdrpeer.lab.files import lab_path, read_lab
 from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import UpOptions, start_lab
 from sdrpeer.netlab import net
-from tests.realnet import NETNS_ONLY
+from tests.realnet import NETNS_ONLY, http
 from tests.wait import until
 
 FAKE_AGENT = Path(__file__).parent / "fake_agent"
@@ -159,9 +159,28 @@ def sdrpeer(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
 
 
+FOREIGN = {
+    "instances": [
+        {
+            "name": "Foreign",
+            "launcher": "exec",
+            "target": [sys.executable, str(Path(__file__).with_name("fake_host.py"))],
+        }
+    ]
+}
+"""An instance whose host is no Python SDK host: the control channel spoken by a script."""
+
+
+def instance_states(api: str) -> dict[str, str]:
+    """Instance name -> state on the agent at `api`."""
+    return {i["name"]: i["state"] for i in AgentClient(api).get("/v1/instances")}
+
+
 def test_lab_up_allow_launcher_reaches_every_agent(tmp_path: Path) -> None:
     """`lab up --allow-launcher exec` turns exec on in every agent of the lab (as `sdrpeer agent
-    --allow-launcher` does); without it they allow python only; an unknown name starts nothing."""
+    --allow-launcher` does), so a foreign host (tests/fake_host.py speaks the control channel
+    without the SDK) runs there; without it they allow python only and refuse it (403); an
+    unknown name starts nothing."""
     lab_dir = str(tmp_path / "lab")
     up = ["lab", "up", "--robots", "2", "--detach", "--preset", "fast_test", "--dir", lab_dir]
     refused = sdrpeer(*up, "--allow-launcher", "warp")
@@ -180,6 +199,21 @@ def test_lab_up_allow_launcher_reaches_every_agent(tmp_path: Path) -> None:
                 functools.partial(launchers_seen, str(lab.robots[0].api)),
                 expected.__eq__,
                 within=15,
+                poll=0.1,
+                retry=(ApiError,),
+            )
+            robot = lab.robots[0]
+            status, doc = http("POST", f"{robot.api}/v1/instances", FOREIGN, token=robot.token)
+            if "exec" not in launchers:
+                assert status == 403, doc
+                assert "launcher 'exec' is off on this robot" in doc["error"]
+                continue
+            assert status == 200, doc
+            until(
+                "the foreign host ACTIVE on robot-1",
+                functools.partial(instance_states, str(robot.api)),
+                lambda states: states.get("Foreign") == "ACTIVE",
+                within=30,
                 poll=0.1,
                 retry=(ApiError,),
             )
