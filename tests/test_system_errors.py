@@ -472,12 +472,22 @@ CUT = f"'{'N' * 60}'... (200,224 characters)"
             HEAD + f"connections:\n  - {{from: {LONG}.out, to: D.image}}\n",
             f"sys.yaml:6: field 'connections[0].from': no component {CUT} (known: C, D)",
         ),
+        (  # a long value with spaces (a map's repr): cut where it is echoed (errors.shown)
+            "name: s\ncomponents:\n  - {name: C, target: "
+            + CAM
+            + ", params: {big: {"
+            + ", ".join(f"k{i}: {i}" for i in range(100))
+            + "}}}\n",
+            "sys.yaml:3: field 'components[0].params.big': expected a string, number, boolean or "
+            "a list of them, got {'k0': 0, 'k1': 1, 'k2': 2, 'k3': 3, 'k4': 4, 'k5': 5, 'k6':... "
+            "(1,080 characters)",
+        ),
         (  # YAML keys stop at 1024 characters
             HEAD + f"{'K' * 1000}: 1\n",
             f"sys.yaml:5: field '{'K' * 60}'... (1,000 characters): unknown field",
         ),
     ],
-    ids=["component name", "connection end", "unknown key"],
+    ids=["component name", "connection end", "long map", "unknown key"],
 )
 def test_an_error_about_a_huge_value_shows_its_start_and_length(text: str, message: str) -> None:
     with pytest.raises(SystemFileError) as info:

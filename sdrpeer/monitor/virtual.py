@@ -76,7 +76,7 @@ def _coord(c: object) -> float:
 def parse_position(value: object) -> tuple[float, float]:
     """[x, y] in metres (numbers or distances such as 3m; negative coordinates allowed)."""
     if not isinstance(value, list | tuple) or len(value) != 2:
-        raise ValueError(f"expected a position such as [3, 4.5], got {value!r}")
+        raise ValueError(f"expected a position such as [3, 4.5], got {shown(value)}")
     return (_coord(value[0]), _coord(value[1]))
 
 
