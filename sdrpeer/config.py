@@ -15,11 +15,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sdrpeer.errors import ConfigError
+from sdrpeer.errors import ConfigError, shown
 from sdrpeer.launch.policy import DEFAULT_TARGETS, LaunchPolicy
 from sdrpeer.record.limits import check_int
 
 NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
+MAX_NAME = 255
+"""A robot name's most characters: the gossip wire carries no longer one (`sdrpeer.gossip.wire.
+MAX_NAME`, held equal by tests/test_config.py): an agent with a longer name would be refused by
+every peer."""
 PRESETS_SAID = {
     "lan": "robots on one Wi-Fi network: sub-2-second failure detection, tolerant of 30 % loss",
     "fast_test": "loopback tests: fast timers, short reaping; a busy machine makes it flap",
@@ -310,7 +314,9 @@ def _validate(values: dict[str, Any], origin: dict[str, str]) -> None:
     if not name:
         raise ConfigError("no robot name: pass --name NAME (or name: in the config file)")
     if not NAME_RE.fullmatch(name):
-        raise fail("name", f"{name!r} may only contain letters, digits, '_', '.' and '-'")
+        raise fail("name", f"{shown(name)} may only contain letters, digits, '_', '.' and '-'")
+    if len(name) > MAX_NAME:
+        raise fail("name", f"{shown(name)} is longer than {MAX_NAME} characters")
     for field in ("bind", "api"):
         if field in values:
             try:

@@ -27,15 +27,66 @@ SdrpeerError
 ├── ProfileError               a component could not be profiled
 └── ElectionError              the election core tried a move its table forbids
 ```
+
+A message echoes what it refuses, so a 200 kB name would make a 200 kB message: every
+SdrpeerError's message goes through `clip`, which cuts each quoted string or unbroken run of
+characters longer than SHOWN_LIMIT to its first SHOWN_HEAD characters and says how long it was
+(`got 'NNNN...N'... (200,224 characters)`); `shown(value)` is the same for one value (a repr),
+for messages that are not errors yet (a parser's ValueError, an API's 400).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
+
+SHOWN_LIMIT = 200
+"""The longest piece of input an error message shows whole (characters)."""
+SHOWN_HEAD = 60
+"""How much of a longer one it shows, followed by `... (N characters)`."""
+
+_QUOTED = re.compile(r"""(?<!\w)(?:'(?:[^'\\\n]|\\.)*'|"(?:[^"\\\n]|\\.)*")""")
+"""A quoted string as repr() writes it (an apostrophe inside a word opens none)."""
+_LONG_RUN = re.compile(rf"[^\s'\"]{{{SHOWN_LIMIT + 1},}}")
+"""A run of characters with no space or quote longer than SHOWN_LIMIT."""
+
+
+def _cut(text: str) -> str:
+    return f"{text[:SHOWN_HEAD]}... ({len(text):,} characters)"
+
+
+def shown(value: object) -> str:
+    """`repr(value)` for a message, or when longer than SHOWN_LIMIT characters its first
+    SHOWN_HEAD and its length: `'NNNN...N'... (200,224 characters)`."""
+    text = value if isinstance(value, str) else repr(value)
+    if len(text) <= SHOWN_LIMIT:
+        return repr(value)
+    if isinstance(value, str):
+        return f"{text[:SHOWN_HEAD]!r}... ({len(text):,} characters)"
+    return _cut(text)
+
+
+def clip(message: str) -> str:
+    """`message` with every quoted string, and every run without a space, longer than
+    SHOWN_LIMIT characters cut as `shown` cuts a value (short messages come back as they are)."""
+    if len(message) <= SHOWN_LIMIT:
+        return message
+
+    def quoted(match: re.Match[str]) -> str:
+        whole = match.group(0)
+        body = whole[1:-1]
+        if len(body) <= SHOWN_LIMIT:
+            return whole
+        return f"{whole[0]}{body[:SHOWN_HEAD]}{whole[0]}... ({len(body):,} characters)"
+
+    return _LONG_RUN.sub(lambda m: _cut(m.group(0)), _QUOTED.sub(quoted, message))
 
 
 class SdrpeerError(Exception):
-    """Base of every error sdrpeer raises on purpose."""
+    """Base of every error sdrpeer raises on purpose; its message is `clip`ped."""
+
+    def __init__(self, *args: object) -> None:
+        super().__init__(*(clip(a) if isinstance(a, str) else a for a in args))
 
 
 # --- configuration ----------------------------------------------------------------------------
@@ -62,7 +113,9 @@ class SystemFileError(ConfigError):
 
     def __init__(self, message: str, problems: Sequence[str] | None = None) -> None:
         super().__init__(message)
-        self.problems: list[str] = list(problems) if problems is not None else [message]
+        self.problems: list[str] = (
+            [clip(p) for p in problems] if problems is not None else [str(self)]
+        )
 
     @classmethod
     def collect(cls, name: str, problems: Sequence[str]) -> SystemFileError:

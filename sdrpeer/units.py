@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 import re
 
+from sdrpeer.errors import shown
+
 _NUMBER = r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?"
 _QUANTITY = re.compile(rf"^\s*({_NUMBER})\s*(\S*)\s*$")
 
@@ -73,7 +75,7 @@ def _parse(
     signed: bool,
 ) -> float:
     """Shared parser: number or `<number><unit>` -> value in the base unit."""
-    wrong = ValueError(f"expected {what} such as {example}, got {value!r}")
+    wrong = ValueError(f"expected {what} such as {example}, got {shown(value)}")
     if isinstance(value, bool):
         raise wrong
     if isinstance(value, int | float):

@@ -6,7 +6,8 @@ How it works: a `RealCluster` owns a temporary directory with one cluster key (g
 `start` waits for `agent.json` (the bound addresses); `wait_until` polls a condition every 0.1 s
 for at most 15 s by default and fails with a message that names what was awaited, the last value
 seen and the tail of every agent's log. `close` SIGKILLs whatever is still running, so a failed or
-interrupted test leaves no process behind.
+interrupted test leaves no process behind: every agent carries the cluster directory as its lab
+mark (`sdrpeer.lab.procs`), so one the list missed is found too.
 """
 
 from __future__ import annotations
@@ -26,9 +27,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+import psutil
 import pytest
 
 from sdrpeer.gossip.wire import Keyring, format_key
+from sdrpeer.lab.procs import lab_env, lab_processes
 from tests import wait
 
 REPO = Path(__file__).resolve().parents[1]
@@ -213,7 +216,7 @@ class RealCluster:
         for peer in join:
             command += ["--join", peer.gossip]
         command += flags
-        env = dict(os.environ)
+        env = lab_env(self.root, os.environ)  # marked: `close` finds whatever escaped the list
         env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH")) if p)
         env.pop("SDRPEER_API", None)
         env.pop("SDRPEER_TOKEN", None)
@@ -290,12 +293,18 @@ class RealCluster:
             ) from None
 
     def close(self) -> None:
-        """SIGKILL every agent that is still running and reap it."""
+        """SIGKILL every agent that is still running and reap it, then every other process
+        carrying the cluster's mark (one whose Popen never returned, a host it left)."""
         for agent in self.agents:
             if agent.proc.poll() is None:
                 _signal_group(agent.proc, signal.SIGKILL)
             with contextlib.suppress(subprocess.TimeoutExpired):
                 agent.proc.wait(timeout=5)
+        for proc in lab_processes(self.root):
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)  # each leads its own session
+            with contextlib.suppress(psutil.Error):
+                proc.kill()
 
     # ------------------------------------------------------------------ waiting
     def logs(self) -> str:
@@ -371,6 +380,14 @@ def _signal_group(proc: subprocess.Popen[bytes], sig: int) -> None:
         return
     with contextlib.suppress(ProcessLookupError):
         proc.send_signal(sig)
+
+
+def kill_all(procs: Iterable[subprocess.Popen[Any]]) -> None:
+    """SIGKILL each of `procs` still running and reap every one (a test's `finally`)."""
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
 
 
 def send_udp(addr: tuple[str, int], *datagrams: bytes) -> None:

@@ -292,3 +292,13 @@ async def test_metrics_families_types_and_values(
     assert samples("sdrpeer_members")[(("state", "suspect"),)] == 1.0
     assert samples("sdrpeer_health_score") == {(): 1.0}
     assert samples("sdrpeer_uptime_seconds") == {(): 12.0}
+
+
+async def test_a_400_about_huge_input_shows_its_start_and_length(
+    client: TestClient[web.Request, web.Application],
+) -> None:
+    response = await client.get("/v1/events?since=" + "x" * 5000)
+    assert response.status == 400
+    assert (await response.json())["error"] == (
+        f"since must be an integer, got '{'x' * 60}'... (5,000 characters)"
+    )

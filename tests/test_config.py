@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from sdrpeer.config import (
+    MAX_NAME,
     NO_KEY_MESSAGE,
     AgentConfig,
     build_config,
@@ -16,6 +17,7 @@ from sdrpeer.config import (
     parse_hostport,
 )
 from sdrpeer.errors import ConfigError
+from sdrpeer.gossip import wire
 from sdrpeer.launch.policy import LaunchPolicy
 
 
@@ -163,6 +165,10 @@ def test_missing_file(tmp_path: Path) -> None:
     [
         ({}, "no robot name: pass --name NAME (or name: in the config file)"),
         ({"name": "robot 1"}, "--name: name: 'robot 1' may only contain letters, digits"),
+        (  # the gossip wire carries at most 255 characters: peers would refuse every datagram
+            {"name": "r" * 256},
+            f"--name: name: '{'r' * 60}'... (256 characters) is longer than 255 characters",
+        ),
         ({"bind": "localhost"}, "--bind: bind: 'localhost' is not HOST:PORT (no port;"),
         ({"bind": "h:99999"}, "--bind: bind: 'h:99999': port must be in 0..65535"),
         ({"api": ":80"}, "--api: api: ':80' is not HOST:PORT (bad host ''"),
@@ -240,3 +246,8 @@ def test_parse_hostport(text: str, expected: tuple[str, int]) -> None:
 def test_parse_hostport_errors(text: str, message: str) -> None:
     with pytest.raises(ValueError, match=re.escape(message)):
         parse_hostport(text)
+
+
+def test_a_robot_name_may_be_as_long_as_the_gossip_wire_carries() -> None:
+    assert MAX_NAME == wire.MAX_NAME
+    assert build_config(None, {"name": "r" * MAX_NAME, "insecure": True}).name == "r" * MAX_NAME

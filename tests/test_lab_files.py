@@ -9,6 +9,7 @@ import stat
 import subprocess
 import sys
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -19,19 +20,27 @@ from sdrpeer.gossip.wire import Keyring
 from sdrpeer.lab.files import (
     Lab,
     LabRobot,
-    is_agent_process,
-    lab_down,
     lab_path,
-    lab_status,
     new_cluster_key,
     read_lab,
     robot_file_text,
-    running_pids,
     write_lab,
     write_robot_file,
 )
+from sdrpeer.lab.procs import (
+    LOCK_FILE,
+    is_agent_process,
+    lab_down,
+    lab_lock,
+    lab_status,
+    running_pids,
+    start_time,
+)
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import RunningLab, UpOptions, agent_command, log_tail, read_agent_json
 from sdrpeer.monitor.virtual import RobotFile
+from tests.realnet import kill_all
+from tests.wait import until
 
 # A stand-in whose command line looks like `python -m sdrpeer agent --data-dir D`.
 FAKE_AGENT = "import signal, sys, time\n{setup}\nprint('ready', flush=True)\ntime.sleep(60)\n"
@@ -81,6 +90,7 @@ def test_lab_json_round_trip_and_mode(tmp_path: Path) -> None:
                 "log": str(tmp_path / "robot-1" / "agent.log"),
                 "token": "tok-robot-1",
                 "pid": 42,
+                "started": None,
                 "api": "http://127.0.0.1:1234",
                 "gossip": None,
             }
@@ -163,25 +173,26 @@ def test_log_tail(tmp_path: Path) -> None:
 def test_down_with_stale_pids_signals_nothing(
     tmp_path: Path, spawn: list[subprocess.Popen[str]]
 ) -> None:
-    # A live process that is not this robot's agent (another data dir) must not be touched.
-    other = start_fake(spawn, str(tmp_path / "elsewhere"))
+    # A live process that is not this robot's agent (another lab's data dir) must not be touched.
+    other = start_fake(spawn, str(tmp_path / "elsewhere" / "robot-2"))
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()
+    lab_dir = tmp_path / "lab"
     robots = [
-        robot(tmp_path, "robot-1", pid=gone.pid),
-        robot(tmp_path, "robot-2", pid=other.pid),
-        robot(tmp_path, "robot-3", pid=None),
+        robot(lab_dir, "robot-1", pid=gone.pid),
+        robot(lab_dir, "robot-2", pid=other.pid),
+        robot(lab_dir, "robot-3", pid=None),
     ]
-    write_lab(tmp_path, Lab(robots=robots, key_file="k"))
+    write_lab(lab_dir, Lab(robots=robots, key_file="k"))
     assert running_pids(Lab(robots=robots, key_file="k")) == {}
-    report = lab_down(tmp_path, grace=0.5)
+    report = lab_down(lab_dir, grace=0.5)
     assert report == [
         f"robot-1: pid {gone.pid} is not running (stale)",
         f"robot-2: pid {other.pid} is not running (stale)",
         "robot-3: never started",
     ]
     assert other.poll() is None
-    assert not lab_path(tmp_path).exists()
+    assert not lab_path(lab_dir).exists()
 
 
 def test_down_stops_agents_and_kills_the_stubborn(
@@ -229,3 +240,89 @@ def test_watch_appends_frames_when_piped(tmp_path: Path) -> None:
     assert frames[0] == f"lab {tmp_path}: 1 robots, 0 of 2 s  (Ctrl-C to stop)\nno agent is running"
     assert frames[2].startswith(f"lab {tmp_path}: 1 robots, 2 of 2 s")
     assert "\x1b[" not in out.getvalue()
+
+
+def test_down_stops_what_the_lab_spawned_but_never_recorded(tmp_path: Path) -> None:
+    """`lab up` died between spawning an agent and writing its pid into lab.json (as a crash or
+    SIGKILL at that moment leaves it): `lab down` still stops it, and a process that carries
+    the lab's mark without looking like an agent (a host whose agent died) too."""
+    lab_dir = tmp_path / "lab"
+    entry = robot(lab_dir.resolve(), "robot-2")
+    Path(entry.data_dir).mkdir(parents=True)
+    running = RunningLab(lab_dir, Lab(robots=[entry], key_file="k"))
+    agent = [sys.executable, "-c", FAKE_AGENT.format(setup=""), "-m", "sdrpeer", "agent"]
+    running.spawn(entry, [*agent, "--data-dir", entry.data_dir])
+    marked_only = LabRobot("host", entry.data_dir, entry.log, "t")
+    running.spawn(marked_only, [sys.executable, "-c", "import time; time.sleep(60)"])
+    procs = list(running.procs.values())
+    try:
+        entry.pid = entry.started = None  # what lab.json held when `lab up` died
+        write_lab(lab_dir, Lab(robots=[entry], key_file="k"))
+        until(
+            "both processes started",
+            lambda: lab_survivors(lab_dir),
+            lambda found: len(found) == 2,
+            within=10,
+            poll=0.05,
+        )
+        report = lab_down(lab_dir, grace=2)
+        program = Path(sys.executable).name
+        assert report == sorted(
+            [
+                "robot-2: never started",
+                f"robot-2 (not in lab.json): pid {procs[0].pid} stopped",
+                f"a process ({program}) (not in lab.json): pid {procs[1].pid} stopped",
+            ]
+        )
+        assert lab_survivors(lab_dir) == []
+    finally:
+        kill_all(procs)
+
+
+def test_a_recorded_start_time_tells_a_reused_pid_apart(
+    tmp_path: Path, spawn: list[subprocess.Popen[str]]
+) -> None:
+    entry = robot(tmp_path, "robot-1")
+    entry.pid = start_fake(spawn, entry.data_dir).pid
+    entry.started = start_time(entry.pid)
+    assert entry.started is not None
+    assert is_agent_process(entry.pid, entry)
+    entry.started -= 60.0  # lab.json's agent started a minute before this process did
+    assert not is_agent_process(entry.pid, entry)
+    assert running_pids(Lab(robots=[entry], key_file="k")) == {}
+
+
+def lock_holders(path: Path) -> int:
+    """How many of this process's file descriptors are open on `path`."""
+    fds = Path("/proc/self/fd").iterdir()
+    return sum(1 for fd in fds if os.path.realpath(fd) == os.path.realpath(path))
+
+
+def test_down_waits_for_a_lab_up_still_spawning_then_stops_what_it_spawned(
+    tmp_path: Path,
+) -> None:
+    """`lab down` asked while `lab up` holds the lab's lock (it is spawning agents) waits for it,
+    so an agent spawned after down was asked is stopped too, not left behind."""
+    lab_dir = tmp_path / "lab"
+    entry = robot(lab_dir.resolve(), "robot-1")
+    Path(entry.data_dir).mkdir(parents=True)
+    running = RunningLab(lab_dir, Lab(robots=[entry], key_file="k"))
+    write_lab(lab_dir, running.lab)
+    agent = [sys.executable, "-c", FAKE_AGENT.format(setup=""), "-m", "sdrpeer", "agent"]
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            with lab_lock(lab_dir):  # as lab up holds it while it spawns
+                down = pool.submit(lab_down, lab_dir, grace=2)
+                until(  # its own descriptor of lab.lock open beside ours: it is waiting
+                    "lab down waiting for the lock",
+                    lambda: lock_holders(lab_dir / LOCK_FILE),
+                    lambda n: n == 2 and not down.done(),
+                    within=5,
+                    poll=0.02,
+                )
+                running.spawn(entry, [*agent, "--data-dir", entry.data_dir])
+            report = down.result(timeout=60)
+            assert report == [f"robot-1: pid {entry.pid} stopped"]
+            assert lab_survivors(lab_dir) == []
+        finally:
+            kill_all(running.procs.values())

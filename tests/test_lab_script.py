@@ -15,6 +15,7 @@ import pytest
 
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.script import Conductor
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.monitor.scenario import Scenario, Step
@@ -175,3 +176,29 @@ def test_lab_up_in_the_foreground_carries_out_the_steps(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert "robot-2: agent kill (pid" in done.stdout
     assert "SIGKILL, exit -9)" in done.stdout
+
+
+def test_lab_up_refuses_a_scenario_step_for_a_robot_it_does_not_have(tmp_path: Path) -> None:
+    """A `set` step for robot-9 in a 2-robot lab: no agent would ever run it (each knows only
+    its own robot), so `lab up` refuses the file, naming file, line and robot, and starts
+    nothing."""
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        "steps:\n  - {at: 1s, robot: robot-1, set: {battery: 50%}}\n"
+        "  - {at: 2s, robot: robot-9, set: {battery: 40%}}\n"
+    )
+    lab_dir = tmp_path / "lab"
+    done = sdrpeer(
+        "lab", "up", "--robots", "2", "--dir", str(lab_dir), "--scenario", str(scenario),
+        "--detach",
+    )  # fmt: skip
+    try:
+        assert done.returncode == 2  # a configuration error
+        assert done.stderr.strip() == (
+            f"error: {scenario}:3: field 'robot': unknown robot 'robot-9' (known: robot-1, robot-2)"
+        )
+        assert not (lab_dir / "lab.json").exists()  # nothing was started
+        assert lab_survivors(lab_dir) == []
+    finally:
+        if (lab_dir / "lab.json").exists():  # a lab that did start must not outlive the test
+            sdrpeer("lab", "down", "--dir", str(lab_dir))

@@ -1,6 +1,6 @@
 """The network-namespace lab for real (root): three agents each in its own namespace, a partition
 that kills and a heal that revives, packet loss the agents measure, a shaped link, and `lab down`
-leaving nothing behind — also when the lab process itself died."""
+leaving nothing behind (no namespace, link or process) — also when the lab process itself died."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import pytest
 
 from sdrpeer.client import AgentClient
 from sdrpeer.errors import ApiError
+from sdrpeer.lab.procs import processes_naming as lab_survivors
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab
 from sdrpeer.netlab import net
 from tests.realnet import NETNS_ONLY
@@ -62,6 +63,7 @@ def lab(tmp_path: Path) -> Iterator[RunningLab]:
     finally:
         running.stop(grace=3)
         assert net.load(tmp_path / "lab") is None
+        assert lab_survivors(tmp_path / "lab") == []
 
 
 def test_robots_live_in_their_namespaces_and_faults_act_on_the_network(
@@ -175,6 +177,7 @@ def test_lab_down_removes_everything_after_the_lab_process_died(tmp_path: Path) 
     links = output(["ip", "link", "show"])
     assert plan.bridge not in links
     assert plan.veth("robot-1") not in links
+    assert lab_survivors(lab_dir) == [], out  # and no process: every agent, however far it got
 
 
 def test_labs_built_at_once_claim_different_ids(tmp_path: Path) -> None:

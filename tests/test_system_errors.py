@@ -144,6 +144,12 @@ CASES: list[tuple[str, str, str]] = [
         "sys.yaml:5: field 'components[2].pin': expected a robot name",
     ),
     (
+        "pin longer than a robot name",
+        HEAD + f"  - {{name: E, target: {CAM}, pin: {'r' * 256}}}\n",
+        "sys.yaml:5: field 'components[2].pin': a robot name has at most 255 characters, got "
+        f"'{'r' * 60}'... (256 characters)",
+    ),
+    (
         "prefer twice",
         HEAD + f"  - {{name: E, target: {CAM}, prefer: [r1, r1]}}\n",
         "sys.yaml:5: field 'components[2].prefer': 'r1' is listed twice",
@@ -446,3 +452,46 @@ def test_a_bad_component_name_is_reported_once(profiles: Path) -> None:
 def test_empty_file(text: str) -> None:
     with pytest.raises(SystemFileError, match=r"^sys\.yaml(:1)?: expected a mapping with version"):
         parse_system(text, "sys.yaml")
+
+
+LONG = "N" * 200_224
+"""A 200 kB name, as in issue 30."""
+CUT = f"'{'N' * 60}'... (200,224 characters)"
+"""How every error message shows it: its first 60 characters and its length."""
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            f"name: s\ncomponents:\n  - {{name: {LONG}, target: {CAM}}}\n",
+            "sys.yaml:3: field 'components[0].name': expected a name of [A-Za-z0-9_.-] (1-128), "
+            f"got {CUT}",
+        ),
+        (
+            HEAD + f"connections:\n  - {{from: {LONG}.out, to: D.image}}\n",
+            f"sys.yaml:6: field 'connections[0].from': no component {CUT} (known: C, D)",
+        ),
+        (  # a long value with spaces (a map's repr): cut where it is echoed (errors.shown)
+            "name: s\ncomponents:\n  - {name: C, target: "
+            + CAM
+            + ", params: {big: {"
+            + ", ".join(f"k{i}: {i}" for i in range(100))
+            + "}}}\n",
+            "sys.yaml:3: field 'components[0].params.big': expected a string, number, boolean or "
+            "a list of them, got {'k0': 0, 'k1': 1, 'k2': 2, 'k3': 3, 'k4': 4, 'k5': 5, 'k6':... "
+            "(1,080 characters)",
+        ),
+        (  # YAML keys stop at 1024 characters
+            HEAD + f"{'K' * 1000}: 1\n",
+            f"sys.yaml:5: field '{'K' * 60}'... (1,000 characters): unknown field",
+        ),
+    ],
+    ids=["component name", "connection end", "long map", "unknown key"],
+)
+def test_an_error_about_a_huge_value_shows_its_start_and_length(text: str, message: str) -> None:
+    with pytest.raises(SystemFileError) as info:
+        parse_system(text, "sys.yaml")
+    assert message in str(info.value)
+    assert all(len(p) < 300 for p in info.value.problems)
+    assert len(str(info.value)) < 600

@@ -85,6 +85,17 @@ def test_parse_quantities(fn: Callable[[object], float], text: object, expected:
         (units.parse_speed, "1m", "expected a speed such as 0.5m/s, got '1m'"),
         (units.parse_rate, "2%", "expected a rate such as 2%/min, got '2%'"),
         (units.parse_rate, "", "expected a rate such as 2%/min, got ''"),
+        (  # a huge value: its first 60 characters and its length (issue 30)
+            units.parse_size,
+            "9" * 200_224 + "XB",
+            f"expected a size such as 500MB, got '{'9' * 60}'... (200,226 characters)",
+        ),
+        (
+            units.parse_percent,
+            [50] * 100_000,
+            f"expected a percentage such as 80%, got {'[' + '50, ' * 14 + '50,'}... "
+            "(400,000 characters)",
+        ),
     ],
 )
 def test_errors_name_the_kind_and_the_value(

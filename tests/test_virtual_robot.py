@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
 
+from sdrpeer.cli.common import parse_assignment
 from sdrpeer.errors import ConfigError
 from sdrpeer.monitor.virtual import RobotFile, VirtualRobot
 
@@ -224,3 +226,40 @@ def test_set_is_all_or_nothing_and_names_the_field() -> None:
     assert r.sample(100.0).pos == (3.0, 4.5)
     with pytest.raises(ConfigError, match=r"field 'cpu_load': cannot be changed \(settable: "):
         r.set(100.0, {"cpu_load": 50})
+
+
+@pytest.mark.parametrize("written", ["50%", "50 %", "50", 50, 50.0])
+def test_a_battery_reads_the_same_from_the_api_the_cli_and_the_robot_file(written: object) -> None:
+    """`POST /v1/robot {"battery": "50%"}` takes the unit string as the robot file and `sdrpeer
+    robot set robot-1 battery=50%` do (a plain number is percent): 50 % whichever way."""
+    from_api, _ = robot()
+    from_api.set(100.0, {"battery": written})  # the API hands its JSON body to set()
+    _, from_cli_value = parse_assignment(f"battery={written}")
+    from_cli, _ = robot()
+    from_cli.set(100.0, {"battery": from_cli_value})
+    from_file, _ = robot(GOOD.replace("battery: 100%", f"battery: {written}"))
+    assert [r.sample(100.0).battery_pct for r in (from_api, from_cli, from_file)] == [50.0] * 3
+
+
+@pytest.mark.parametrize("written", ["fifty", "50 percent", "50%%", True, None, [50]])
+def test_a_battery_in_no_known_form_is_refused_naming_the_field(written: object) -> None:
+    r, _ = robot()
+    with pytest.raises(
+        ConfigError, match=r"^robot r1: field 'battery': expected a percentage such as 80%, got "
+    ):
+        r.set(100.0, {"battery": written, "rssi": "-60dBm"})
+    assert r.sample(100.0).battery_pct == 100.0
+    assert r.sample(100.0).rssi_dbm == -45.0  # all or nothing
+
+
+def test_a_robot_name_longer_than_the_gossip_wire_carries_is_refused() -> None:
+    long = "r" * 256
+    with pytest.raises(
+        ConfigError,
+        match=re.escape(
+            f"r.yaml:1: field 'name': a robot name has at most 255 characters, "
+            f"got '{'r' * 60}'... (256 characters)"
+        ),
+    ):
+        RobotFile.parse(f"name: {long}\nmemory: 1GB\n", "r.yaml")
+    assert RobotFile.parse(f"name: {'r' * 255}\nmemory: 1GB\n").name == "r" * 255

@@ -22,7 +22,7 @@ from typing import Any
 from aiohttp import web
 
 from sdrpeer.api.view import AgentView, InstancesView
-from sdrpeer.errors import CommandError, ConfigError, LaunchRefused
+from sdrpeer.errors import CommandError, ConfigError, LaunchRefused, clip
 from sdrpeer.eventlog import naming
 from sdrpeer.runtime import logfile
 from sdrpeer.runtime.spec import INSTANCE_ACTIONS, InstanceSpec
@@ -61,8 +61,8 @@ def require_token(handler: Handler) -> Handler:
 
 
 def json_error(status: int, message: str) -> web.Response:
-    """A JSON error response `{"error": message}`."""
-    return web.json_response({"error": message}, status=status)
+    """A JSON error response `{"error": message}`, long echoed input cut (`errors.clip`)."""
+    return web.json_response({"error": clip(message)}, status=status)
 
 
 async def json_object(request: web.Request, example: str = "{...}") -> dict[str, Any]:

@@ -25,7 +25,8 @@ from sdrpeer.cli.netlab import add_fault_parsers
 from sdrpeer.client import AgentClient
 from sdrpeer.config import LAB_PRESET, PRESET_NAMES, presets_epilog
 from sdrpeer.errors import ApiError, SdrpeerError
-from sdrpeer.lab.files import DEFAULT_DIR, lab_down, lab_status
+from sdrpeer.lab.files import DEFAULT_DIR
+from sdrpeer.lab.procs import lab_down, lab_status
 
 if TYPE_CHECKING:
     from sdrpeer.lab.up import RunningLab, UpOptions
@@ -76,6 +77,16 @@ def add_lab_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--discover",
         action="store_true",
         help="robots find each other by mDNS, no --join (with --netns: loopback has no multicast)",
+    )
+    up.add_argument(
+        "--allow-launchers",
+        "--allow-launcher",
+        dest="allow_launchers",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a launcher every robot's hosts may use besides python (exec, script, a plugin), "
+        "as `sdrpeer agent --allow-launcher`: off unless named; repeat",
     )
     up.set_defaults(func=cmd_lab_up)
     down = lab_sub.add_parser("down", parents=[where], help="stop the lab's agents")
@@ -245,6 +256,7 @@ def cmd_lab_up(args: argparse.Namespace) -> int:
         timeout=args.timeout,
         netns=args.netns,
         discover=args.discover,
+        allow_launchers=tuple(args.allow_launchers),
     )
     return run_lab(options, detach=args.detach, seconds=args.seconds)
 

@@ -1,39 +1,34 @@
-"""The local lab's files and teardown: lab.json, cluster key, tokens, robot files, `lab down`.
+"""The local lab's files: lab.json, cluster key, tokens, robot files.
 
 Layout of a lab directory (default `.sdrpeer-lab`):
 
     cluster.key            32-byte cluster key, hex (mode 0600)
-    lab.json               robots (name, api, gossip, pid, token, data_dir, log), key_file, created
+    lab.json               robots (name, api, gossip, pid, started, token, data_dir, log),
+                           key_file, created
+    lab.lock               held by `lab up` while it starts agents (sdrpeer.lab.procs)
     robot-K/token          robot-K's API token (mode 0600), passed as --token-file
     robot-K/robot.yaml     robot-K's robot file (copied from examples/robots or generated)
     robot-K/agent.json     written by the agent once bound: name, gossip, api, pid
     robot-K/agent.log      the agent's stdout and stderr
 
 lab.json is written as soon as a process is started (pids first, addresses later), so
-`sdrpeer lab down` can stop the agents even when the `lab up` command itself crashed. Before
-signalling a pid, `lab down` checks with psutil that it still is the sdrpeer agent of that robot.
-Starting agents lives in `sdrpeer.lab.up`.
+`sdrpeer lab down` can stop the agents even when the `lab up` command itself crashed; and it
+does not rely on it alone (`sdrpeer.lab.procs`: the agents carry the lab's mark). Starting agents
+lives in `sdrpeer.lab.up`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import itertools
 import json
 import os
 import secrets
 import shutil
-import signal
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
 from sdrpeer.client import LAB_DIR
 from sdrpeer.errors import SdrpeerError
-
-if TYPE_CHECKING:
-    import psutil
 
 DEFAULT_DIR = LAB_DIR
 """The lab directory (`.sdrpeer-lab`), where the client commands look for lab.json."""
@@ -50,6 +45,9 @@ class LabRobot:
     log: str
     token: str
     pid: int | None = None
+    started: float | None = None
+    """When the process `pid` started (psutil's create_time): a pid the system gave to another
+    process since is not this agent."""
     api: str | None = None
     gossip: str | None = None
 
@@ -149,98 +147,3 @@ def write_robot_file(data_dir: Path, index: int, robot_files: Path | None) -> Pa
     else:
         target.write_text(robot_file_text(index))
     return target
-
-
-# --- processes -------------------------------------------------------------------------------
-
-
-def is_agent_process(pid: int, robot: LabRobot) -> bool:
-    """True if `pid` runs `sdrpeer agent` for this robot (same --data-dir); False otherwise."""
-    import psutil  # noqa: PLC0415 - client commands read lab.json without it
-
-    try:
-        proc = psutil.Process(pid)
-        if proc.status() == psutil.STATUS_ZOMBIE:
-            return False
-        cmdline = proc.cmdline()
-    except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
-        return False
-    pairs = list(itertools.pairwise(cmdline))
-    is_agent = any(a.endswith("sdrpeer") and b == "agent" for a, b in pairs)
-    data_dir = os.path.realpath(robot.data_dir)
-    same_dir = (
-        any(a == "--data-dir" and os.path.realpath(b) == data_dir for a, b in pairs)
-        or f"--data-dir={robot.data_dir}" in cmdline
-    )
-    return is_agent and same_dir
-
-
-def running_pids(lab: Lab) -> dict[str, int]:
-    """Robot name -> pid for every robot whose recorded pid still is its agent."""
-    return {r.name: r.pid for r in lab.robots if r.pid is not None and is_agent_process(r.pid, r)}
-
-
-def _kill_group(proc: psutil.Process) -> None:
-    """SIGKILL a hung agent, and its process group (its components) when it leads one."""
-    import psutil  # noqa: PLC0415 - client commands read lab.json without it
-
-    with contextlib.suppress(psutil.NoSuchProcess, ProcessLookupError, PermissionError):
-        if os.getpgid(proc.pid) == proc.pid:
-            os.killpg(proc.pid, signal.SIGKILL)
-        else:
-            proc.kill()
-
-
-def stop_processes(lab: Lab, *, grace: float = 5.0) -> list[str]:
-    """SIGTERM every live agent of the lab, wait up to `grace` s, SIGKILL leftovers.
-
-    Returns one line per robot saying what happened (for the user).
-    """
-    import psutil  # noqa: PLC0415 - client commands read lab.json without it
-
-    report: list[str] = []
-    procs: dict[str, psutil.Process] = {}
-    for robot in lab.robots:
-        if robot.pid is None:
-            report.append(f"{robot.name}: never started")
-        elif not is_agent_process(robot.pid, robot):
-            report.append(f"{robot.name}: pid {robot.pid} is not running (stale)")
-        else:
-            try:
-                proc = psutil.Process(robot.pid)
-                proc.send_signal(signal.SIGTERM)
-                procs[robot.name] = proc
-            except psutil.NoSuchProcess:
-                report.append(f"{robot.name}: pid {robot.pid} exited")
-    _, alive = psutil.wait_procs(list(procs.values()), timeout=grace)
-    for proc in alive:
-        _kill_group(proc)
-    psutil.wait_procs(alive, timeout=2.0)
-    killed = {p.pid for p in alive}
-    for name, proc in procs.items():
-        how = f"killed (no exit {grace:g} s after SIGTERM)" if proc.pid in killed else "stopped"
-        report.append(f"{name}: pid {proc.pid} {how}")
-    return sorted(report)
-
-
-def lab_down(lab_dir: Path, *, grace: float = 5.0) -> list[str]:
-    """Stop every agent of the lab in `lab_dir` and remove lab.json."""
-    lab = read_lab(lab_dir)
-    if lab is None:
-        raise SdrpeerError(f"no lab in {lab_dir} (no {LAB_FILE}); nothing to stop")
-    report = stop_processes(lab, grace=grace)
-    lab_path(lab_dir).unlink(missing_ok=True)
-    return report
-
-
-def lab_status(lab_dir: Path) -> list[dict[str, Any]]:
-    """One dict per robot: the lab.json entry (without token) plus `running`."""
-    lab = read_lab(lab_dir)
-    if lab is None:
-        raise SdrpeerError(f"no lab in {lab_dir} (no {LAB_FILE}); start one with sdrpeer lab up")
-    status = []
-    for robot in lab.robots:
-        entry = {k: v for k, v in asdict(robot).items() if k != "token"}
-        entry["running"] = robot.pid is not None and is_agent_process(robot.pid, robot)
-        status.append(entry)
-    return status

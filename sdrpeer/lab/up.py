@@ -17,7 +17,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,11 +34,17 @@ from sdrpeer.lab.files import (
     new_token,
     read_lab,
     robot_name,
-    running_pids,
-    stop_processes,
     write_lab,
     write_robot_file,
     write_secret,
+)
+from sdrpeer.lab.procs import (
+    lab_env,
+    lab_lock,
+    lab_processes,
+    running_pids,
+    start_time,
+    stop_processes,
 )
 from sdrpeer.netlab import net
 from sdrpeer.netlab.plan import NetPlan
@@ -66,6 +72,9 @@ class UpOptions:
     discover: bool = False
     """Robots find each other by mDNS (`--discover`) instead of joining robot-1 (a namespace
     lab: multicast needs a network segment, loopback has none)."""
+    allow_launchers: tuple[str, ...] = ()
+    """Launchers every agent lets its hosts use besides `python` (`sdrpeer agent
+    --allow-launcher`): none unless named, as on any agent."""
 
 
 @dataclass(slots=True)
@@ -98,8 +107,16 @@ class RunningLab:
             scenario_start=self.lab.created,
         )
         (Path(robot.data_dir) / "agent.json").unlink(missing_ok=True)  # the new life writes its own
-        self.procs[name] = _spawn(command, Path(robot.log))
-        robot.pid = self.procs[name].pid
+        with lab_lock(self.lab_dir):
+            if not lab_path(self.lab_dir).exists():
+                raise SdrpeerError(f"{name}: not restarted: the lab was taken down (lab down)")
+            self.spawn(robot, command)
+
+    def spawn(self, robot: LabRobot, command: list[str]) -> None:
+        """Start `robot`'s agent and record it in lab.json at once (pid and start time)."""
+        self.procs[robot.name] = _spawn(command, Path(robot.log), self.lab_dir)
+        robot.pid = self.procs[robot.name].pid
+        robot.started = start_time(robot.pid)
         write_lab(self.lab_dir, self.lab)
 
     def wait_started(self, name: str, timeout: float) -> None:
@@ -127,8 +144,10 @@ class RunningLab:
         ]
 
     def stop(self, *, grace: float = 5.0) -> list[str]:
-        """Stop every agent (SIGTERM, then SIGKILL), reap them and remove lab.json."""
-        report = stop_processes(self.lab, grace=grace)
+        """Stop every agent of the lab (SIGTERM, then SIGKILL), those lab.json names and every
+        other process carrying the lab's mark, reap the ones this command started and remove
+        lab.json."""
+        report = stop_processes(self.lab, self.lab_dir, grace=grace)
         for proc in self.procs.values():
             try:
                 proc.wait(timeout=grace)
@@ -204,6 +223,8 @@ def agent_command(
         command += ["--scenario", str(options.scenario.resolve())]
         if scenario_start is not None:
             command += ["--scenario-start", repr(scenario_start)]
+    for launcher in options.allow_launchers:
+        command += ["--allow-launcher", launcher]
     if options.discover:
         command.append("--discover")
     elif join is not None:
@@ -211,8 +232,9 @@ def agent_command(
     return command
 
 
-def _spawn(command: list[str], log: Path) -> subprocess.Popen[bytes]:
-    env = dict(os.environ)
+def _spawn(command: list[str], log: Path, lab_dir: Path) -> subprocess.Popen[bytes]:
+    """Start an agent in its own session, marked as the lab's (`sdrpeer.lab.procs`)."""
+    env = lab_env(lab_dir, os.environ)
     package_root = str(Path(sdrpeer.__file__).resolve().parents[1])
     env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
     with log.open("ab") as out:
@@ -287,9 +309,12 @@ def _prepare(options: UpOptions) -> Lab:
     lab_dir = options.lab_dir
     lab_dir.mkdir(parents=True, exist_ok=True)
     existing = read_lab(lab_dir)
-    if existing is not None and running_pids(existing):
+    running = list(running_pids(existing)) if existing is not None else []
+    if not running and lab_processes(lab_dir):
+        running = ["agents lab.json does not name"]
+    if running:
         raise SdrpeerError(
-            f"a lab is already running in {lab_dir} ({', '.join(running_pids(existing))}); "
+            f"a lab is already running in {lab_dir} ({', '.join(running)}); "
             f"stop it with: sdrpeer lab down --dir {lab_dir}"
         )
     robot_files = options.robot_files or default_robot_files()
@@ -308,45 +333,84 @@ def _prepare(options: UpOptions) -> Lab:
     return Lab(robots=robots, key_file=str(key_file))
 
 
+def _check_scenario(path: Path | None, lab: Lab) -> None:
+    """Refuse a scenario that this lab's robots cannot play before any agent starts: a step for
+    a robot the lab does not have (ScenarioError naming file, line and robot), a ramp or move
+    with nothing to start from. Each agent alone knows only its own robot, and would skip the
+    others' steps without a word."""
+    if path is None:
+        return
+    from sdrpeer.monitor.scenario import Scenario  # noqa: PLC0415 - YAML: only with a scenario
+    from sdrpeer.monitor.virtual import RobotFile  # noqa: PLC0415
+
+    files = [
+        replace(RobotFile.load(Path(r.data_dir) / "robot.yaml"), name=r.name) for r in lab.robots
+    ]
+    Scenario.load(path, robots=files)
+
+
+def _check_launchers(names: tuple[str, ...]) -> None:
+    """Refuse an unknown launcher name before any agent starts (each agent would refuse it)."""
+    if not names:
+        return
+    from sdrpeer.launch.launchers import known_launchers  # noqa: PLC0415 - plugins: entry points
+
+    known = known_launchers()
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise SdrpeerError(
+            f"--allow-launcher {unknown[0]!r}: unknown launcher (known: {', '.join(known)})"
+        )
+
+
 def start_lab(options: UpOptions, say: Callable[[str], None] = print) -> RunningLab:
     """Start the lab's agents and wait until all of them see every robot alive."""
     if options.robots < 1:
         raise SdrpeerError(f"--robots must be at least 1, got {options.robots}")
     if options.discover and not options.netns:
         raise SdrpeerError("--discover needs --netns: loopback carries no multicast")
+    _check_launchers(options.allow_launchers)
     lab = _prepare(options)
+    _check_scenario(options.scenario, lab)
     running = RunningLab(options.lab_dir, lab, options=options)
-    key_file = Path(lab.key_file)
     deadline = time.monotonic() + options.timeout
     try:
+        _start_agents(running, options, deadline, say)
+        _wait_converged(running, deadline)
+    except BaseException:
+        running.stop(grace=2.0)
+        raise
+    return running
+
+
+def _start_agents(
+    running: RunningLab, options: UpOptions, deadline: float, say: Callable[[str], None]
+) -> None:
+    """Spawn every agent (robot-1 first, the others joining it), each recorded in lab.json as it
+    is spawned, and wait for their addresses. The lab's lock is held until the last one is
+    spawned: a `lab down` meanwhile waits, then finds them all."""
+    lab = running.lab
+    key_file = Path(lab.key_file)
+    first, *others = lab.robots
+    with lab_lock(options.lab_dir):
         if options.netns:
             running.net = net.create(options.lab_dir, options.robots)
             say(f"network: bridge {running.net.bridge}, robots on 10.213.{running.net.lab_id}.0/24")
-        first, *others = lab.robots
         say(f"starting {len(lab.robots)} agents in {options.lab_dir} (preset {options.preset})")
-        running.procs[first.name] = _spawn(
-            agent_command(first, options, key_file, None, running.net, scenario_start=lab.created),
-            Path(first.log),
+        command = agent_command(
+            first, options, key_file, None, running.net, scenario_start=lab.created
         )
-        first.pid = running.procs[first.name].pid
-        write_lab(options.lab_dir, lab)
+        running.spawn(first, command)
         _wait_addresses(running, first, deadline)
         write_lab(options.lab_dir, lab)
         for robot in others:
             command = agent_command(
                 robot, options, key_file, first.gossip, running.net, scenario_start=lab.created
             )
-            running.procs[robot.name] = _spawn(command, Path(robot.log))
-            robot.pid = running.procs[robot.name].pid
-            write_lab(options.lab_dir, lab)
-        for robot in others:
-            _wait_addresses(running, robot, deadline)
-        write_lab(options.lab_dir, lab)
-        _wait_converged(running, deadline)
-    except BaseException:
-        running.stop(grace=2.0)
-        raise
-    return running
+            running.spawn(robot, command)
+    for robot in others:
+        _wait_addresses(running, robot, deadline)
+    write_lab(options.lab_dir, lab)
 
 
 @contextmanager

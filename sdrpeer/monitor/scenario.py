@@ -40,7 +40,7 @@ from typing import Any
 import yaml
 
 from sdrpeer import units
-from sdrpeer.errors import ScenarioError
+from sdrpeer.errors import ScenarioError, shown
 from sdrpeer.monitor.virtual import SETTABLE, RobotFile, parse_name, parse_position
 from sdrpeer.yamlfile import YamlFile, line_of
 
@@ -255,7 +255,7 @@ def _positive(parser: Callable[[object], float], example: str) -> Callable[[obje
     def parse(value: object) -> float:
         result = parser(value)
         if result <= 0:
-            raise ValueError(f"expected a value above zero such as {example}, got {value!r}")
+            raise ValueError(f"expected a value above zero such as {example}, got {shown(value)}")
         return result
 
     return parse

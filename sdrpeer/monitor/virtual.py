@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer import units
-from sdrpeer.errors import ConfigError
+from sdrpeer.config import MAX_NAME
+from sdrpeer.errors import ConfigError, shown
 from sdrpeer.record.limits import check, check_int
 from sdrpeer.record.robot import Metrics
 from sdrpeer.yamlfile import YamlFile
@@ -35,7 +36,9 @@ NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
 def parse_name(value: object) -> str:
     """A robot name: letters, digits, `_`, `.`, `-`."""
     if not isinstance(value, str) or not NAME_RE.fullmatch(value):
-        raise ValueError(f"expected a name such as robot-1, got {value!r}")
+        raise ValueError(f"expected a name such as robot-1, got {shown(value)}")
+    if len(value) > MAX_NAME:
+        raise ValueError(f"a robot name has at most {MAX_NAME} characters, got {shown(value)}")
     return value
 
 
@@ -73,7 +76,7 @@ def _coord(c: object) -> float:
 def parse_position(value: object) -> tuple[float, float]:
     """[x, y] in metres (numbers or distances such as 3m; negative coordinates allowed)."""
     if not isinstance(value, list | tuple) or len(value) != 2:
-        raise ValueError(f"expected a position such as [3, 4.5], got {value!r}")
+        raise ValueError(f"expected a position such as [3, 4.5], got {shown(value)}")
     return (_coord(value[0]), _coord(value[1]))
 
 

@@ -43,7 +43,7 @@ import msgpack
 from aiohttp import web
 
 from sdrpeer.api.app import Route, instances_of, json_error, json_object, view_of
-from sdrpeer.errors import ApiError, PortToolError, SpecError
+from sdrpeer.errors import ApiError, PortToolError, SpecError, shown
 from sdrpeer.runtime.spec import ConnectionSpec, default_conn_id, validate_policy
 
 if TYPE_CHECKING:  # loaded on a port tool's first use, not at the agent's start
@@ -115,7 +115,9 @@ def _number(body: dict[str, Any], key: str, default: float | None, high: float) 
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value <= high:
-        raise PortToolError(f"field {key!r}: expected a number in (0, {high:g}], got {value!r}")
+        raise PortToolError(
+            f"field {key!r}: expected a number in (0, {high:g}], got {shown(value)}"
+        )
     return float(value)
 
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from sdrpeer.errors import shown
+
 
 @dataclass(frozen=True, slots=True)
 class Limit:
@@ -51,7 +53,7 @@ def check_int(name: str, value: object, example: str = "0") -> int:
     """`value` if it is an integer inside `LIMITS[name]` (compared exactly, however big), else
     ValueError naming the range."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"expected an integer such as {example}, got {value!r}")
+        raise ValueError(f"expected an integer such as {example}, got {shown(value)}")
     limit = LIMITS[name]
     if not limit.low <= value <= limit.high:
         raise ValueError(f"{value!r} is out of range ({limit.shown})")

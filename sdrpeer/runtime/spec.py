@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import PurePath
 from typing import Any
 
-from sdrpeer.errors import SpecError
+from sdrpeer.errors import SpecError, shown
 from sdrpeer.launch.composite import parse_composite
 from sdrpeer.launch.launchers import known_launchers
 from sdrpeer.vocabulary import InstanceRole, LifecycleState
@@ -220,7 +220,7 @@ def validate_policy(policy: Any, where: str) -> tuple[tuple[str, Any], ...]:
     for key, low in (("buffer", 1), ("skip", 0)):
         value = policy.get(key, low)
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise SpecError(f"{where}.{key}", f"expected an integer >= {low}, got {value!r}")
+            raise SpecError(f"{where}.{key}", f"expected an integer >= {low}, got {shown(value)}")
     return tuple(sorted(policy.items()))
 
 
@@ -261,7 +261,7 @@ def _no_unknown(doc: Mapping[str, Any], known: frozenset[str], where: str) -> No
 
 def _name(value: Any, where: str) -> str:
     if not isinstance(value, str) or not _NAME.match(value):
-        raise SpecError(where, f"expected a name of [A-Za-z0-9_.-] (1-128), got {value!r}")
+        raise SpecError(where, f"expected a name of [A-Za-z0-9_.-] (1-128), got {shown(value)}")
     return value
 
 
@@ -270,7 +270,7 @@ def _port(value: Any, where: str, *, member: bool = False) -> str:
     if isinstance(value, str) and (_PORT.match(value) or (member and _MEMBER_PORT.match(value))):
         return value
     form = "an identifier, or Member.port on a composite" if member else "an identifier"
-    raise SpecError(where, f"expected a port name ({form}), got {value!r}")
+    raise SpecError(where, f"expected a port name ({form}), got {shown(value)}")
 
 
 def _launcher(value: Any, where: str) -> str:
@@ -278,7 +278,7 @@ def _launcher(value: Any, where: str) -> str:
         return str(value)
     known = known_launchers()
     if value not in known:
-        raise SpecError(where, f"expected one of {', '.join(known)}, got {value!r}")
+        raise SpecError(where, f"expected one of {', '.join(known)}, got {shown(value)}")
     return str(value)
 
 
@@ -294,7 +294,7 @@ def _watchdog(value: Any, where: str) -> float | None:
 
 def _choice(value: Any, choices: tuple[str, ...], where: str) -> str:
     if value not in choices:
-        raise SpecError(where, f"expected one of {', '.join(choices)}, got {value!r}")
+        raise SpecError(where, f"expected one of {', '.join(choices)}, got {shown(value)}")
     return str(value)
 
 
@@ -305,12 +305,14 @@ def _target(launcher: str, value: Any, where: str) -> str | tuple[str, ...]:
             or not value
             or not all(isinstance(v, str) and v for v in value)
         ):
-            raise SpecError(where, f"exec needs an argv list of non-empty strings, got {value!r}")
+            raise SpecError(
+                where, f"exec needs an argv list of non-empty strings, got {shown(value)}"
+            )
         return tuple(value)
     if not isinstance(value, str) or not value:
-        raise SpecError(where, f"expected a string, got {value!r}")
+        raise SpecError(where, f"expected a string, got {shown(value)}")
     if launcher == "python" and not _PY_TARGET.match(value):
-        raise SpecError(where, f"expected package.module:Class, got {value!r}")
+        raise SpecError(where, f"expected package.module:Class, got {shown(value)}")
     if launcher == "composite":
         try:
             parse_composite(value)

@@ -22,7 +22,7 @@ from typing import Any
 
 import yaml
 
-from sdrpeer.errors import ProfileFileError, SpecError
+from sdrpeer.errors import ProfileFileError, SpecError, shown
 from sdrpeer.runtime.spec import _launcher, _name, _target
 from sdrpeer.system.classes import ClassInfo, check_params, inspect_target
 from sdrpeer.system.model import (
@@ -351,11 +351,11 @@ def _stop_after(value: object) -> float | None:
 
 def _reconcile(value: object) -> str:
     if value not in RECONCILE:
-        raise ValueError(f"expected one of {', '.join(RECONCILE)}, got {value!r}")
+        raise ValueError(f"expected one of {', '.join(RECONCILE)}, got {shown(value)}")
     return str(value)
 
 
 def _mode(value: object) -> str:
     if value not in STANDBY_MODES:
-        raise ValueError(f"expected one of {', '.join(STANDBY_MODES)}, got {value!r}")
+        raise ValueError(f"expected one of {', '.join(STANDBY_MODES)}, got {shown(value)}")
     return str(value)

@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from sdrpeer.errors import SdrpeerError
+from sdrpeer.errors import SdrpeerError, shown
 from sdrpeer.launch.composite import CompositeTarget
 from sdrpeer.sdk import Periodic, Stepped
 from sdrpeer.sdk.composite import composite_class
@@ -193,7 +193,9 @@ def _execution(value: Any) -> float | None:
         number = not isinstance(hz, bool) and isinstance(hz, int | float)
         if number and math.isfinite(hz) and 0 < hz <= MAX_HZ:
             return float(hz)
-    raise ValueError(f"expected stepped or {{periodic: HZ}} with 0 < HZ <= 10000, got {value!r}")
+    raise ValueError(
+        f"expected stepped or {{periodic: HZ}} with 0 < HZ <= 10000, got {shown(value)}"
+    )
 
 
 def _sum(defs: list[tuple[str, ComponentDef]]) -> Requirements:

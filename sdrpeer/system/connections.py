@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from sdrpeer.errors import SpecError
+from sdrpeer.errors import SpecError, shown
 from sdrpeer.runtime.spec import _port, validate_policy
 from sdrpeer.system.components import ComponentEntry
 from sdrpeer.system.composites import Member
@@ -109,7 +109,7 @@ def _end(
     value = p.f.value(node)
     comp, dot, port = value.rpartition(".") if isinstance(value, str) else ("", "", "")
     if not dot or not comp or not port:
-        p.add(node, field, f"expected Component.port, got {value!r}")
+        p.add(node, field, f"expected Component.port, got {shown(value)}")
         return MISSING, MISSING
     member = members.get(comp)
     if comp not in components and member is None:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import yaml
 
-from sdrpeer.errors import ConfigError, ProfileFileError
+from sdrpeer.errors import ConfigError, ProfileFileError, shown
 from sdrpeer.system.values import MAX_RATE
 from sdrpeer.yamlfile import YamlFile
 
@@ -93,7 +93,7 @@ def _children(f: YamlFile, node: yaml.MappingNode) -> dict[str, yaml.Node]:
 
 def _non_negative(value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"expected a number >= 0, got {value!r}")
+        raise ValueError(f"expected a number >= 0, got {shown(value)}")
     if not math.isfinite(value) or value < 0:
-        raise ValueError(f"expected a number >= 0, got {value!r}")
+        raise ValueError(f"expected a number >= 0, got {shown(value)}")
     return float(value)

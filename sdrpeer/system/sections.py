@@ -18,6 +18,7 @@ from typing import Any
 
 import yaml
 
+from sdrpeer.errors import shown
 from sdrpeer.system.metrics import METRICS, parse_condition
 from sdrpeer.system.model import (
     ON_VIOLATION,
@@ -206,7 +207,7 @@ def read_compliance(p: Problems, node: yaml.Node | None) -> ComplianceDef:
 def _one_of(names: list[str]) -> Callable[[object], str]:
     def parse(value: object) -> str:
         if value not in names:
-            raise ValueError(f"expected one of {', '.join(names)}, got {value!r}")
+            raise ValueError(f"expected one of {', '.join(names)}, got {shown(value)}")
         return str(value)
 
     return parse
@@ -217,7 +218,7 @@ def _names(known: list[str]) -> Callable[[object], tuple[str, ...]]:
 
     def parse(value: object) -> tuple[str, ...]:
         if not isinstance(value, list):
-            raise ValueError(f"expected a list of plugin names, got {value!r}")
+            raise ValueError(f"expected a list of plugin names, got {shown(value)}")
         names = tuple(one(v) for v in value)
         for i, name in enumerate(names):
             if name in names[:i]:
@@ -230,7 +231,7 @@ def _names(known: list[str]) -> Callable[[object], tuple[str, ...]]:
 def _weights(builtin: bool) -> Callable[[object], tuple[tuple[str, float], ...]]:
     def parse(value: object) -> tuple[tuple[str, float], ...]:
         if not isinstance(value, dict):
-            raise ValueError(f"expected a mapping of term -> weight, got {value!r}")
+            raise ValueError(f"expected a mapping of term -> weight, got {shown(value)}")
         out = []
         for term, weight in value.items():
             if builtin and term not in WEIGHT_TERMS:

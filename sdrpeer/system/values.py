@@ -12,7 +12,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from sdrpeer.config import NAME_RE
+from sdrpeer.config import MAX_NAME, NAME_RE
+from sdrpeer.errors import shown
 from sdrpeer.units import parse_size
 
 MAX_RATE = 100e9
@@ -39,12 +40,12 @@ def parse_bandwidth(value: object) -> float:
     if isinstance(value, str):
         text = value.strip()
         if not text.lower().endswith("/s"):
-            raise ValueError(f"expected a data rate such as 200kB/s, got {value!r}")
+            raise ValueError(f"expected a data rate such as 200kB/s, got {shown(value)}")
         text = text[:-2]
     try:
         out = parse_size_float(text)
     except ValueError:
-        raise ValueError(f"expected a data rate such as 200kB/s, got {value!r}") from None
+        raise ValueError(f"expected a data rate such as 200kB/s, got {shown(value)}") from None
     if out > MAX_RATE:
         raise ValueError(f"{value!r} is out of range (0 to 100GB/s)")
     return out
@@ -54,7 +55,7 @@ def parse_size_float(value: object) -> float:
     """Like `parse_size` but keeps fractions of a byte (rates need not be whole)."""
     if isinstance(value, int | float) and not isinstance(value, bool):
         if not math.isfinite(value) or value < 0:
-            raise ValueError(f"expected a size such as 500MB, got {value!r}")
+            raise ValueError(f"expected a size such as 500MB, got {shown(value)}")
         return float(value)
     return float(parse_size(value))
 
@@ -64,7 +65,7 @@ def integer(low: int, high: int) -> Callable[[object], int]:
 
     def parse(value: object) -> int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"expected a whole number, got {value!r}")
+            raise ValueError(f"expected a whole number, got {shown(value)}")
         if not low <= value <= high:
             raise ValueError(f"{value!r} is out of range ({low} to {high})")
         return value
@@ -75,14 +76,16 @@ def integer(low: int, high: int) -> Callable[[object], int]:
 def robot_name(value: object) -> str:
     """A robot's name ([A-Za-z0-9_.-]+); robots are not known at load time, only the form is."""
     if not isinstance(value, str) or not NAME_RE.fullmatch(value):
-        raise ValueError(f"expected a robot name of [A-Za-z0-9_.-], got {value!r}")
+        raise ValueError(f"expected a robot name of [A-Za-z0-9_.-], got {shown(value)}")
+    if len(value) > MAX_NAME:
+        raise ValueError(f"a robot name has at most {MAX_NAME} characters, got {shown(value)}")
     return value
 
 
 def robot_names(value: object) -> tuple[str, ...]:
     """A list of distinct robot names."""
     if not isinstance(value, list):
-        raise ValueError(f"expected a list of robot names, got {value!r}")
+        raise ValueError(f"expected a list of robot names, got {shown(value)}")
     names = tuple(robot_name(v) for v in value)
     for i, name in enumerate(names):
         if name in names[:i]:
@@ -93,14 +96,14 @@ def robot_names(value: object) -> tuple[str, ...]:
 def boolean(value: object) -> bool:
     """true or false (YAML booleans only: 'yes' in quotes is a string)."""
     if not isinstance(value, bool):
-        raise ValueError(f"expected true or false, got {value!r}")
+        raise ValueError(f"expected true or false, got {shown(value)}")
     return value
 
 
 def text(value: object) -> str:
     """A non-empty string."""
     if not isinstance(value, str) or not value.strip():
-        raise ValueError(f"expected a non-empty string, got {value!r}")
+        raise ValueError(f"expected a non-empty string, got {shown(value)}")
     return value
 
 
@@ -109,7 +112,9 @@ def param_value(value: Any) -> Any:
     if isinstance(value, list):
         return tuple(param_value(v) for v in value)
     if not isinstance(value, str | int | float | bool):
-        raise ValueError(f"expected a string, number, boolean or a list of them, got {value!r}")
+        raise ValueError(
+            f"expected a string, number, boolean or a list of them, got {shown(value)}"
+        )
     if isinstance(value, float) and not math.isfinite(value):
-        raise ValueError(f"expected a finite number, got {value!r}")
+        raise ValueError(f"expected a finite number, got {shown(value)}")
     return value
