@@ -445,6 +445,12 @@ def test_an_earlier_lifes_record_before_our_first_sends_nothing_empty() -> None:
     assert own_records_sent(core.datagrams_to_send()) == {b"mine"}
 
 
+def test_an_earlier_lifes_record_in_a_full_state_exchange_is_jumped_past_too() -> None:
+    core = with_peers()
+    core.receive(0.1, addr(2), Sync("r2", False, (("r0", addr(0), 0, ALIVE, 40),), (), "r0"))
+    assert core.set_record(1.0, b"mine") == 41
+
+
 def own_records_sent(sent: list[tuple[Addr, Packet]]) -> set[bytes]:
     """The payloads of our own (r0's) records in `sent`."""
     return {

@@ -7,10 +7,11 @@ previous allocator between its own win and the next one, first match wins:
 
 - `first`: no allocator before (the fleet's first election);
 - `allocator killed`: the soak SIGKILLed its agent (a `kill_agent` fault);
-- `stepped down: REASON`: it gave the role up itself (`election.stepped_down`: `ineligible` when
-  its robot fell below the allocation thresholds or lost touch with the fleet, `outranked` by a
-  claim it learnt of, ...);
-- `partition`: a partition fault was on;
+- `partition`: a partition fault was on meanwhile (the side cut off steps down);
+- `fault on the allocator's robot`: the soak pushed its RSSI or battery past the rules;
+- `stepped down: REASON`: it gave the role up itself, with no fault to explain it
+  (`election.stepped_down`: `ineligible` when its robot fell below the allocation thresholds or
+  lost touch with the fleet, `outranked` by a claim it learnt of, ...);
 - `declared dead while alive`: some robot declared it dead although nothing killed it (a false
   death: a starved agent, a lossy link);
 - `other`: none of these.
@@ -33,6 +34,14 @@ WINDOW_AFTER_S = 1.0
 """A previous allocator's step-down logged this long after the next win still explains it (the
 winner may claim as soon as it hears of the step-down, before the loser logs it)."""
 
+CHANGE_WINDOW_S = 5.0
+"""A partition or a robot fault on at some moment this long before a win explains it (the
+condition's sustain, the step-down, the claim); one that ended earlier does not, even if the
+previous allocator held the role meanwhile."""
+
+ROBOT_FAULTS = ("rssi", "battery")
+"""Faults that push a robot past the allocation thresholds (it steps down, ineligible)."""
+
 
 def elections(
     events: Mapping[str, Iterable[Mapping[str, Any]]],
@@ -40,39 +49,31 @@ def elections(
     t0_wall: float,
 ) -> dict[str, Any]:
     """{"total", "by_reason", "churn", "list"} from every robot's events (robot -> entries of
-    `GET /v1/events`) and the soak's faults done (`{"t", "kind", "robots"}`, t relative to
-    `t0_wall`)."""
-    wins: dict[int, tuple[float, str]] = {}
+    `GET /v1/events`) and the soak's faults done (`{"t", "kind", "robots", "until"?}`, times
+    relative to `t0_wall`)."""
+    claimed: dict[int, tuple[str, float]] = {}  # epoch -> (winner, first seen), winners' logs
+    heard: dict[int, tuple[str, float]] = {}  # the same, as other robots learnt of it
     stepped: list[tuple[float, str, str]] = []
     dead: list[tuple[float, str]] = []
     for entries in events.values():
         for e in entries:
             kind, ts, robot = e.get("kind"), float(e.get("ts", 0.0)), str(e.get("robot", ""))
             detail = e.get("detail") or {}
-            winner = (
-                robot
-                if kind == EventKind.ELECTION_ELECTED
-                else detail.get("leader")
-                if kind == EventKind.ELECTION
-                else None
-            )
-            if winner:  # a win, as the winner logged it or as another robot learnt of it
-                epoch = int(detail.get("epoch", 0))
-                if epoch not in wins or (ts, str(winner)) < wins[epoch]:
-                    wins[epoch] = (ts, str(winner))
+            epoch = int(detail.get("epoch", 0))
+            if kind == EventKind.ELECTION_ELECTED:
+                _won(claimed, epoch, robot, ts)
+            elif kind == EventKind.ELECTION and detail.get("leader"):
+                _won(heard, epoch, str(detail["leader"]), ts)
             elif kind == EventKind.ELECTION_STEPPED_DOWN:
                 stepped.append((ts, robot, str(detail.get("reason", "?"))))
             elif kind == EventKind.MEMBER_DEAD:
                 dead.append((ts, robot))
-    kills = [
-        (t0_wall + float(f["t"]), str(f["robots"][0])) for f in faults if f["kind"] == "kill_agent"
-    ]
-    cuts = [t0_wall + float(f["t"]) for f in faults if f["kind"] == "partition"]
+    spans = [_span(f, t0_wall) for f in faults]
     rows = []
     previous: tuple[float, str] | None = None
-    for epoch in sorted(wins):
-        ts, winner = wins[epoch]
-        why = _why(previous, ts, kills=kills, stepped=stepped, cuts=cuts, dead=dead)
+    for epoch in sorted(claimed.keys() | heard.keys()):
+        winner, ts = claimed.get(epoch) or heard[epoch]
+        why = _why(previous, ts, spans=spans, stepped=stepped, dead=dead)
         rows.append({"epoch": epoch, "winner": winner, "t": round(ts - t0_wall, 3), "why": why})
         previous = (ts, winner)
     by_reason = Counter(str(r["why"]) for r in rows)
@@ -80,29 +81,51 @@ def elections(
     return {"total": len(rows), "by_reason": dict(by_reason), "churn": churn, "list": rows}
 
 
-CAUSED = frozenset({"first", "allocator killed", "partition"})
+CAUSED = frozenset({"first", "allocator killed", "partition", "fault on the allocator's robot"})
 """Reasons a fault (or the start) explains; the rest is churn among living members."""
+
+
+def _won(wins: dict[int, tuple[str, float]], epoch: int, robot: str, ts: float) -> None:
+    """Note `robot` winning `epoch` at `ts`: two claims of one epoch are settled as the
+    election settles them (the higher name), at the first time either was seen."""
+    known = wins.get(epoch)
+    if known is None:
+        wins[epoch] = (robot, ts)
+    else:
+        wins[epoch] = (max(known[0], robot), min(known[1], ts))
+
+
+def _span(fault: Mapping[str, Any], t0_wall: float) -> tuple[str, str, float, float]:
+    """(kind, robot, from, until) of a fault done, in wall time (a fault with no end: an
+    instant)."""
+    start = t0_wall + float(fault["t"])
+    until = fault.get("until")
+    end = start if until is None else t0_wall + float(until)
+    return str(fault["kind"]), str(fault["robots"][0]), start, end
 
 
 def _why(
     previous: tuple[float, str] | None,
     ts: float,
     *,
-    kills: list[tuple[float, str]],
+    spans: list[tuple[str, str, float, float]],
     stepped: list[tuple[float, str, str]],
-    cuts: list[float],
     dead: list[tuple[float, str]],
 ) -> str:
     if previous is None:
         return "first"
     since, holder = previous
-    if any(since <= t <= ts and r == holder for t, r in kills):
+    held = [(k, r) for k, r, a, b in spans if a <= ts and b >= since]  # while it held the role
+    recent = [(k, r) for k, r, a, b in spans if a <= ts and b >= max(since, ts - CHANGE_WINDOW_S)]
+    if any(k == "kill_agent" and r == holder for k, r in held):
         return "allocator killed"
+    if any(k == "partition" for k, _ in recent):  # a side cut off steps down: ineligible
+        return "partition"
+    if any(k in ROBOT_FAULTS and r == holder for k, r in recent):
+        return "fault on the allocator's robot"
     for t, r, reason in stepped:
         if since <= t <= ts + WINDOW_AFTER_S and r == holder:
             return f"stepped down: {reason}"
-    if any(since <= t <= ts for t in cuts):
-        return "partition"
     if any(since <= t <= ts and r == holder for t, r in dead):
         return "declared dead while alive"
     return "other"

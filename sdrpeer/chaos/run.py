@@ -143,8 +143,9 @@ class Soak:
             self.judge.fault(
                 t, fault.kind, None if fault.until is None else t + fault.until - fault.at
             )
+        until = None if fault.until is None else round(t + fault.until - fault.at, 2)
         self.done.append({"t": round(t, 2), "kind": fault.kind, "robots": list(fault.robots),
-                          "note": what})  # fmt: skip
+                          "until": until, "note": what})  # fmt: skip
 
     def end(self, fault: Fault) -> None:
         """Undo a fault that has an end."""

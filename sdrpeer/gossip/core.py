@@ -527,6 +527,8 @@ class Membership:
             elif name == self.name and mine is not None and rec_version > mine[0]:
                 self._store_own_record(rec_version + 1, mine[1])
                 push.append(Record(name, rec_version + 1, mine[1]))
+            elif name == self.name and mine is None:  # an earlier life's, before our first
+                self._first_version = max(self._first_version, rec_version + 1)
         self._push_records(src, sync.sender, push)
         if sync.reply:
             last = self._sync_replied.get(sync.sender)

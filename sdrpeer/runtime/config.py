@@ -43,8 +43,9 @@ class SupervisorConfig:
     eof_grace: float = 1.0
     """A host that closed its control channel is killed if it has not exited this much later."""
     max_starting: int = 2
-    """Hosts starting at once on this robot, at most (0: no limit): the rest wait their turn,
-    would-be actives first (`sdrpeer.runtime.reconciler`)."""
+    """Standbys start only while fewer hosts than this are starting on this robot, and only once
+    no would-be active waits to start (0: no limit); actives always start at once
+    (`sdrpeer.runtime.reconciler`)."""
     host_nice: int = 5
     """Hosts run this much nicer than their agent (`nice(2)`; 0: the same priority): a robot's
     components take every cycle its agent leaves idle, and cannot starve the agent's probes,

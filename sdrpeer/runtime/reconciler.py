@@ -158,7 +158,7 @@ class Reconciler:
         if self.max_starting <= 0:
             return starts
         actives = [a for a in starts if desired[a.instance].wants_active()]
-        if actives:  # the standbys wait until these are up
+        if actives:  # no standby starts in a pass that starts actives; later, the count gates
             return actives
         busy = {n for n, (a, _) in self.in_flight.items() if a.kind == "start"}
         busy |= {n for n, obs in observed.items() if obs.status in STARTING}
