@@ -8,7 +8,8 @@ previous allocator between its own win and the next one, first match wins:
 - `first`: no allocator before (the fleet's first election);
 - `allocator killed`: the soak SIGKILLed its agent (a `kill_agent` fault);
 - `partition`: a partition fault was on meanwhile (the side cut off steps down);
-- `fault on the allocator's robot`: the soak pushed its RSSI or battery past the rules;
+- `fault on the allocator's robot`: the soak pushed its RSSI, battery or packet loss past the
+  rules;
 - `stepped down: REASON`: it gave the role up itself, with no fault to explain it
   (`election.stepped_down`: `ineligible` when its robot fell below the allocation thresholds or
   lost touch with the fleet, `outranked` by a claim it learnt of, ...);
@@ -39,8 +40,9 @@ CHANGE_WINDOW_S = 5.0
 condition's sustain, the step-down, the claim); one that ended earlier does not, even if the
 previous allocator held the role meanwhile."""
 
-ROBOT_FAULTS = ("rssi", "battery")
-"""Faults that push a robot past the allocation thresholds (it steps down, ineligible)."""
+ROBOT_FAULTS = ("rssi", "battery", "loss")
+"""Faults that push a robot past the allocation thresholds or the recovery rules (it steps down,
+ineligible)."""
 
 
 def elections(
