@@ -60,7 +60,7 @@ OTHER_MEANINGS: dict[str, dict[str, str]] = {
     "sdrpeer/recovery/plugins.py": {"standby": "the recovery action 'promote a standby'"},
     "sdrpeer/system/components.py": {"standby": "the `standby:` block of a system file"},
     "sdrpeer/system/composites.py": {"standby": "the `standby:` block of a composite"},
-    "sdrpeer/lab/files.py": {"stopped": "what `lab down` says of an agent process"},
+    "sdrpeer/lab/procs.py": {"stopped": "what `lab down` says of an agent process"},
     "sdrpeer/cli/lab.py": {"stopped": "what `lab status` says of an agent process"},
 }
 """Module -> word -> why the word is not the state or role there."""
