@@ -24,22 +24,26 @@ def hosts(tmp_path: Path) -> Iterator[HostPool]:
     pool.close_all()
 
 
-def refused_pair(hosts: HostPool) -> tuple[HostProc, HostProc]:
-    """A Sequencer (it sends with `send()`) blocked on a `full: block` stream to a Recorder
-    that refuses its key."""
+def sender_to(hosts: HostPool, to: str) -> HostProc:
+    """A Sequencer (it sends with `send()`), active, on a `full: block` stream to `to`."""
     pub, _ = hosts.ready("components.ledger:Sequencer", name="Pub", env=SENDER_KEY)
-    rec, rec_hello = hosts.ready(f"{FX}:Recorder", name="Rec", env=RECEIVER_KEY)
-    assert rec.command("activate")["ok"] is True
     conn = {
         "id": "c1",
         "out": "out",
-        "to": f"tcp://{rec_hello['data']['tcp']}",
+        "to": to,
         "in": "inp",
         "policy": {"push": "fifo", "buffer": 4, "full": "block"},
     }
     assert pub.command("connect", conn=conn)["ok"] is True
     assert pub.command("activate")["ok"] is True
-    return pub, rec
+    return pub
+
+
+def refused_pair(hosts: HostPool) -> tuple[HostProc, HostProc]:
+    """A sender blocked on a stream to a Recorder that refuses its key."""
+    rec, rec_hello = hosts.ready(f"{FX}:Recorder", name="Rec", env=RECEIVER_KEY)
+    assert rec.command("activate")["ok"] is True
+    return sender_to(hosts, f"tcp://{rec_hello['data']['tcp']}"), rec
 
 
 def is_refused(m: Msg) -> bool:
@@ -81,23 +85,13 @@ def test_a_host_blocked_in_send_on_a_refused_stream_exits_at_once(hosts: HostPoo
 
 
 def down_sender(hosts: HostPool) -> HostProc:
-    """A Sequencer blocked in `send()` on a `full: block` stream whose receiver is down (its
-    port answers nothing), not refusing: `deactivate` waits for such a sender (a planned move
-    loses nothing), unlike one on a refused stream."""
-    pub, _ = hosts.ready("components.ledger:Sequencer", name="Pub", env=SENDER_KEY)
+    """A sender blocked on a stream whose receiver is down (its port answers nothing), not
+    refusing: `deactivate` waits for such a sender (a planned move loses nothing), unlike one on
+    a refused stream."""
     with socket.socket() as s:  # a port nothing listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    conn = {
-        "id": "c1",
-        "out": "out",
-        "to": f"tcp://127.0.0.1:{port}",
-        "in": "inp",
-        "policy": {"push": "fifo", "buffer": 4, "full": "block"},
-    }
-    assert pub.command("connect", conn=conn)["ok"] is True
-    assert pub.command("activate")["ok"] is True
-    return pub
+    return sender_to(hosts, f"tcp://127.0.0.1:{port}")
 
 
 def test_exit_is_carried_out_while_a_command_waits_on_a_blocked_sender(hosts: HostPool) -> None:
