@@ -22,6 +22,7 @@ import psutil
 import pytest
 
 from sdrpeer.lab.procs import is_agent_command
+from tests.hostctl import HostPool
 from tests.realnet import RealCluster
 
 SESSION_ENV = "SDRPEER_TEST_SESSION"
@@ -37,6 +38,14 @@ def cluster(tmp_path: Path) -> Iterator[RealCluster]:
         yield net
     finally:
         net.close()
+
+
+@pytest.fixture
+def hosts(tmp_path: Path) -> Iterator[HostPool]:
+    """Component hosts run by hand over their control channel, all closed at teardown."""
+    pool = HostPool(tmp_path)
+    yield pool
+    pool.close_all()
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import psutil
-import pytest
 
 from components.anomaly_detection import AnomalyDetection
 from components.camera import Camera, OmnidirectionalCamera
@@ -107,13 +104,6 @@ async def test_five_components_in_process_alarm_stop_and_leave_the_area() -> Non
     assert cmds.values[-1]["stopped"] is True
     assert poses.values[0]["inside"] is True
     assert len(poses.values) > 10
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def params(values: dict[str, str]) -> list[str]:

@@ -6,23 +6,12 @@ member's failure reported as the composite's ERROR naming the member."""
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
-from pathlib import Path
-
-import pytest
 
 from tests.hostctl import HostPool, HostProc, Msg
 
 FX = "tests.components_fixture"
 CF = "tests.composite_fixture"
 PIPE = f"periodic:100;Src={CF}:Source;Dbl={CF}:Doubler"
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def port_counters(host: HostProc, port: str, key: str, more_than: int) -> dict[str, int]:

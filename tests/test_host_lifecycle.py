@@ -4,22 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import msgpack
-import pytest
 
 from tests.hostctl import HostPool
 
 FX = "tests.components_fixture"
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def test_hello_then_inactive(hosts: HostPool, tmp_path: Path) -> None:

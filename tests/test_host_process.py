@@ -8,7 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -20,13 +20,6 @@ FX = "tests.components_fixture"
 HEAVY = ("aiohttp", "prometheus_client", "yaml", "psutil", "hashlib", "hmac", "cryptography")
 """What a host never imports unless it needs it (hashlib and hmac load OpenSSL: +4 MB idle RSS
 when the key derivations imported them at the top of sdrpeer.keys.derive)."""
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def wait_log(path: Path, text: str, timeout: float = 5.0) -> str:

@@ -5,23 +5,12 @@ even while its component waits in `send()` on that stream (issue 30 item 5)."""
 from __future__ import annotations
 
 import socket
-from collections.abc import Iterator
-from pathlib import Path
-
-import pytest
 
 from tests.hostctl import HostPool, HostProc, Msg
 
 FX = "tests.components_fixture"
 SENDER_KEY = {"SDRPEER_DATA_KEYS": "11" * 32}
 RECEIVER_KEY = {"SDRPEER_DATA_KEYS": "22" * 32}
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def sender_to(hosts: HostPool, to: str) -> HostProc:

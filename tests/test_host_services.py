@@ -4,11 +4,8 @@ re-point and disconnect the binding."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
-
-import pytest
 
 from sdrpeer.keys.derive import data_key
 from tests.components_fixture import ECHO, OTHER_ECHO
@@ -16,13 +13,6 @@ from tests.hostctl import HostPool, HostProc
 
 FX = "tests.components_fixture"
 KEYS = {"SDRPEER_DATA_KEYS": data_key(b"\x05" * 32).hex()}
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def beat_until(

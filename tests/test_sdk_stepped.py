@@ -6,8 +6,6 @@ and a real host runs its component's steps on the `step` command."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -132,13 +130,6 @@ def test_an_on_input_class_is_still_checked() -> None:
 
         class Bad(Component):
             execution = OnInput("missing")
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def test_a_hosted_stepped_component_runs_on_the_step_command(hosts: HostPool) -> None:

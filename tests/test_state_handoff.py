@@ -9,7 +9,7 @@ import contextlib
 import math
 import os
 import signal
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -395,13 +395,6 @@ async def test_a_malformed_state_is_refused_and_the_host_lives_on(sups: Any) -> 
         window=0.1,
     )
     assert (await pe.snapshot())["v"] == 1
-
-
-@pytest.fixture
-def hosts(tmp_path: Path) -> Iterator[HostPool]:
-    pool = HostPool(tmp_path)
-    yield pool
-    pool.close_all()
 
 
 def test_restore_commands_whose_parts_do_not_add_up_are_refused(hosts: HostPool) -> None:
