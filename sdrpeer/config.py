@@ -105,6 +105,11 @@ class AgentConfig:
     """debug, info, warning or error."""
     log_format: str = "text"
     """text (human) or json (one object per line)."""
+    ros2_domain: int | None = None
+    """The fleet's ROS 2 domain (ROS_DOMAIN_ID, 0..101) for hosts of the `ros2` launcher
+    (sdrpeer.ros2.env); every robot of a fleet must give the same. None: the agent's own
+    ROS_DOMAIN_ID if set, else `default_domain("sdrpeer")` (not 0, so that stock ROS 2 nodes on
+    a robot do not join the fleet's graph)."""
     discover: bool = False
     """Find the fleet on the local network by mDNS/DNS-SD (sdrpeer.agent.discovery): advertise
     this robot's gossip address and join the robots found, no `join` needed. Off by default: it
@@ -192,6 +197,13 @@ def _as_priority(value: Any) -> int:
     return check_int("priority", _as_int(value))
 
 
+def _as_domain(value: Any) -> int:
+    n = _as_int(value)
+    if not 0 <= n <= 101:
+        raise ValueError(f"a ROS 2 domain is 0..101, got {n}")
+    return n
+
+
 def _as_float(value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise TypeError("expected a number")
@@ -238,6 +250,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "log_level": _as_str,
     "log_format": _as_str,
     "discover": _as_bool,
+    "ros2_domain": _as_domain,
 }
 _PATH_FIELDS = ("robot_file", "scenario", "key_file", "token_file", "data_dir")
 

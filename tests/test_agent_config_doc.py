@@ -12,7 +12,7 @@ from sdrpeer.cli.agent import add_agent_parser, agent_flag_values
 from sdrpeer.config import FIELDS, build_config, load_agent_config
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "agent-config.md"
-ROW = re.compile(r"^\| `(?P<field>[a-z_]+)` \| (?P<flags>[^|]+) \|", re.MULTILINE)
+ROW = re.compile(r"^\| `(?P<field>[a-z0-9_]+)` \| (?P<flags>[^|]+) \|", re.MULTILINE)
 NOT_FIELDS = {"help", "config", "command"}
 
 
@@ -29,7 +29,7 @@ def test_the_doc_lists_every_field_with_its_flags() -> None:
     rows = {m["field"]: m["flags"] for m in ROW.finditer(DOC.read_text())}
     assert set(rows) == set(FIELDS), "docs/agent-config.md must list exactly the fields"
     for field, flags in rows.items():
-        named = set(re.findall(r"`(--[a-z-]+)`", flags))
+        named = set(re.findall(r"`(--[a-z0-9-]+)`", flags))
         assert named, f"{field}: no flag in the doc's row"
         assert named <= options[field], (
             f"{field}: the doc names {named}, the parser {options[field]}"

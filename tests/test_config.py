@@ -57,6 +57,7 @@ def test_fields_are_the_documented_set() -> None:
         "log_level",
         "log_format",
         "discover",
+        "ros2_domain",
     }
 
 

@@ -73,7 +73,7 @@ def test_unknown_launcher_lists_known() -> None:
     with pytest.raises(LauncherError) as info:
         get_launcher("docker")
     assert "unknown launcher 'docker'" in str(info.value)
-    assert "exec, python, script" in str(info.value)
+    assert "exec, python, ros2, script" in str(info.value)
     assert {"exec", "python", "script"} <= set(known_launchers())
 
 

@@ -57,6 +57,7 @@ from sdrpeer.gossip.udp_shell import GossipShell, open_gossip
 from sdrpeer.gossip.wire import REASONS, Codec, Keyring
 from sdrpeer.keys.derive import data_keys, peer_token, peer_tokens
 from sdrpeer.keys.store import load_ring, save_ring
+from sdrpeer.launch.launchers import offered
 from sdrpeer.monitor.links import LinkTable, distance
 from sdrpeer.monitor.procstats import ProcessTreeMeter, trim_heap
 from sdrpeer.monitor.publish import (
@@ -96,6 +97,7 @@ if TYPE_CHECKING:
     from sdrpeer.monitor.scenario import Scenario
     from sdrpeer.monitor.virtual import VirtualRobot
     from sdrpeer.runtime.manager import InstanceManager
+    from sdrpeer.runtime.spec import InstanceSpec
 
 log = logging.getLogger("sdrpeer.agent")
 
@@ -119,6 +121,9 @@ class Agent:
 
     def __init__(self, config: AgentConfig) -> None:
         self.config = config
+        self.launch_policy, self.launchers_missing = offered(config.launch_policy)
+        """What this robot's hosts may run: the configured launchers less those it cannot run
+        here (`ros2` without ROS 2 installed), each of those with why (said at start)."""
         self.tuning: Tuning = preset(config.preset)
         """Every timer and size of this agent and its parts: the preset `config.preset` names."""
         self.events = EventLog()
@@ -277,13 +282,16 @@ class Agent:
         if not stack_in_background:
             await self._stack
         log.info(
-            "agent %s up: gossip %s:%d, api %s, preset %s",
+            "agent %s up: gossip %s:%d, api %s, preset %s, launchers %s",
             cfg.name,
             addr[0],
             addr[1],
             self.api_url,
             cfg.preset,
+            ", ".join(self.launch_policy.launchers) or "none",
         )
+        for name, why in self.launchers_missing.items():
+            log.warning("launcher %s is configured but not offered: %s", name, why)
 
     async def _start_discovery(self, host: str, port: int) -> None:
         """Announce this agent and join what mDNS finds; a failure is logged, not fatal (the
@@ -332,8 +340,9 @@ class Agent:
             on_fault=self._on_fault,
             on_instance_problem=self._on_fault,
             on_refused=self._on_refused,
-            policy=cfg.launch_policy,
+            policy=self.launch_policy,
         )
+        instances.launch_env = self._launch_env
         instances.data_keys = data_keys(self.keyring.keys) if self.keyring else ()
         instances.remote_address = self._remote_data_address
         self.coordinator = Coordinator(
@@ -482,7 +491,7 @@ class Agent:
             infos,
             election=None if coord is None else coord.election.info(),
             plan=None if coord is None else coord.store.info(),
-            launch=self.config.launch_policy,
+            launch=self.launch_policy,
         )
         self.current = record
         decision, version = publish(self.shell, self.publisher, now, record, force=force)
@@ -647,6 +656,26 @@ class Agent:
     def _wake_coordinator(self) -> None:
         if self.coordinator is not None:
             self.coordinator.wake()
+
+    def _launch_env(self, spec: InstanceSpec) -> dict[str, str]:
+        """A `ros2` host's fleet discovery settings (sdrpeer.ros2.env): the fleet's domain, the
+        other alive robots' addresses as static DDS peers; nothing for other launchers."""
+        if spec.launcher != "ros2":
+            return {}
+        from sdrpeer.ros2.env import Ros2Net, default_domain, process_env  # noqa: PLC0415
+
+        domain = self.config.ros2_domain
+        if domain is None:
+            inherited = os.environ.get("ROS_DOMAIN_ID", "")
+            domain = int(inherited) if inherited.isdigit() else default_domain("sdrpeer")
+        peers: list[str] = []
+        if self.core is not None:
+            peers = [
+                m.addr[0]
+                for m in self.core.members()
+                if m.state == MemberState.ALIVE and m.name != self.name
+            ]
+        return process_env({}, Ros2Net(domain, tuple(peers)))
 
     def _remote_data_address(self, instance: str) -> str | None:
         """The TCP data address another alive robot's record gives for `instance` (None: no

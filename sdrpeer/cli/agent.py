@@ -92,6 +92,13 @@ def add_agent_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--log-level", choices=LOG_LEVELS, help="default info")
     p.add_argument("--log-format", choices=LOG_FORMATS, help="default text")
     p.add_argument(
+        "--ros2-domain",
+        type=int,
+        choices=range(102),
+        metavar="0..101",
+        help="the fleet's ROS 2 domain for ros2 hosts (default: $ROS_DOMAIN_ID, else a fixed one)",
+    )
+    p.add_argument(
         "--discover",
         action=argparse.BooleanOptionalAction,
         default=None,

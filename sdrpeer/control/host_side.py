@@ -152,6 +152,7 @@ class ControlChannel(asyncio.Protocol):
         counters: Callable[[], dict[str, dict[str, int]]],
         *,
         data_counters: Callable[[], dict[str, int]] | None = None,
+        endpoints: Callable[[], dict[str, list[str]]] | None = None,
         clock: Callable[[], float] = time.time,
         heartbeat_interval: float = HEARTBEAT_INTERVAL,
     ) -> None:
@@ -159,6 +160,7 @@ class ControlChannel(asyncio.Protocol):
         self._on_closed = on_closed
         self._counters = counters
         self._data_counters = data_counters
+        self._endpoints = endpoints
         self._clock = clock
         self._interval = heartbeat_interval
         self._decoder = ControlDecoder()
@@ -194,7 +196,8 @@ class ControlChannel(asyncio.Protocol):
     def send_heartbeat(self) -> None:
         """Write a heartbeat with the current counters."""
         data = None if self._data_counters is None else self._data_counters() or None
-        self.send(Heartbeat(self._clock(), self._counters(), data))
+        endpoints = None if self._endpoints is None else self._endpoints()
+        self.send(Heartbeat(self._clock(), self._counters(), data, endpoints))
 
     def close(self) -> None:
         """End the channel from our side (after the reports already queued are written)."""

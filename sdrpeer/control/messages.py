@@ -280,6 +280,10 @@ class Heartbeat:
     data: dict[str, int] | None = field(default=None, metadata=_OMIT)
     """The host's data server: accepted, rejected, refused_auth, deliver_error, shm, acked
     (docs/protocol.md; left out when there is none)."""
+    endpoints: dict[str, list[str]] | None = field(default=None, metadata=_OMIT)
+    """A hosted ROS 2 node's topics and services (sdrpeer.ros2.node): name -> [direction, ROS
+    type], direction `publishes`, `subscribes` or `serves`; their counters are in `ports` under
+    the same names (left out for other hosts)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -37,8 +37,9 @@ def is_file_target(where: str) -> bool:
     return where.endswith(".py") or os.sep in where
 
 
-def load_component_class(target: str, base: type) -> type:
-    """Import `target` and return the Component subclass it names."""
+def load_component_class(target: str, base: type | tuple[type, ...]) -> type:
+    """Import `target` and return the subclass of `base` (or of one of several bases) it
+    names."""
     where, name = split_target(target)
     module = _load_file(target, where) if is_file_target(where) else _load_module(target, where)
     if name is None:
@@ -46,8 +47,8 @@ def load_component_class(target: str, base: type) -> type:
     cls = getattr(module, name, None)
     if cls is None:
         raise LoadError(f"{target}: {where} defines no {name!r}")
-    if not (inspect.isclass(cls) and issubclass(cls, base)) or cls is base:
-        raise LoadError(f"{target}: {name} is not a subclass of {base.__name__}")
+    if not (inspect.isclass(cls) and issubclass(cls, base)) or cls in _bases(base):
+        raise LoadError(f"{target}: {name} is not a subclass of {_names(base)}")
     return cls
 
 
@@ -110,19 +111,27 @@ def _load_file(target: str, where: str) -> ModuleType:
     return module
 
 
-def _single_subclass(target: str, module: ModuleType, base: type) -> type:
+def _bases(base: type | tuple[type, ...]) -> tuple[type, ...]:
+    return base if isinstance(base, tuple) else (base,)
+
+
+def _names(base: type | tuple[type, ...]) -> str:
+    return " or ".join(b.__name__ for b in _bases(base))
+
+
+def _single_subclass(target: str, module: ModuleType, base: type | tuple[type, ...]) -> type:
     """The one subclass of `base` defined in `module`."""
     found = [
         obj
         for obj in vars(module).values()
         if inspect.isclass(obj)
         and issubclass(obj, base)
-        and obj is not base
+        and obj not in _bases(base)
         and obj.__module__ == module.__name__
     ]
     if len(found) == 1:
         return found[0]
     names = ", ".join(sorted(c.__name__ for c in found))
     if not found:
-        raise LoadError(f"{target}: defines no subclass of {base.__name__}")
-    raise LoadError(f"{target}: defines several {base.__name__} subclasses ({names}); name one")
+        raise LoadError(f"{target}: defines no subclass of {_names(base)}")
+    raise LoadError(f"{target}: defines several {_names(base)} subclasses ({names}); name one")

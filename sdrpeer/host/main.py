@@ -20,10 +20,11 @@ import logging
 import os
 import shutil
 import sys
+from collections.abc import Callable
 
 from sdrpeer.control.host_side import arm_parent_death_signal
 from sdrpeer.errors import LoadError, SdrpeerError
-from sdrpeer.host.config import parse_args
+from sdrpeer.host.config import HostConfig, parse_args
 from sdrpeer.host.loader import load_component_class, load_composite_class
 
 log = logging.getLogger("sdrpeer.host")
@@ -40,19 +41,24 @@ def setup_logging(name: str) -> None:
     root.setLevel(logging.INFO)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run a host; returns the exit code."""
+def load_class(config: HostConfig) -> type:
+    """The component class a host runs (LoadError if it cannot be loaded)."""
+    from sdrpeer.sdk import Component  # noqa: PLC0415 - after logging, so import errors show
+
+    if config.composite:
+        return load_composite_class(config.name or "Composite", config.target)
+    return load_component_class(config.target, Component)
+
+
+def main(argv: list[str] | None = None, *, load: Callable[[HostConfig], type] = load_class) -> int:
+    """Run a host; returns the exit code. `load` finds the class (a ROS 2 host wraps a node
+    class: sdrpeer.ros2.host)."""
     config = parse_args(sys.argv[1:] if argv is None else argv, dict(os.environ))
     if config.control_fd is not None:
         arm_parent_death_signal()
     setup_logging(config.name or ("composite" if config.composite else config.target))
-    from sdrpeer.sdk import Component  # noqa: PLC0415 - after logging, so import errors show
-
     try:
-        if config.composite:
-            cls = load_composite_class(config.name or "Composite", config.target)
-        else:
-            cls = load_component_class(config.target, Component)
+        cls = load(config)
     except LoadError as exc:
         print(f"sdrpeer.host: cannot load {exc}", file=sys.stderr)
         if exc.__cause__ is not None:

@@ -69,6 +69,7 @@ class Host:
                 self._on_closed,
                 self._counters,
                 data_counters=self._data_counters,
+                endpoints=getattr(component, "endpoints", None),
             )
             report: ReportTo = self.channel.send
         else:

@@ -21,6 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from sdrpeer.errors import LauncherError
 from sdrpeer.launch.composite import parse_composite
+from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.plugins.registry import Registry
 
 log = logging.getLogger("sdrpeer.launch.launchers")
@@ -141,6 +142,26 @@ for _builtin in (PythonLauncher, ScriptLauncher, ExecLauncher, CompositeLauncher
 def known_launchers() -> list[str]:
     """Every launcher name available: built-ins and plugins."""
     return LAUNCHERS.names()
+
+
+def offered(policy: LaunchPolicy) -> tuple[LaunchPolicy, dict[str, str]]:
+    """`policy` less the launchers this machine cannot run (a launcher may say why with an
+    `available()` method returning None or the reason, e.g. `ros2` without ROS 2 installed), and
+    why each one left out cannot run. An unknown name is left in: the configuration check
+    refuses those."""
+    missing: dict[str, str] = {}
+    for name in policy.launchers:
+        try:
+            probe = getattr(get_launcher(name), "available", None)
+        except LauncherError:
+            continue
+        why = probe() if callable(probe) else None
+        if why:
+            missing[name] = str(why)
+    if not missing:
+        return policy, missing
+    kept = tuple(n for n in policy.launchers if n not in missing)
+    return LaunchPolicy(kept, policy.targets), missing
 
 
 def get_launcher(name: str) -> Launcher:

@@ -6,7 +6,8 @@ cluster key). `python` starts an installed module's class, `script` a Python fil
 any command line: `exec` and `script` can run anything the agent's user can, so they are off
 unless the agent's configuration names them (`allow_launchers`, `--allow-launcher`: launchers
 allowed besides `python`), as Nomad ships `raw_exec` disabled. `allow_targets` narrows the
-`python` launcher to module patterns (shell-style, matched against `package.module:Class`;
+`python` launcher (and `ros2`, whose targets are module classes too) to module patterns
+(shell-style, matched against `package.module:Class`;
 default `*`, any installed module; an empty list turns `python` off). Plugin launchers (entry
 points) run only when named too. A `composite` (sdrpeer.launch.composite) runs Python classes
 in one host: it runs wherever `python` does, each member's target held to `allow_targets`.
@@ -28,6 +29,8 @@ from sdrpeer.launch.composite import parse_composite
 
 DEFAULT_LAUNCHERS: tuple[str, ...] = ("python",)
 DEFAULT_TARGETS: tuple[str, ...] = ("*",)
+PYTHON_LAUNCHERS: tuple[str, ...] = ("python", "ros2")
+"""Launchers whose target is an installed module's class, held to `allow_targets`."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,20 +58,20 @@ class LaunchPolicy:
                 f"enable it in the agent's configuration: allow_launchers: "
                 f"[{', '.join((*extra, launcher))}] (or --allow-launcher {launcher})"
             )
-        if launcher == "python" and isinstance(target, str):
-            return self._target_refusal(target)
+        if launcher in PYTHON_LAUNCHERS and isinstance(target, str):
+            return self._target_refusal(target, launcher)
         if launcher == "composite":  # allowed by name: its members are still python classes
             if not isinstance(target, str):
                 return f"composite target {target!r}: expected a string"
             return self._members_refusal(target)
         return None
 
-    def _target_refusal(self, target: str) -> str | None:
+    def _target_refusal(self, target: str, launcher: str = "python") -> str | None:
         """None if the python target matches one of `targets`, else why not."""
         if any(fnmatch.fnmatchcase(target, p) for p in self.targets):
             return None
         return (
-            f"python target {target!r} matches none of this robot's allow_targets "
+            f"{launcher} target {target!r} matches none of this robot's allow_targets "
             f"({', '.join(self.targets) or 'none'}); add a pattern to allow_targets in "
             f"the agent's configuration (or --allow-target PATTERN)"
         )

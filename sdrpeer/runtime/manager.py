@@ -30,7 +30,7 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -69,6 +69,10 @@ log = logging.getLogger(__name__)
 ACTIONS = INSTANCE_ACTIONS
 
 
+def _no_env(spec: InstanceSpec) -> Mapping[str, str]:
+    return {}
+
+
 class InstanceManager:
     """Owns the desired set and the supervisors of one agent."""
 
@@ -105,6 +109,9 @@ class InstanceManager:
         self.before_stop_timeout = 2.0
         self.data_keys: tuple[bytes, ...] = ()
         """What new hosts authenticate data connections with (`set_data_keys` on rotation)."""
+        self.launch_env: Callable[[InstanceSpec], Mapping[str, str]] = _no_env
+        """Variables the agent adds to one host's environment (a `ros2` host's discovery
+        settings: sdrpeer.ros2.env), asked when the host is started."""
         self.reconciler = Reconciler(max_starting=config.max_starting)
         self._desired: dict[str, InstanceSpec] = {}
         self._adhoc = AdHoc()
@@ -320,6 +327,7 @@ class InstanceManager:
                     ),
                     on_refused=lambda s, report: self.on_refused(s.name, report),
                     data_keys=lambda: self.data_keys,
+                    launch_env=self.launch_env,
                 )
                 self._sups[a.instance] = sup
             sup.spec = spec

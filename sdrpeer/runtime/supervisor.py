@@ -31,7 +31,7 @@ import socket
 import subprocess
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +93,7 @@ class Supervisor:
         on_problem: Callable[[Supervisor, str], None] = lambda s, c: None,
         on_refused: Callable[[Supervisor, messages.Refused], None] = lambda s, r: None,
         data_keys: Callable[[], Sequence[bytes]] = tuple,
+        launch_env: Callable[[InstanceSpec], Mapping[str, str]] = lambda s: {},
     ) -> None:
         self.spec = spec
         self.data_dir = data_dir
@@ -108,6 +109,7 @@ class Supervisor:
         """Connection id -> why its receiver refuses it now: `{"error", "ts", "count"}` (the
         last reason, when it was reported, refusals in all); gone once it got through."""
         self.data_keys = data_keys  # what a new host authenticates its data connections with
+        self.launch_env = launch_env  # what the agent adds to a new host's environment
         self.faults: deque[problems.Fault] = deque(maxlen=config.max_faults)
         """The last faults reported, oldest first."""
         self.policy = RestartPolicy(config.restart)
@@ -291,7 +293,7 @@ class Supervisor:
             self._run_dir = private_dir(self.name)
         parent, child = socket.socketpair()
         env = host_env(
-            os.environ,
+            {**os.environ, **self.launch_env(self.spec)},
             self.spec,
             fd=child.fileno(),
             data_host=self.config.data_host,

@@ -1,0 +1,288 @@
+"""Bridges between ROS 2 topics and sdrpeer ports: components that the `ros2` launcher hosts.
+
+How it works: `FromRos<Type>` subscribes to a ROS 2 topic and writes each message to its OutPort
+`out`; `ToRos<Type>` publishes every frame its InPort `input` receives on a ROS 2 topic. `<Type>` is
+one of the standard robot types (`Pose`, `Velocity`, `Odometry`, `RangeScan`, `Image`,
+`BatteryState`: typed ports, converted by sdrpeer.ros2.types); `FromRos`/`ToRos` carry any ROS
+type given by `ros_type` (`std_msgs/msg/String`) as the untyped map of its fields. A system file
+declares them with a `ros2:` end on a connection (sdrpeer.system.connections), and they are
+placed, moved and recovered like any component.
+
+The ROS side lives from initialize to finalize: a standby already has its subscription or
+publisher matched with the topic's other ends, so a failover does not wait for DDS discovery; a
+`FromRos` bridge writes to its port only while ACTIVE, a `ToRos` bridge publishes only what
+arrives while ACTIVE. Received messages cross from rclpy's executor thread to the host's asyncio
+loop in batches (one wake-up for all that arrived meanwhile). QoS comes from the params
+`reliability` (reliable, best_effort), `depth` (keep last N) and `durability` (volatile,
+transient_local); the system file derives them from the connection's policy (docs/ros2.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import logging
+from collections import deque
+from typing import Any, ClassVar
+
+from sdrpeer.ros2.types import fill, mapping_for, message_to_map
+from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Periodic
+from sdrpeer.sdk.errors import NoData
+from sdrpeer.sdk.robot_types import BatteryState, Image, Odometry, Pose, RangeScan, Velocity
+
+__all__ = [
+    "FromRos",
+    "FromRosBatteryState",
+    "FromRosImage",
+    "FromRosOdometry",
+    "FromRosPose",
+    "FromRosRangeScan",
+    "FromRosVelocity",
+    "ToRos",
+    "ToRosBatteryState",
+    "ToRosImage",
+    "ToRosOdometry",
+    "ToRosPose",
+    "ToRosRangeScan",
+    "ToRosVelocity",
+    "bridge_class_name",
+    "import_ros_type",
+]
+
+log = logging.getLogger("sdrpeer.ros2.bridge")
+RELIABILITY = ("reliable", "best_effort")
+DURABILITY = ("volatile", "transient_local")
+
+
+def import_ros_type(name: str) -> type:
+    """The rclpy class of `pkg/msg/Name` (or `pkg/Name`); ValueError naming what is missing."""
+    parts = name.split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or not all(p.isidentifier() for p in parts):
+        raise ValueError(f"ROS type {name!r}: expected pkg/msg/Name")
+    try:
+        module = importlib.import_module(f"{parts[0]}.{parts[1]}")
+    except ImportError:
+        raise ValueError(f"ROS type {name!r}: package {parts[0]!r} is not installed") from None
+    cls = getattr(module, parts[2], None)
+    if not isinstance(cls, type):
+        raise ValueError(f"ROS type {name!r}: {parts[0]}.{parts[1]} has no {parts[2]}")
+    return cls
+
+
+def bridge_class_name(direction: str, kind: str | None) -> str:
+    """`FromRosOdometry` / `ToRos`: the bridge class for a direction (`from`: ROS -> port,
+    `to`: port -> ROS) and a standard type's short name (None: any ROS type, untyped)."""
+    return ("FromRos" if direction == "from" else "ToRos") + (kind or "")
+
+
+class _Bridge(Component):
+    """What both directions share: the topic, the QoS, the executor."""
+
+    topic = Param(str, "", "the ROS 2 topic (absolute, e.g. /odom)")
+    ros_type = Param(str, "", "the ROS 2 type (pkg/msg/Name); default: the port type's mapping")
+    reliability = Param(str, "reliable", "ROS 2 QoS reliability", choices=RELIABILITY)
+    depth = Param(int, 10, "ROS 2 QoS history depth (keep last N)", min=1)
+    durability = Param(str, "volatile", "ROS 2 QoS durability", choices=DURABILITY)
+    stuck_after = Param(float, 2.0, "seconds rclpy's executor may sit in a callback", min=0.1)
+    kind: ClassVar[type | None] = None
+    """The standard robot type of the port (None: untyped maps)."""
+
+    def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
+        super().__init__(name, params)
+        self._mapping = None if self.kind is None else mapping_for(self.kind)
+        self._spinner: Any = None
+        self._node: Any = None
+        self.frames = 0
+        self.bytes_hint = 0
+
+    def _ros_class(self) -> type:
+        p = self.param_values()
+        name = p["ros_type"] or ("" if self._mapping is None else self._mapping.ros_type)
+        if not name:
+            raise ValueError(f"{self.instance_name}: an untyped bridge needs ros_type")
+        return import_ros_type(name)
+
+    def _qos(self) -> Any:
+        from rclpy.qos import (  # noqa: PLC0415 - a ROS 2 host only
+            DurabilityPolicy,
+            HistoryPolicy,
+            QoSProfile,
+            ReliabilityPolicy,
+        )
+
+        p = self.param_values()
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=p["depth"],
+            reliability=ReliabilityPolicy.RELIABLE
+            if p["reliability"] == "reliable"
+            else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL
+            if p["durability"] == "transient_local"
+            else DurabilityPolicy.VOLATILE,
+        )
+
+    async def on_initialize(self) -> None:
+        from sdrpeer.ros2.spin import Spinner  # noqa: PLC0415 - loads rclpy
+
+        topic = self.param_values()["topic"]
+        if not topic.startswith("/"):
+            raise ValueError(f"{self.instance_name}: topic {topic!r} must be absolute (/name)")
+        ros_class = self._ros_class()
+        self._spinner = Spinner(executor="events")
+        await self._spinner.call(lambda: self._make(ros_class))
+
+    def _make(self, ros_class: type) -> None:
+        """In the executor thread: the node and the endpoint."""
+        from rclpy.node import Node  # noqa: PLC0415
+
+        node = Node(_node_name(self.instance_name))
+        self._node = node
+        self._spinner.watch(node)
+        self._endpoint(node, ros_class)
+        self._spinner.executor.add_node(node)
+
+    def _endpoint(self, node: Any, ros_class: type) -> None:
+        raise NotImplementedError
+
+    def on_execute(self) -> None:
+        if self._spinner is not None:
+            self._spinner.check(float(self.param_values()["stuck_after"]))
+
+    async def on_finalize(self) -> None:
+        spinner, self._spinner = self._spinner, None
+        if spinner is None:
+            return
+        if spinner.alive and self._node is not None:
+            node = self._node
+            await spinner.call(lambda: (spinner.executor.remove_node(node), node.destroy_node()))
+        spinner.close()
+
+    def endpoints(self) -> dict[str, list[str]]:
+        """The bridged topic: name -> [direction, ROS type] (shown by `sdrpeer port list`)."""
+        p = self.param_values()
+        ros_type = p["ros_type"] or ("" if self._mapping is None else self._mapping.ros_type)
+        return {p["topic"]: [self._direction, ros_type]}
+
+    _direction: ClassVar[str] = ""
+
+    def port_counters(self) -> dict[str, dict[str, int]]:
+        out = super().port_counters()
+        key = "in" if self._direction == "subscribes" else "out"
+        out[self.param_values()["topic"]] = {f"frames_{key}": self.frames}
+        return out
+
+
+def _node_name(instance: str) -> str:
+    """A valid ROS 2 node name for an instance (letters, digits and underscores)."""
+    name = "".join(c if c.isalnum() else "_" for c in instance)
+    return name if name[:1].isalpha() else f"n_{name}"
+
+
+class _FromRos(_Bridge):
+    """ROS 2 topic -> OutPort `out` (see the module's doc)."""
+
+    execution = Periodic(hz=4.0)  # only watches the executor: frames are written as they come
+    _direction = "subscribes"
+    out = OutPort("frames from ROS (typed in each FromRos<Type>)")
+
+    def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
+        super().__init__(name, params)
+        self._batch: deque[Any] = deque()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._active = False
+
+    async def on_initialize(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        await super().on_initialize()
+
+    def _endpoint(self, node: Any, ros_class: type) -> None:
+        node.create_subscription(ros_class, self.param_values()["topic"], self._heard, self._qos())
+
+    def _heard(self, msg: Any) -> None:
+        """In the executor thread: queue the converted value; wake the loop once per batch."""
+        if not self._active:
+            return
+        mapping = self._mapping
+        value = message_to_map(msg) if mapping is None else mapping.from_ros(msg)
+        batch = self._batch
+        batch.append(value)
+        if len(batch) == 1 and self._loop is not None:
+            self._loop.call_soon_threadsafe(self._flush)
+
+    def _flush(self) -> None:
+        """On the loop: write everything that arrived."""
+        batch, out = self._batch, self.outport("out")
+        while batch:
+            out.write(batch.popleft())
+            self.frames += 1
+
+    def on_activated(self) -> None:
+        self._active = True
+
+    def on_deactivated(self) -> None:
+        self._active = False
+        self._batch.clear()
+
+    def on_aborting(self) -> None:
+        self.on_deactivated()
+
+
+class _ToRos(_Bridge):
+    """InPort `input` -> ROS 2 topic (see the module's doc)."""
+
+    execution = OnInput("input")
+    _direction = "publishes"
+    input = InPort("frames to ROS (typed in each ToRos<Type>)")
+
+    def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
+        super().__init__(name, params)
+        self._pub: Any = None
+        self._msg_class: type | None = None
+
+    def _endpoint(self, node: Any, ros_class: type) -> None:
+        self._msg_class = ros_class
+        self._pub = node.create_publisher(ros_class, self.param_values()["topic"], self._qos())
+
+    def on_execute(self) -> None:
+        super().on_execute()
+        port, pub, cls = self.inport("input"), self._pub, self._msg_class
+        if pub is None or cls is None:
+            return
+        to_ros = None if self._mapping is None else self._mapping.to_ros
+        while True:
+            try:
+                value = port.get_nowait()
+            except NoData:
+                return
+            fields = to_ros(value) if to_ros is not None else value
+            pub.publish(fill(cls(), fields))  # rcl_publish may be called from any thread
+            self.frames += 1
+
+
+def _from_ros(kind: type | None) -> type[_FromRos]:
+    name = bridge_class_name("from", None if kind is None else kind.__name__)
+    return type(name, (_FromRos,), {"kind": kind, "out": OutPort("frames from ROS", type=kind)})
+
+
+def _to_ros(kind: type | None) -> type[_ToRos]:
+    name = bridge_class_name("to", None if kind is None else kind.__name__)
+    return type(name, (_ToRos,), {"kind": kind, "input": InPort("frames to ROS", type=kind)})
+
+
+FromRos = _from_ros(None)
+FromRosPose = _from_ros(Pose)
+FromRosVelocity = _from_ros(Velocity)
+FromRosOdometry = _from_ros(Odometry)
+FromRosRangeScan = _from_ros(RangeScan)
+FromRosImage = _from_ros(Image)
+FromRosBatteryState = _from_ros(BatteryState)
+ToRos = _to_ros(None)
+ToRosPose = _to_ros(Pose)
+ToRosVelocity = _to_ros(Velocity)
+ToRosOdometry = _to_ros(Odometry)
+ToRosRangeScan = _to_ros(RangeScan)
+ToRosImage = _to_ros(Image)
+ToRosBatteryState = _to_ros(BatteryState)
