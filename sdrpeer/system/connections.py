@@ -13,6 +13,8 @@ bound once, and its policy may only set `encrypt`. The policy is checked by the 
 given, else the sender's profiled rate for that port, else unknown (None). The same stream given
 twice is an error. An end naming a member of a composite (`Cam.image`, sdrpeer.system.composites)
 is checked against the member's class and becomes its composite's port (`Vision`, `Cam.image`).
+An end may be a ROS 2 topic instead (`from: {ros2: /odom}`): the connection then runs to or from
+a bridge component made for it (sdrpeer.system.ros2_ends).
 `constraints:` holds the connection's own Table II bounds (rssi_above, jitter_below,
 distance_below, loss_below, delay_below), which narrow the fleet's when its ends run on two robots.
 """
@@ -30,6 +32,7 @@ from sdrpeer.system.components import ComponentEntry
 from sdrpeer.system.composites import Member
 from sdrpeer.system.model import ConnectionDef, Thresholds
 from sdrpeer.system.problems import MISSING, Problems
+from sdrpeer.system.ros2_ends import bridge_for, is_ros2_end, read_ros2_end
 from sdrpeer.system.sections import LINK_KEYS, read_thresholds
 from sdrpeer.system.values import parse_bandwidth
 
@@ -59,15 +62,21 @@ def read_connections(
         fields = p.mapping(item, where, CONNECTION_KEYS, ("from", "to"))
         if fields is None:
             continue
-        sender = _end(p, fields, "from", where, components, members=members)
-        receiver = _end(p, fields, "to", where, components, members=members)
-        _same_type(p, (item, where), components, sender, receiver)
-        service = _service(p, (item, where), components, sender, receiver)
         policy: Any = ()
         if "policy" in fields:
             policy = _policy(p, fields["policy"], f"{where}.policy")
-            if service and any(key != "encrypt" for key, _ in policy):
-                p.add(fields["policy"], f"{where}.policy", "a service binding sets only encrypt")
+        ros = [k for k in ("from", "to") if is_ros2_end(p, fields.get(k))]
+        if ros:
+            sender, receiver = _ros2_connection(
+                p, fields, ros, where, components=components, members=members, policy=policy
+            )
+        else:
+            sender = _end(p, fields, "from", where, components, members=members)
+            receiver = _end(p, fields, "to", where, components, members=members)
+        _same_type(p, (item, where), components, sender, receiver)
+        service = _service(p, (item, where), components, sender, receiver)
+        if "policy" in fields and service and any(key != "encrypt" for key, _ in policy):
+            p.add(fields["policy"], f"{where}.policy", "a service binding sets only encrypt")
         if service and sender in bound:
             p.add(item, where, f"{'.'.join(sender)} is bound already (line {bound[sender]})")
         elif service:
@@ -146,6 +155,46 @@ def _end(
             return MISSING, MISSING
         return member.composite, f"{comp}.{port}"
     return comp, port
+
+
+def _ros2_connection(
+    p: Problems,
+    fields: dict[str, yaml.Node],
+    ros: list[str],
+    where: str,
+    *,
+    components: dict[str, ComponentEntry],
+    members: Mapping[str, Member],
+    policy: tuple[tuple[str, Any], ...],
+) -> tuple[tuple[str, str], tuple[str, str]]:
+    """(sender, receiver) of a connection with a `ros2:` end (sdrpeer.system.ros2_ends): the
+    bridge at that end, made on first use."""
+    missing = (MISSING, MISSING)
+    if len(ros) == 2:
+        p.add(
+            fields["from"],
+            where,
+            "both ends are ROS 2 topics: a connection needs one sdrpeer end (remap in ROS 2)",
+        )
+        return missing, missing
+    key = ros[0]
+    other_key = "to" if key == "from" else "from"
+    end = read_ros2_end(p, fields[key], f"{where}.{key}")
+    other = _end(p, fields, other_key, where, components, members=members)
+    if end is None or MISSING in other:
+        return missing, missing
+    info = components[other[0]].info
+    peer_type = None if info is None else info.port_type(other[1])
+    bridge = bridge_for(
+        p,
+        end,
+        key=key,
+        field=f"{where}.{key}",
+        peer_type=peer_type,
+        policy=dict(policy),
+        components=components,
+    )
+    return (bridge, other) if key == "from" else (other, bridge)
 
 
 def _same_type(
