@@ -24,7 +24,8 @@ def rclpy_messages(path: Path) -> list[tuple[str, int, Any]]:
     out = []
     with path.open("rb") as f:
         for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
-            assert schema is not None and channel.message_encoding == "cdr"
+            assert schema is not None
+            assert channel.message_encoding == "cdr"
             ros = deserialize_message(message.data, rclpy_class(schema.name))
             out.append((channel.topic, message.publish_time, ros))
     return out

@@ -128,7 +128,8 @@ def test_a_ros2_recording_is_rosbag2s_and_reads_back_as_the_sdrpeer_format(tmp_p
     assert (channel.topic, channel.message_encoding) == ("/Odo/pose", "cdr")
     assert (schema.name, schema.encoding) == ("geometry_msgs/msg/PoseStamped", "ros2msg")
     assert schema.data.decode() == DEFINITIONS["geometry_msgs/msg/PoseStamped"]
-    assert channel.metadata["instance"] == "Odo" and channel.metadata["port"] == "pose"
+    assert channel.metadata["instance"] == "Odo"
+    assert channel.metadata["port"] == "pose"
     by_rosbags = rosbags_messages(path)
     assert [(t, r) for t, r, _ in by_rosbags] == [
         ("/Odo/pose", "geometry_msgs/msg/PoseStamped")
@@ -200,4 +201,5 @@ def test_a_battery_percentage_is_a_fraction_there(tmp_path):
     codec = codec_for(message_type(BatteryState).type_id)  # type: ignore[union-attr]
     assert codec is not None
     ros = deserialize_message(codec.encode(_wire(VALUES[-1])), rclpy_class(codec.ros_type))
-    assert math.isclose(ros.percentage, 0.5) and ros.power_supply_status == 1
+    assert math.isclose(ros.percentage, 0.5)
+    assert ros.power_supply_status == 1
