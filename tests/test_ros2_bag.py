@@ -5,6 +5,7 @@ not a recording of either format is refused by name before anything is read out.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import sys
 from pathlib import Path
@@ -30,7 +31,15 @@ from sdrpeer.ros2.types import MAPPED
 from sdrpeer.sdk.robot_types import BatteryState, Image, Odometry, Pose, RangeScan, Velocity
 from sdrpeer.sdk.typed import message_type
 from tests.ros2_readers import rclpy_class, rclpy_messages, rosbags_messages
-from tools.gen_ros2_msgdefs import full_text
+
+_SPEC = importlib.util.spec_from_file_location(
+    "gen_ros2_msgdefs", Path(__file__).resolve().parent.parent / "tools" / "gen_ros2_msgdefs.py"
+)
+assert _SPEC is not None
+assert _SPEC.loader is not None
+_GEN = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(_GEN)
+full_text = _GEN.full_text
 
 pytestmark = pytest.mark.filterwarnings(  # rclpy's type support loads lark, which imports sre_parse
     "ignore::DeprecationWarning:lark.*"
