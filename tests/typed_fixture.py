@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from sdrpeer.sdk import Component, Image, InPort, OnInput, OutPort, Param, Periodic, Pose
+from sdrpeer.sdk.robot_types import Odometry, Velocity
+from sdrpeer.sdk.typed import MessageType, message_type
+
+_ODOMETRY = message_type(Odometry)
+assert _ODOMETRY is not None
+ODOMETRY: MessageType = _ODOMETRY
 
 
 class PosePub(Component):
@@ -50,3 +57,32 @@ class ImageRec(Component):
         """Take every image waiting."""
         while self.image.qsize():
             self.image.get_nowait()
+
+
+class OdomPub(Component):
+    """Publishes an Odometry at `rate` Hz, its numbers counting up with `n` (x = n, y = 2n,
+    vx = n / 10, wz = -n / 100), and keeps every value it sent (as its field arrays)."""
+
+    execution = Periodic(param="rate")
+    rate = Param(float, 50.0, "odometry messages per second")
+    odom = OutPort("where we are and how we move", type=Odometry)
+
+    def on_initialize(self) -> None:
+        """Nothing sent yet."""
+        self.n = 0
+        self.sent: list[Any] = []
+
+    def on_execute(self) -> None:
+        """The next odometry."""
+        self.n += 1
+        n, now = float(self.n), time.time()
+        pose = Pose(now, "odom", n, 2 * n, 0.0, 0.0, 0.0, 0.6, 0.8)
+        value = Odometry(
+            now, "odom", "base_link", pose, Velocity(now, "base_link", n / 10, wz=-n / 100)
+        )
+        self.odom.write(value)
+        self.sent.append(ODOMETRY.flat(value))
+
+    def on_snapshot(self) -> list[Any]:
+        """Every value sent so far (field arrays)."""
+        return self.sent

@@ -5,9 +5,12 @@ which does the work with the cluster's data keys; this side never holds one. `li
 robot of the cluster (their API addresses from /v1/members). `print` and `record` read the
 agent's tap stream (msgpack: a header, one `[index, received_ns, seq, value]` per frame, an end
 map); `record` writes it to an MCAP file as it arrives (sdrpeer.ports.mcapfile), one channel
-per port. `replay` reads a recording and streams its messages to the agent's feed in file
-order, each at its recorded log time scaled by `--speed` (0: as fast as the ports take them),
-with the bytes as recorded.
+per port, in format `sdrpeer` (msgpack) or `ros2` (`--format ros2`: CDR, rosbag2's; every port
+must be of a mapped type, checked on the tap's header before the file is opened). `replay`
+reads a recording of either format and streams its messages to the agent's feed in file order,
+each at its recorded log time scaled by `--speed` (0: as fast as the ports take them), as the
+value's msgpack (a `sdrpeer` recording's bytes as recorded; a `ros2` one's decoded first, the
+whole file before anything is sent, so a damaged message sends nothing).
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from typing import Any
 
 from sdrpeer.cli.common import client_for, parse_assignment, print_json
 from sdrpeer.client import AgentClient
-from sdrpeer.errors import ApiError, ConfigError, SdrpeerError
+from sdrpeer.errors import ApiError, ConfigError, PortToolError, SdrpeerError
 from sdrpeer.vocabulary import MemberState
 
 RECORD_POLICY = {"push": "fifo", "full": "overwrite", "buffer": 256}
@@ -167,26 +170,37 @@ def cmd_inject(args: argparse.Namespace) -> int:
 
 
 def record(
-    client: AgentClient, ports: list[str], path: Path, body: dict[str, Any]
+    client: AgentClient,
+    ports: list[str],
+    path: Path,
+    body: dict[str, Any],
+    fmt: str = "sdrpeer",
 ) -> dict[str, Any]:
     """Tap `ports` (the tap's `body`: count, duration, policy) and write what comes to an MCAP
-    file at `path`; what was recorded: frames, bytes, seconds, the first and last log times,
-    the end map (why it ended, dropped)."""
-    import msgpack  # noqa: PLC0415 - the parser stays light (sdrpeer.cli.main)
+    file at `path` in format `fmt` (`sdrpeer` or `ros2`); what was recorded: frames, bytes,
+    seconds, the first and last log times, the end map (why it ended, dropped). PortToolError,
+    and no file, when a port cannot be recorded in that format."""
+    from sdrpeer.ports import mcapfile  # noqa: PLC0415 - loads mcap
 
-    from sdrpeer.ports.mcapfile import RecordingWriter, publish_ns  # noqa: PLC0415 - loads mcap
-
+    refused = mcapfile.refusal(fmt, [])
+    if refused:
+        raise ConfigError(refused)
     stream = client.stream("/v1/ports/tap", {"ports": ports, **body})
     header = next(stream, None)
     if not isinstance(header, dict):
         raise SdrpeerError("the agent's tap sent no header")
     tapped = header["ports"]
-    pack = msgpack.Packer().pack
+    refused = mcapfile.refusal(fmt, [(p["ref"], p["type"]) for p in tapped])
+    if refused:
+        close = getattr(stream, "close", None)
+        if close is not None:
+            close()  # the tap's connections go with the stream
+        raise PortToolError(refused)
     end: dict[str, Any] = {"end": "stream ended"}
     first = last = 0
     started = time.monotonic()
     with path.open("wb") as f:
-        writer = RecordingWriter(f)
+        writer = mcapfile.RecordingWriter(f, fmt=fmt)
         channels = [writer.add_port(p["ref"], p["type"], p["fields"], p["robot"]) for p in tapped]
         try:
             for item in stream:
@@ -194,8 +208,9 @@ def record(
                     end = item
                     break
                 index, received, seq, value = item
-                published = publish_ns(value, tapped[index]["fields"], received)
-                writer.write(channels[index], received, published, seq, pack(value))
+                published = mcapfile.publish_ns(value, tapped[index]["fields"], received)
+                data = writer.encode(channels[index], value)
+                writer.write(channels[index], received, published, seq, data)
                 first, last = first or received, received
         except KeyboardInterrupt:
             end = {"end": "interrupted"}
@@ -219,10 +234,10 @@ def cmd_record(args: argparse.Namespace) -> int:
         body["count"] = args.count
     if args.duration is not None:
         body["duration"] = args.duration
-    done = record(client_for(args), args.ports, args.output, body)
+    done = record(client_for(args), args.ports, args.output, body, args.format)
     end = done["end"]
     print(
-        f"recorded {done['frames']} frames ({done['bytes'] / 1e6:.1f} MB) of "
+        f"recorded {done['frames']} frames ({done['bytes'] / 1e6:.1f} MB, format {args.format}) of "
         f"{done['ports']} port(s) in {done['seconds']:.1f} s to {args.output}"
         f" ({end.get('end')}; dropped {end.get('dropped', 0)})"
     )
@@ -272,12 +287,15 @@ def replay(
     """Feed the recording at `path` into ports (a channel into the port of its name, or the one
     `mapping` gives) at its recorded pace scaled by `speed` (0: at once); frames per channel,
     the agent's answer and the seconds it took."""
-    from sdrpeer.ports.mcapfile import UNTYPED, recorded_channels  # noqa: PLC0415 - loads mcap
+    from sdrpeer.ports import mcapfile  # noqa: PLC0415 - loads mcap
 
     if speed < 0:
         raise ConfigError(f"--speed: expected 0 (as fast as possible) or more, got {speed}")
     try:
-        schemas = recorded_channels(path)
+        schemas = mcapfile.recorded_channels(path)
+        if mcapfile.is_ros2(path):
+            for _ in mcapfile.read_recording(path):
+                pass  # every message decodes before any is sent
     except ValueError as e:  # its message names the file
         raise SdrpeerError(str(e)) from None
     except OSError as e:
@@ -288,8 +306,14 @@ def replay(
         has = ", ".join(topics)
         raise ConfigError(f"--map: {', '.join(unknown)} not in {path} (it has {has})")
     targets = [mapping.get(t, t) for t in topics]
+    unnamed = [t for t, to in zip(topics, targets, strict=True) if to.startswith("/")]
+    if unnamed:
+        raise ConfigError(
+            f"{path}: {', '.join(unnamed)} name no port (a bag recorded by ROS): "
+            f"give --map {unnamed[0]}=Instance.port"
+        )
     index = {t: i for i, t in enumerate(topics)}
-    types = ["" if schemas[t] == UNTYPED else schemas[t] for t in topics]
+    types = ["" if schemas[t] == mcapfile.UNTYPED else schemas[t] for t in topics]
     query = urllib.parse.urlencode([*(("port", t) for t in targets), *(("type", t) for t in types)])
     counts: dict[str, int] = {}
     started = time.monotonic()
@@ -359,6 +383,12 @@ def add_port_parsers(
     p = psub.add_parser("record", parents=[client, limits, policy], help="record to MCAP")
     p.add_argument("ports", nargs="+", metavar="Instance.port")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.mcap")
+    p.add_argument(
+        "--format",
+        choices=("sdrpeer", "ros2"),
+        default="sdrpeer",
+        help="sdrpeer: msgpack values (any port); ros2: rosbag2's CDR (ports of mapped types)",
+    )
     p.set_defaults(func=cmd_record)
     p = psub.add_parser("replay", parents=[client], help="feed an MCAP recording into ports")
     p.add_argument("file", type=Path, metavar="FILE.mcap")
