@@ -55,8 +55,16 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Mark this pytest process's children (an xdist worker marks its own)."""
+    """Mark this pytest process's children (an xdist worker marks its own), and give this
+    process's ROS 2 participants (the probe, the hosts and agents it starts) a DDS domain of their
+    own, discovery kept on the machine: the two workers of one run, and two runs side by side,
+    do not hear each other's topics."""
     os.environ[SESSION_ENV] = f"{os.getpid()}-{secrets.token_hex(8)}"
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+    run = os.getppid() if "PYTEST_XDIST_WORKER" in os.environ else os.getpid()
+    index = int(worker) if worker.isdigit() else 0
+    os.environ["ROS_DOMAIN_ID"] = str(20 + (run % 20) * 4 + index % 4)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 
 def left_behind(mark: str) -> list[psutil.Process]:

@@ -25,7 +25,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("foundation", {"units", "yamlfile", "vocabulary", "eventlog"}),
     ("plugins", {"plugins"}),
     ("primitives", {"keys", "launch", "control", "sdk", "client", "netlab"}),
-    ("codecs and transports", {"record", "gossip", "dataplane", "ros2"}),
+    ("codecs and transports", {"record", "gossip", "dataplane"}),
     ("processes and settings", {"config", "runtime", "host"}),
     ("ROS 2 hosting and mapping", {"ros2"}),
     ("system model", {"system"}),

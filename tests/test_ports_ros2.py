@@ -10,7 +10,6 @@ import asyncio
 from pathlib import Path
 
 import msgpack
-import pytest
 from mcap.writer import Writer
 
 from sdrpeer.cli.main import main as cli_main
@@ -23,9 +22,6 @@ from tests.wait import until_answer, until_async
 
 __all__ = ["agent"]  # the fixture
 
-pytestmark = pytest.mark.filterwarnings(  # rclpy's type support loads lark, which imports sre_parse
-    "ignore::DeprecationWarning:lark.*"
-)
 ODOM = spec("Odom", "tests.typed_fixture:OdomPub", rate=100.0)
 
 

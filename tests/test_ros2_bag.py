@@ -41,9 +41,6 @@ _GEN = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(_GEN)
 full_text = _GEN.full_text
 
-pytestmark = pytest.mark.filterwarnings(  # rclpy's type support loads lark, which imports sre_parse
-    "ignore::DeprecationWarning:lark.*"
-)
 
 VALUES: list[Any] = [
     Pose(1.5, "map", 1.0, 2.0, 3.0, 0.0, 0.0, 0.6, 0.8),

@@ -39,6 +39,8 @@ from sdrpeer.sdk import Component, Param, Periodic
 __all__ = ["HIDDEN_SERVICES", "HIDDEN_TOPICS", "Ros2Node", "ros_type_name"]
 
 log = logging.getLogger("sdrpeer.ros2.node")
+RESCAN: Final = 1.0
+"""Seconds between looks for endpoints the node made after it was constructed."""
 SAMPLE: Final = 32
 """One message in this many is serialized to learn the size of its topic's messages."""
 HIDDEN_TOPICS: Final = frozenset({"/rosout", "/parameter_events"})
@@ -143,6 +145,7 @@ class Ros2Node(Component):
         self._spinner: Any = None
         self._timer: Any = None
         self._endpoints: dict[str, _Counted] = {}
+        self._wrapped: set[int] = set()  # ids of the endpoints already counted
 
     def convert_params(self, values: Mapping[str, Any]) -> dict[str, Any]:
         """Own params converted as usual; the rest kept as ROS parameters (see the doc)."""
@@ -212,8 +215,9 @@ class Ros2Node(Component):
         """Construct the node, count its endpoints, spin it."""
         node = self.node_class()
         self.node = node
-        self._count(node)
+        self._count()
         self._timer = self._spinner.watch(node)
+        node.create_timer(RESCAN, self._count)  # endpoints made later (on_configure, ...)
         self._spinner.executor.add_node(node)
 
     def _destroy(self) -> None:
@@ -223,6 +227,7 @@ class Ros2Node(Component):
         self._spinner.executor.remove_node(node)
         node.destroy_node()
         self._endpoints.clear()
+        self._wrapped.clear()
 
     async def _stop(self) -> None:
         if self._spinner is None or not self._spinner.alive or self.node is None:
@@ -244,6 +249,7 @@ class Ros2Node(Component):
             if strict:
                 raise RuntimeError(f"lifecycle {name}: {exc}") from exc
             return
+        self._count()
         if strict and result != TransitionCallbackReturn.SUCCESS:
             raise RuntimeError(f"lifecycle {name} returned {getattr(result, 'name', result)}")
 
@@ -258,29 +264,40 @@ class Ros2Node(Component):
             if not result.successful:
                 log.warning("%s: parameter refused: %s", self.instance_name, result.reason)
 
-    def _count(self, node: Any) -> None:
-        """Wrap the node's publishers and subscription callbacks to count their traffic."""
+    def _count(self) -> None:
+        """Wrap the node's publishers and subscription callbacks not yet counted."""
+        node = self.node
+        if node is None:
+            return
         for pub in list(node.publishers):
-            if pub.topic_name in HIDDEN_TOPICS:
+            if pub.topic_name in HIDDEN_TOPICS or not self._new(pub):
                 continue
             c = self._endpoints.setdefault(
                 pub.topic_name, _Counted("publishes", ros_type_name(pub.msg_type))
             )
             pub.publish = _counting_publish(pub.publish, c)
         for sub in list(node.subscriptions):
-            if sub.topic_name in HIDDEN_TOPICS:
+            if sub.topic_name in HIDDEN_TOPICS or not self._new(sub):
                 continue
             c = self._endpoints.setdefault(
                 sub.topic_name, _Counted("subscribes", ros_type_name(sub.msg_type))
             )
             sub.callback = _counting_callback(sub.callback, c)
         for srv in list(node.services):
-            if srv.srv_name.endswith(HIDDEN_SERVICES):
+            if srv.srv_name.endswith(HIDDEN_SERVICES) or not self._new(srv):
                 continue
             c = self._endpoints.setdefault(
                 srv.srv_name, _Counted("serves", ros_type_name(srv.srv_type))
             )
             srv.callback = _counting_callback(srv.callback, c, sized=False)
+
+    def _new(self, endpoint: Any) -> bool:
+        """True the first time an endpoint is seen (it is then counted)."""
+        key = id(endpoint)
+        if key in self._wrapped:
+            return False
+        self._wrapped.add(key)
+        return True
 
     # -- what the agent sees --------------------------------------------------------------
 
