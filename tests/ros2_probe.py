@@ -66,7 +66,7 @@ class Probe:
 
     def call(self, service: str, srv_type: type, request: Any, timeout: float = 5.0) -> Any:
         """Call a service once; its response (AssertionError when it does not answer)."""
-        client = self.node.create_client(srv_type, service)
+        client: Any = self.node.create_client(srv_type, service)
         try:
             assert client.wait_for_service(timeout_sec=timeout), f"no service {service}"
             future = client.call_async(request)

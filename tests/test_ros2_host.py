@@ -5,6 +5,7 @@ blocks or cannot be made ends in ERROR. A ROS 2 probe in the test process watche
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Iterator
 
@@ -93,7 +94,8 @@ def test_a_plain_node_lives_while_active_and_takes_its_params(
     assert host.command("activate")["ok"] is True
     msgs = until("odometry", lambda: probe.messages("/odom"), lambda m: len(m) >= 4, within=WITHIN)
     steps = {
-        round(b.pose.pose.position.x - a.pose.pose.position.x, 6) for a, b in zip(msgs, msgs[1:])
+        round(b.pose.pose.position.x - a.pose.pose.position.x, 6)
+        for a, b in itertools.pairwise(msgs)
     }
     assert steps == {0.2}  # speed / rate_hz: the ROS parameters reached the node
     assert "odometry_publisher" in probe.node_names()
