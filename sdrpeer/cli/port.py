@@ -68,7 +68,13 @@ def format_ports(rows: list[dict[str, Any]]) -> str:
     frames/s, connections."""
     header = ("ROBOT", "PORT", "DIR", "TYPE", "FRAMES", "HZ", "CONNECTIONS")
     lines = [header]
-    keys = {"out": "frames_out", "in": "frames_in", "provides": "calls", "requires": "calls"}
+    keys = {
+        "out": "frames_out",
+        "in": "frames_in",
+        "provides": "calls",
+        "requires": "calls",
+        "publishes": "frames_out",
+    }
     for r in rows:
         key = keys.get(r["direction"], "frames_in")
         frames = (r.get("counters") or {}).get(key, 0)
@@ -80,7 +86,7 @@ def format_ports(rows: list[dict[str, Any]]) -> str:
         lines.append(
             (
                 str(r.get("robot", "")),
-                f"{r['instance']}.{r['port']}",
+                f"{r['instance']} {r['port']}" if r.get("ros2") else f"{r['instance']}.{r['port']}",
                 r["direction"],
                 r.get("type") or "-",
                 str(frames),

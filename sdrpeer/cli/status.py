@@ -65,10 +65,14 @@ def _state(state: Any, color: bool) -> str:
 
 
 def _sends(doc: Mapping[str, Any]) -> dict[str, Any]:
-    """Component -> bytes/s its active instance sends (from the connections' traffic)."""
+    """Component -> bytes/s its active instance sends: its own figure (every OutPort, and a
+    ROS 2 node's topics), else its connections' traffic."""
     out: dict[str, Any] = {}
     for c in doc.get("connections") or []:
         out[str(c.get("from", "")).split(".")[0]] = c.get("bytes_per_s")
+    for comp in doc.get("components") or []:
+        if comp.get("sends_bytes_per_s"):
+            out[str(comp.get("component"))] = comp["sends_bytes_per_s"]
     return out
 
 

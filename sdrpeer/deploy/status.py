@@ -74,6 +74,7 @@ def status_doc(
             "standbys": [],
             "standbys_wanted": count,
         }
+    actives = _actives(plan, alive)
     for p in plan.placements:
         state = instance_state(alive, p.robot, p.instance, plan)
         if p.role == InstanceRole.STANDBY and p.mode == "cold" and state == "pending":
@@ -86,6 +87,8 @@ def status_doc(
         }
         entry = comps.setdefault(p.component, {"component": p.component, "standbys": []})
         if p.role == InstanceRole.ACTIVE:
+            info = actives.get(p.component)
+            row["sends_bytes_per_s"] = None if info is None else info.out_bps
             entry.update(row)
         else:
             entry["standbys"].append({**row, "mode": p.mode})
@@ -103,6 +106,17 @@ def status_doc(
     }
 
 
+def _actives(plan: Plan, alive: Mapping[str, RobotRecord]) -> dict[str, InstanceInfo]:
+    """Component -> what its active instance's robot reports of it."""
+    out: dict[str, InstanceInfo] = {}
+    for robot, rec in alive.items():
+        for inst in rec.instances:
+            p = plan.active_of(inst.component)
+            if p is not None and p.instance == inst.name and p.robot == robot:
+                out[inst.component] = inst
+    return out
+
+
 def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str, Any]]:
     """Each connection of the system with the bytes/s its sender's active instance sends now
     and the frames/s its outgoing connections lose to full buffers at either end (all its
@@ -110,12 +124,7 @@ def _connections(plan: Plan, alive: Mapping[str, RobotRecord]) -> list[dict[str,
     now (`refused`, likewise the instance's), and the traffic the system file expects."""
     if plan.system is None:
         return []
-    sending: dict[str, InstanceInfo] = {}
-    for robot, rec in alive.items():
-        for inst in rec.instances:
-            p = plan.active_of(inst.component)
-            if p is not None and p.instance == inst.name and p.robot == robot:
-                sending[inst.component] = inst
+    sending = _actives(plan, alive)
     rows = []
     for c in plan.system.connections:
         sender = sending.get(c.from_component)

@@ -187,10 +187,13 @@ class Catalog:
 
     def listing(self) -> list[dict[str, Any]]:
         """Every port of every hosted instance: instance, port, direction, type, connections
-        (`id`, the other end, run-time or not), the host's counters for it and their rates."""
+        (`id`, the other end, run-time or not), the host's counters for it and their rates; then
+        a ROS 2 host's topics and services (`ros2: true`, the port a ROS 2 name, the direction
+        publishes, subscribes or serves, the type a ROS 2 type)."""
         manager = self.manager
         counters = manager.port_counters()
         rates = manager.port_rates()
+        endpoints = manager.endpoints()
         adhoc = {conn.id for _, conn in manager.adhoc_connections()}
         desired = manager.desired()
         rows: list[dict[str, Any]] = []
@@ -207,6 +210,20 @@ class Catalog:
                         "counters": counters.get(name, {}).get(facts.port, {}),
                         "rates": rates.get(name, {}).get(facts.port, {}),
                         "robot": self.robot,
+                    }
+                )
+            for topic, (direction, ros_type) in sorted(endpoints.get(name, {}).items()):
+                rows.append(
+                    {
+                        "instance": name,
+                        "port": topic,
+                        "direction": direction,
+                        "type": ros_type or None,
+                        "connections": [],
+                        "counters": counters.get(name, {}).get(topic, {}),
+                        "rates": rates.get(name, {}).get(topic, {}),
+                        "robot": self.robot,
+                        "ros2": True,
                     }
                 )
         return rows

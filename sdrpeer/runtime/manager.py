@@ -431,6 +431,11 @@ class InstanceManager:
         """Instance -> port -> counters, from each running host's last heartbeat."""
         return {name: sup.ports for name, sup in self._sups.items() if sup.ports}
 
+    def endpoints(self) -> dict[str, dict[str, list[str]]]:
+        """Instance -> its ROS 2 node's topics and services (name -> [direction, ROS type]),
+        from each running ROS 2 host's last heartbeat."""
+        return {name: sup.endpoints for name, sup in self._sups.items() if sup.endpoints}
+
     def port_rates(self) -> dict[str, dict[str, dict[str, float]]]:
         """Instance -> port -> frames and bytes per second between its last two heartbeats."""
         return {name: sup.port_rates for name, sup in self._sups.items() if sup.port_rates}

@@ -124,6 +124,8 @@ class Supervisor:
         self.hello: Hello | None = None
         """The running host's hello (None until it said it)."""
         self.ports: dict[str, dict[str, int]] = {}
+        self.endpoints: dict[str, list[str]] = {}
+        """A hosted ROS 2 node's topics and services: name -> [direction, ROS type]."""
         self.port_rates: dict[str, dict[str, float]] = {}
         """Port -> frames and bytes per second, in and out, between the last two heartbeats."""
         self.data_plane: dict[str, int] = {}
@@ -492,6 +494,7 @@ class Supervisor:
         self._heard = self._beat_at = now
         self.ports = msg.ports
         self.data_plane = msg.data or {}
+        self.endpoints = msg.endpoints or {}
 
     def _on_fault(self, msg: messages.Fault) -> None:
         fault = problems.fault_from_report(msg, time.time())

@@ -183,7 +183,7 @@ def _ros2_connection(
     other = _end(p, fields, other_key, where, components, members=members)
     if end is None or MISSING in other:
         return missing, missing
-    info = components[other[0]].info
+    info, peer = components[other[0]].info, components[other[0]].definition
     peer_type = None if info is None else info.port_type(other[1])
     bridge = bridge_for(
         p,
@@ -193,6 +193,7 @@ def _ros2_connection(
         peer_type=peer_type,
         policy=dict(policy),
         components=components,
+        standby=None if peer is None else peer.standby,
     )
     return (bridge, other) if key == "from" else (other, bridge)
 

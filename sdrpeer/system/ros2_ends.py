@@ -11,7 +11,8 @@ a ROS 2 type, `nav_msgs/msg/Odometry`; a ROS 2 type without a mapping travels as
 of its fields). QoS: `depth` is the connection policy's `buffer` (default 10), `reliability` is
 `best_effort` when the policy pushes only the newest (`push: new`) else `reliable`, `durability`
 is `volatile`; `qos:` (reliability, depth, durability) overrides each. The bridge is placed,
-moved and recovered like any component; its requirements are a ROS 2 process's (`BRIDGE_NEEDS`).
+moved and recovered like any component, with the standbys of the component at its sdrpeer end;
+its requirements are a ROS 2 process's (`BRIDGE_NEEDS`).
 """
 
 from __future__ import annotations
@@ -26,14 +27,14 @@ from sdrpeer.ros2.bridge import DURABILITY, RELIABILITY, bridge_class_name
 from sdrpeer.ros2.types import mapping_for
 from sdrpeer.system.classes import class_info
 from sdrpeer.system.components import ComponentEntry
-from sdrpeer.system.model import ComponentDef, Requirements
+from sdrpeer.system.model import ComponentDef, Requirements, StandbySpec
 from sdrpeer.system.problems import MISSING, Problems
 
 __all__ = ["BRIDGE_NEEDS", "ROS2_END_KEYS", "Ros2End", "bridge_for", "read_ros2_end"]
 
 ROS2_END_KEYS: Final = ("ros2", "type", "qos")
 QOS_KEYS: Final = ("reliability", "depth", "durability")
-BRIDGE_NEEDS: Final = Requirements(cpu_pct=5.0, mem_bytes=90 * 1024 * 1024)
+BRIDGE_NEEDS: Final = Requirements(cpu_pct=5.0, mem_bytes=90_000_000)
 """What one bridge host takes: an rclpy process with Fast DDS (~80 MB RSS measured on this
 project's machines), a few percent of a core at 50 Hz."""
 _PORT: Final = {"from": "out", "to": "input"}
@@ -129,10 +130,13 @@ def bridge_for(
     peer_type: str | None,
     policy: dict[str, Any],
     components: dict[str, ComponentEntry],
+    standby: StandbySpec | None = None,
 ) -> tuple[str, str]:
     """The bridge of `end` (made and added to `components` the first time; `key` is the end's
     side, `from` or `to`) and its port; MISSING when the type cannot be settled (recorded).
-    `peer_type` is the type id of the sdrpeer end's port (None: untyped or unknown)."""
+    `peer_type` is the type id of the sdrpeer end's port (None: untyped or unknown); the bridge
+    keeps the standbys of the component at the sdrpeer end (`standby`), so that it fails over
+    as fast as that component does."""
     settled = _settle_type(p, end, field, peer_type)
     if settled is None:
         return MISSING, MISSING
@@ -156,6 +160,7 @@ def bridge_for(
         f"sdrpeer.ros2.bridge:{cls_name}",
         tuple(sorted(params.items())),
         requires=BRIDGE_NEEDS,
+        standby=standby or StandbySpec(),
     )
     have = components.get(name)
     if have is not None:
