@@ -53,6 +53,16 @@ def probe() -> Iterator[Probe]:
         p.close()
 
 
+def status_of(clients: dict[str, AgentClient]) -> dict[str, Any]:
+    """The status as the first robot that answers gives it."""
+    for c in clients.values():
+        try:
+            return dict(c.get("/v1/status"))
+        except ApiError:
+            continue
+    raise ApiError("no agent answers")
+
+
 def row(status: dict[str, Any], component: str) -> dict[str, Any]:
     return next((c for c in status["components"] if c["component"] == component), {})
 
@@ -67,12 +77,7 @@ def test_a_ros2_system_runs_across_the_fleet_and_survives_a_robot_death(
     post_when_elected(one, "/v1/deploy", {"system": system.to_json()}, 30.0)
 
     def status() -> dict[str, Any]:
-        for c in clients.values():
-            try:
-                return dict(c.get("/v1/status"))
-            except ApiError:
-                continue
-        raise ApiError(0, "no agent answers")
+        return status_of(clients)
 
     names = [c.name for c in system.components]
     until(
@@ -118,12 +123,7 @@ def test_a_ros2_system_runs_across_the_fleet_and_survives_a_robot_death(
     alive = {n: c for n, c in clients.items() if n != robot}
 
     def survivors_status() -> dict[str, Any]:
-        for c in alive.values():
-            try:
-                return dict(c.get("/v1/status"))
-            except ApiError:
-                continue
-        raise ApiError(0, "no agent answers")
+        return status_of(alive)
 
     until(
         "the publisher ACTIVE on another robot",
