@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from sdrpeer.sdk import Component, Image, InPort, OnInput, OutPort, Param, Periodic, Pose
 from sdrpeer.sdk.robot_types import Odometry, Velocity
-from sdrpeer.sdk.typed import MessageType, message_type
+from sdrpeer.sdk.typed import MessageType, message, message_type
 
 _ODOMETRY = message_type(Odometry)
 assert _ODOMETRY is not None
@@ -86,3 +87,18 @@ class OdomPub(Component):
     def on_snapshot(self) -> list[Any]:
         """Every value sent so far (field arrays)."""
         return self.sent
+
+
+@message("lab/Detection")
+@dataclass(slots=True)
+class Detection:
+    """A message type of a lab's own (no ROS 2 mapping)."""
+
+    stamp: float
+    label: str
+
+
+class DetectionSource(Component):
+    """Sends `Detection`s (a typed port whose type has no ROS 2 mapping)."""
+
+    out = OutPort("detections", type=Detection)

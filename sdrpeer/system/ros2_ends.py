@@ -11,13 +11,14 @@ a ROS 2 type, `nav_msgs/msg/Odometry`; a ROS 2 type without a mapping travels as
 of its fields). QoS: `depth` is the connection policy's `buffer` (default 10), `reliability` is
 `best_effort` when the policy pushes only the newest (`push: new`) else `reliable`, `durability`
 is `volatile`; `qos:` (reliability, depth, durability) overrides each. The bridge is placed,
-moved and recovered like any component, with the standbys of the component at its sdrpeer end;
+moved and recovered like any component, with the standbys of the component at its sdrpeer end
+(of the more guarded one, when several share it);
 its requirements are a ROS 2 process's (`BRIDGE_NEEDS`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Final
 
 import yaml
@@ -163,8 +164,8 @@ def bridge_for(
         standby=standby or StandbySpec(),
     )
     have = components.get(name)
-    if have is not None:
-        if have.definition != definition:
+    if have is not None and have.definition is not None:
+        if replace(have.definition, standby=definition.standby) != definition:
             p.add(
                 end.node,
                 field,
@@ -172,11 +173,18 @@ def bridge_for(
                 f"{have.node.start_mark.line + 1} with another type or QoS; give them the same",
             )
             return MISSING, MISSING
+        wider = _wider(have.definition.standby, definition.standby)
+        have.definition = replace(have.definition, standby=wider)
         return name, _PORT[key]
     components[name] = ComponentEntry(
         end.node, field, class_info(getattr(bridge, cls_name)), definition
     )
     return name, _PORT[key]
+
+
+def _wider(a: StandbySpec, b: StandbySpec) -> StandbySpec:
+    """The standbys of a bridge shared by two peers: as many as the more guarded one keeps."""
+    return a if (a.other_robots, a.same_robot) >= (b.other_robots, b.same_robot) else b
 
 
 def _settle_type(
