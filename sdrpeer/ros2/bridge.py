@@ -54,13 +54,14 @@ RELIABILITY = ("reliable", "best_effort")
 DURABILITY = ("volatile", "transient_local")
 
 
-def import_ros_type(name: str) -> type:
-    """The rclpy class of `pkg/msg/Name` (or `pkg/Name`); ValueError naming what is missing."""
+def import_ros_type(name: str, kind: str = "msg") -> type:
+    """The rclpy class of `pkg/msg/Name` (or `pkg/Name`; `kind="srv"`: a service type
+    `pkg/srv/Name`); ValueError naming what is missing."""
     parts = name.split("/")
     if len(parts) == 2:
-        parts = [parts[0], "msg", parts[1]]
+        parts = [parts[0], kind, parts[1]]
     if len(parts) != 3 or not all(p.isidentifier() for p in parts):
-        raise ValueError(f"ROS type {name!r}: expected pkg/msg/Name")
+        raise ValueError(f"ROS type {name!r}: expected pkg/{kind}/Name")
     try:
         module = importlib.import_module(f"{parts[0]}.{parts[1]}")
     except ImportError:

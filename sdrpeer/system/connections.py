@@ -184,6 +184,17 @@ def _ros2_connection(
     if end is None or MISSING in other:
         return missing, missing
     info, peer = components[other[0]].info, components[other[0]].definition
+    if end.service and info is not None:
+        wanted = "requires" if key == "to" else "provides"
+        if info.port_kind(other[1]) != wanted:
+            role = "ServiceConsumer" if wanted == "requires" else "ServiceProvider"
+            p.add(
+                fields[other_key],
+                f"{where}.{other_key}",
+                f"a ros2_service end binds a {role}(ROS2_SERVICE) port "
+                f"(sdrpeer.ros2.services); {'.'.join(other)} is not one",
+            )
+            return missing, missing
     peer_type = None if info is None else info.port_type(other[1])
     bridge = bridge_for(
         p,

@@ -34,6 +34,7 @@ from sdrpeer.system.problems import MISSING, Problems
 __all__ = ["BRIDGE_NEEDS", "ROS2_END_KEYS", "Ros2End", "bridge_for", "read_ros2_end"]
 
 ROS2_END_KEYS: Final = ("ros2", "type", "qos")
+SERVICE_END_KEYS: Final = ("ros2_service", "type")
 QOS_KEYS: Final = ("reliability", "depth", "durability")
 BRIDGE_NEEDS: Final = Requirements(cpu_pct=5.0, mem_bytes=90_000_000)
 """What one bridge host takes: an rclpy process with Fast DDS (~80 MB RSS measured on this
@@ -46,20 +47,24 @@ class Ros2End:
     """One `ros2:` end as written."""
 
     topic: str
+    """The topic, or the service of a `ros2_service:` end."""
     type: str | None
     qos: tuple[tuple[str, Any], ...]
     node: yaml.Node
+    service: bool = False
 
 
 def is_ros2_end(p: Problems, node: yaml.Node | None) -> bool:
     """Whether an end is a `{ros2: ...}` mapping (not yet checked)."""
     if not isinstance(node, yaml.MappingNode):
         return False
-    return any(p.f.value(k) == "ros2" for k, _ in node.value)
+    return any(p.f.value(k) in ("ros2", "ros2_service") for k, _ in node.value)
 
 
 def read_ros2_end(p: Problems, node: yaml.Node, field: str) -> Ros2End | None:
     """The end's fields (problems recorded; None when it is wrong)."""
+    if any(p.f.value(k) == "ros2_service" for k, _ in node.value):
+        return _read_service_end(p, node, field)
     before = len(p.items)
     fields = p.mapping(node, field, ROS2_END_KEYS, ("ros2",))
     if fields is None:
@@ -101,6 +106,31 @@ def read_ros2_end(p: Problems, node: yaml.Node, field: str) -> Ros2End | None:
     return Ros2End(topic, kind, tuple(sorted(qos)), node)
 
 
+def _read_service_end(p: Problems, node: yaml.Node, field: str) -> Ros2End | None:
+    """A `{ros2_service: /name, type: pkg/srv/Name}` end."""
+    before = len(p.items)
+    fields = p.mapping(node, field, SERVICE_END_KEYS, SERVICE_END_KEYS)
+    if fields is None:
+        return None
+    name = p.f.value(fields["ros2_service"]) if "ros2_service" in fields else None
+    if "ros2_service" in fields and (not isinstance(name, str) or not _valid_topic(name)):
+        p.add(
+            fields["ros2_service"],
+            f"{field}.ros2_service",
+            f"expected an absolute ROS 2 service name like /reset, got {shown(name)}",
+        )
+    kind = p.f.value(fields["type"]) if "type" in fields else None
+    if "type" in fields and (
+        not isinstance(kind, str) or kind.count("/") != 2 or "/srv/" not in kind
+    ):
+        p.add(fields["type"], f"{field}.type", f"expected pkg/srv/Name, got {shown(kind)}")
+    if len(p.items) != before:
+        return None
+    assert isinstance(name, str)
+    assert isinstance(kind, str)
+    return Ros2End(name, kind, (), node, service=True)
+
+
 def _valid_topic(topic: str) -> bool:
     parts = topic.split("/")
     return (
@@ -135,9 +165,13 @@ def bridge_for(
 ) -> tuple[str, str]:
     """The bridge of `end` (made and added to `components` the first time; `key` is the end's
     side, `from` or `to`) and its port; MISSING when the type cannot be settled (recorded).
+    A service end's bridge is `ToRosService` (`to:`, the sdrpeer consumer calls ROS 2) or
+    `FromRosService` (`from:`, ROS 2 clients call the sdrpeer provider), port `ros`.
     `peer_type` is the type id of the sdrpeer end's port (None: untyped or unknown); the bridge
     keeps the standbys of the component at the sdrpeer end (`standby`), so that it fails over
     as fast as that component does."""
+    if end.service:
+        return _service_bridge(p, end, key, components, standby)
     settled = _settle_type(p, end, field, peer_type)
     if settled is None:
         return MISSING, MISSING
@@ -180,6 +214,39 @@ def bridge_for(
         end.node, field, class_info(getattr(bridge, cls_name)), definition
     )
     return name, _PORT[key]
+
+
+def _service_bridge(
+    p: Problems,
+    end: Ros2End,
+    key: str,
+    components: dict[str, ComponentEntry],
+    standby: StandbySpec | None,
+) -> tuple[str, str]:
+    """The bridge of a `ros2_service:` end (one per service and side, shared)."""
+    from sdrpeer.ros2 import services  # noqa: PLC0415 - its classes by name
+
+    cls_name = "FromRosService" if key == "from" else "ToRosService"
+    body = end.topic.strip("/").replace("/", "_")
+    name = f"ros2-{body}-{'server' if key == 'from' else 'client'}"
+    params = {"service": end.topic, "srv_type": end.type}
+    definition = ComponentDef(
+        name,
+        "ros2",
+        f"sdrpeer.ros2.services:{cls_name}",
+        tuple(sorted(params.items())),
+        requires=BRIDGE_NEEDS,
+        standby=standby or StandbySpec(),
+    )
+    have = components.get(name)
+    if have is not None:
+        if key == "from":
+            p.add(end.node, "connections", f"{end.topic} is served by one component only")
+            return MISSING, MISSING
+        return name, "ros"
+    info = class_info(getattr(services, cls_name))
+    components[name] = ComponentEntry(end.node, name, info, definition)
+    return name, "ros"
 
 
 def _wider(a: StandbySpec, b: StandbySpec) -> StandbySpec:

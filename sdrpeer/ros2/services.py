@@ -1,0 +1,167 @@
+"""Service bridges: an sdrpeer service port calling a ROS 2 service, a ROS 2 client calling an
+sdrpeer service port, through the one interface `ROS2_SERVICE`.
+
+How it works: `ROS2_SERVICE` (`ros2/Service`, one method `call`) carries a ROS 2 request as the
+map of its fields and answers with the response's map. An sdrpeer component that calls ROS 2
+services declares `ServiceConsumer(ROS2_SERVICE)` and binds it (`from: Comp.port`) to a
+`{ros2_service: /name, type: pkg/srv/Name}` end: the bridge `ToRosService` provides the interface,
+fills the request message, calls the ROS 2 service (`timeout` seconds) and answers with the
+response's fields. A component that serves ROS 2 clients provides `ServiceProvider(ROS2_SERVICE)`
+with a `call(request) -> response` handler and is bound from a `ros2_service:` end: the bridge
+`FromRosService` offers the ROS 2 service and hands each request to the component (the answer
+fills the response; a failure is logged and answers an empty response, since ROS 2 services have
+no error reply). Both are `ros2`-launcher components like the topic bridges (sdrpeer.ros2.bridge).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+from typing import Any
+
+from sdrpeer.ros2.bridge import import_ros_type
+from sdrpeer.ros2.types import fill, message_to_map
+from sdrpeer.sdk import Component, Param, Periodic
+from sdrpeer.sdk.services import Interface, ServiceCallError, ServiceConsumer, ServiceProvider
+
+__all__ = ["ROS2_SERVICE", "FromRosService", "ToRosService"]
+
+log = logging.getLogger("sdrpeer.ros2.services")
+ROS2_SERVICE = Interface.of("ros2/Service", "call")
+"""A ROS 2 service call: the request's fields in, the response's fields out."""
+
+
+class _ServiceBridge(Component):
+    execution = Periodic(hz=4.0)  # only watches rclpy's executor
+    service = Param(str, "", "the ROS 2 service (absolute, e.g. /reset)")
+    srv_type = Param(str, "", "the ROS 2 service type (pkg/srv/Name)")
+    timeout = Param(float, 5.0, "seconds a call may take", min=0.01)
+    stuck_after = Param(float, 2.0, "seconds rclpy's executor may sit in a callback", min=0.1)
+    _direction = ""
+
+    def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
+        super().__init__(name, params)
+        self._spinner: Any = None
+        self._node: Any = None
+        self.calls = 0
+
+    async def on_initialize(self) -> None:
+        from rclpy.node import Node  # noqa: PLC0415 - a ROS 2 host only
+
+        from sdrpeer.ros2.bridge import _node_name  # noqa: PLC0415
+        from sdrpeer.ros2.spin import Spinner  # noqa: PLC0415
+
+        p = self.param_values()
+        if not p["service"].startswith("/"):
+            raise ValueError(f"{self.instance_name}: service {p['service']!r} must be absolute")
+        srv = import_ros_type(p["srv_type"], kind="srv")
+        self._spinner = Spinner(executor="single")
+
+        def make() -> None:
+            node = Node(_node_name(self.instance_name))
+            self._node = node
+            self._spinner.watch(node)
+            self._endpoint(node, srv)
+            self._spinner.executor.add_node(node)
+
+        await self._spinner.call(make)
+
+    def _endpoint(self, node: Any, srv: type) -> None:
+        raise NotImplementedError
+
+    def on_execute(self) -> None:
+        if self._spinner is not None:
+            self._spinner.check(float(self.param_values()["stuck_after"]))
+
+    async def on_finalize(self) -> None:
+        spinner, self._spinner = self._spinner, None
+        if spinner is None:
+            return
+        node = self._node
+        if spinner.alive and node is not None:
+            await spinner.call(lambda: (spinner.executor.remove_node(node), node.destroy_node()))
+        spinner.close()
+
+    def endpoints(self) -> dict[str, list[str]]:
+        """The bridged service: name -> [direction, ROS type] (shown by `sdrpeer port list`)."""
+        p = self.param_values()
+        return {p["service"]: [self._direction, p["srv_type"]]}
+
+    def port_counters(self) -> dict[str, dict[str, int]]:
+        out = super().port_counters()
+        out[self.param_values()["service"]] = {"calls": self.calls}
+        return out
+
+
+class ToRosService(_ServiceBridge):
+    """Provides `ROS2_SERVICE`; each call is a call of the ROS 2 service."""
+
+    ros = ServiceProvider(ROS2_SERVICE, "calls of the ROS 2 service")
+    _direction = "calls"
+
+    def _endpoint(self, node: Any, srv: type) -> None:
+        self._srv = srv
+        self._client = node.create_client(srv, self.param_values()["service"])
+
+    @ros.method
+    async def call(self, request: Any) -> Any:
+        """Fill the request, call, answer with the response's fields."""
+        p = self.param_values()
+        client, srv = self._client, self._srv
+        msg = fill(srv.Request(), request or {})  # type: ignore[attr-defined]
+        self.calls += 1
+        if not client.service_is_ready():
+            raise RuntimeError(f"ROS 2 service {p['service']} is not available")
+        future = await self._spinner.call(lambda: client.call_async(msg))
+        done = asyncio.get_running_loop().create_future()
+
+        def settled(f: Any) -> None:
+            loop = done.get_loop()
+            loop.call_soon_threadsafe(_settle, done, f)
+
+        future.add_done_callback(settled)
+        async with asyncio.timeout(float(p["timeout"])):
+            response = await done
+        return message_to_map(response)
+
+
+def _settle(done: asyncio.Future[Any], f: Any) -> None:
+    if done.done():
+        return
+    exc = f.exception()
+    if exc is not None:
+        done.set_exception(exc)
+    else:
+        done.set_result(f.result())
+
+
+class FromRosService(_ServiceBridge):
+    """Offers the ROS 2 service; each request is a call of the bound `ROS2_SERVICE` provider."""
+
+    ros = ServiceConsumer(ROS2_SERVICE, "the component that answers the ROS 2 service")
+    _direction = "serves"
+
+    async def on_initialize(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        await super().on_initialize()
+
+    def _endpoint(self, node: Any, srv: type) -> None:
+        node.create_service(srv, self.param_values()["service"], self._serve)
+
+    def _serve(self, request: Any, response: Any) -> Any:
+        """In rclpy's executor thread: ask the component, wait for its answer (bounded)."""
+        self.calls += 1
+        timeout = float(self.param_values()["timeout"])
+        caller = self.consumer("ros")
+        job = asyncio.run_coroutine_threadsafe(
+            caller.call("call", message_to_map(request), timeout=timeout), self._loop
+        )
+        try:
+            answer = job.result(timeout + 1.0)
+        except (ServiceCallError, concurrent.futures.TimeoutError) as exc:
+            log.warning("%s: the component did not answer: %s", self.instance_name, exc)
+            return response
+        if isinstance(answer, dict):
+            fill(response, answer)
+        return response
