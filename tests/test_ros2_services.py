@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from std_srvs.srv import SetBool
@@ -51,7 +52,7 @@ def test_services_are_bridged_both_ways(lab: RunningLab) -> None:
     assert {c.name for c in system.components} >= {"ros2-reset-client", "ros2-invert-server"}
     post_when_elected(client, "/v1/deploy", {"system": system.to_json()}, 30.0)
 
-    def row(instance: str, port: str) -> dict[str, object]:
+    def row(instance: str, port: str) -> dict[str, Any]:
         rows = client.get("/v1/ports")
         return next((r for r in rows if r["instance"] == instance and r["port"] == port), {})
 
@@ -70,13 +71,19 @@ def test_services_are_bridged_both_ways(lab: RunningLab) -> None:
     probe = Probe()
     try:
         for data in (True, False):
+            request = SetBool.Request(data=data)
+
+            def ask(request: Any = request) -> Any:
+                return probe.call("/invert", SetBool, request, 5.0)
+
             answer = until(
                 "an answer from /invert",
-                lambda d=data: probe.call("/invert", SetBool, SetBool.Request(data=d), 5.0),
-                lambda a, d=data: a.message == f"inverted {d}",
+                ask,
+                lambda a: a is not None,
                 within=WITHIN,
                 retry=(AssertionError,),
             )
+            assert answer.message == f"inverted {data}"
             assert answer.success is (not data)
     finally:
         probe.close()
