@@ -1,6 +1,7 @@
 """A wheel-odometry publisher: nav_msgs/Odometry on /odom at `rate_hz` (default 50), the robot
-driving along x at `speed` m/s. Plain rclpy; `position.x / (speed / rate_hz)` counts the messages
-since the node started, which lets a listener count the ones it missed."""
+driving along x at `speed` m/s, and a listener that counts what it hears. Plain rclpy;
+`position.x / (speed / rate_hz)` counts the messages since the publisher's node started, which
+lets a listener count the ones it missed."""
 
 from __future__ import annotations
 
@@ -33,3 +34,21 @@ class OdometryPublisher(Node):
         msg.twist.twist.linear.x = self.speed
         self.pub.publish(msg)
         self.seq += 1
+
+
+class OdometryListener(Node):
+    """Subscribes to /odom (parameter `topic`) and logs once a second how many it received."""
+
+    def __init__(self) -> None:
+        super().__init__("odometry_listener")
+        self.declare_parameter("topic", "/odom")
+        self.received = 0
+        topic = str(self.get_parameter("topic").value)
+        self.sub = self.create_subscription(Odometry, topic, self.heard, 10)
+        self.timer = self.create_timer(1.0, self.report)
+
+    def heard(self, msg: Odometry) -> None:
+        self.received += 1
+
+    def report(self) -> None:
+        self.get_logger().info(f"{self.received} odometry messages")
