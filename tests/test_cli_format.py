@@ -160,6 +160,7 @@ def test_agent_info_snapshot() -> None:
         "uptime_s": 75.0,
         "insecure": True,
         "preset": "lan",
+        "launchers": {"offered": ["python", "exec"], "not_offered": {"ros2": "not installed"}},
         "health_score": 0,
         "messages": {
             "in": 10,
@@ -180,6 +181,7 @@ def test_agent_info_snapshot() -> None:
         "uptime:       1m15s\n"
         "preset:       lan\n"
         "security:     INSECURE (no cluster key)\n"
+        "launchers:    python, exec; not ros2: not installed\n"
         "health score: 0\n"
         "members:      alive 3, suspect 1, dead 0, left 0\n"
         "messages:     10 in, 11 out (1.5KB in, 2.5KB out; 150B/s in, 250B/s out)\n"

@@ -915,6 +915,10 @@ class Agent:
             "uptime_s": round(time.time() - self._started_wall, 3),
             "insecure": self.keyring is None,
             "preset": self.config.preset,
+            "launchers": {
+                "offered": list(self.launch_policy.launchers),
+                "not_offered": dict(self.launchers_missing),
+            },
             "health_score": self.core.health_score,
             "messages": {
                 "in": c["messages_in"],

@@ -196,6 +196,14 @@ def format_members(members: Sequence[Mapping[str, Any]], *, color: bool = False)
     return render_table(MEMBER_COLUMNS, [member_row(m, color=color) for m in members])
 
 
+def _launchers(launchers: Mapping[str, Any]) -> str:
+    """`python, ros2` and, after it, each launcher configured but not offered with why."""
+    text = ", ".join(launchers.get("offered") or []) or "none"
+    for name, why in (launchers.get("not_offered") or {}).items():
+        text += f"; not {name}: {why}"
+    return text
+
+
 def format_agent(agent: Mapping[str, Any]) -> str:
     """The `sdrpeer agent-info` summary: one `key: value` line per counter group."""
     messages = agent.get("messages") or {}
@@ -214,6 +222,7 @@ def format_agent(agent: Mapping[str, Any]) -> str:
         ("uptime", human_seconds(agent.get("uptime_s"))),
         ("preset", agent.get("preset", MISSING)),
         ("security", "INSECURE (no cluster key)" if agent.get("insecure") else "cluster key"),
+        ("launchers", _launchers(agent.get("launchers") or {})),
         ("health score", agent.get("health_score", MISSING)),
         (
             "members",
