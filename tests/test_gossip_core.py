@@ -441,7 +441,7 @@ def test_an_earlier_lifes_record_before_our_first_sends_nothing_empty() -> None:
     sent = feed(core, 0.1, Record("r0", 40, b"from before the restart"))
     advance(core, 0.1, 1.0)
     assert own_records_sent(sent + core.datagrams_to_send()) == set()
-    assert core.set_record(1.0, b"mine") == 41
+    assert core.set_record(1.0, b"mine", urgent=True) == 41
     assert own_records_sent(core.datagrams_to_send()) == {b"mine"}
 
 
@@ -468,14 +468,29 @@ def test_our_own_new_record_goes_out_at_once_and_news_inside_the_gap_at_its_end(
     core = with_peers()
     advance(core, 0.0, 5.0)  # the joins' gossip spent
     core.datagrams_to_send()
-    core.set_record(5.0, b"stood down: A")
+    core.set_record(5.0, b"stood down: A", urgent=True)
     assert own_records_sent(core.datagrams_to_send()) == {b"stood down: A"}
     gap = CONFIG.gossip_interval / 4
-    core.set_record(5.0 + gap / 5, b"stood down: A, B")  # inside the gap: not sent yet
+    core.set_record(5.0 + gap / 5, b"stood down: A, B", urgent=True)  # inside the gap: not yet
     assert own_records_sent(core.datagrams_to_send()) == set()
     assert core.next_timer() <= 5.0 + gap + 1e-9  # but at the gap's end, not a round later
     core.handle_timer(5.0 + gap)
     assert own_records_sent(answer_pings(core, 5.0 + gap)) == {b"stood down: A, B"}
+
+
+def test_a_record_that_changes_no_placement_waits_for_the_regular_round() -> None:
+    # A join storm: fifty robots each publishing what they are must not raise a round apiece.
+    core = with_peers()
+    advance(core, 0.0, 5.0)
+    core.datagrams_to_send()
+    core.set_record(5.0, b"what I am")
+    assert own_records_sent(core.datagrams_to_send()) == set()
+    sent: set[bytes] = set()
+    while not sent and core.next_timer() <= 5.0 + CONFIG.gossip_interval + 1e-9:
+        now = core.next_timer()
+        core.handle_timer(now)  # the regular round carries it
+        sent = own_records_sent(answer_pings(core, now))
+    assert sent == {b"what I am"}
 
 
 def test_broadcast_event_goes_out_at_once_and_is_deduplicated() -> None:

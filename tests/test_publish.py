@@ -105,6 +105,30 @@ def test_decisions(new: RobotRecord, expected: str) -> None:
     assert published().decide(1.0, new) == expected
 
 
+@pytest.mark.parametrize(
+    ("new", "urgent"),
+    [
+        # a placement others wait for: in a gossip round at once
+        (instance(state="inactive"), True),  # stood down: the new robot may activate
+        (instance(role="standby"), True),
+        (replace(BASE, instances=()), True),
+        (replace(BASE, plan=PlanInfo(1, 1, "d", "robot-1")), True),
+        # what the robot is: the next regular round (a join storm raises no extra rounds)
+        (replace(BASE, priority=5), False),
+        (metrics(mem_total=8 * GB), False),
+        (replace(BASE, election=ElectionInfo(1, "robot-1", True)), False),
+        (instance(data="tcp://127.0.0.1:9"), False),
+        (metrics(battery_pct=19.9), False),
+    ],
+)
+def test_only_a_record_that_changes_a_placement_is_urgent(new: RobotRecord, urgent: bool) -> None:
+    p = Publisher()
+    assert p.decide(0.0, BASE) == RECORD
+    assert p.urgent is False  # the first record says what the robot is
+    assert p.decide(10.0, new) == RECORD
+    assert p.urgent is urgent
+
+
 def test_deadband_is_measured_from_the_last_values_sent() -> None:
     p = published()
     assert p.decide(1.0, metrics(cpu_pct=13.0)) == NONE

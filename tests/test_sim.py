@@ -76,7 +76,7 @@ class Beacon:
     def next_event(self) -> CoreEvent | None:
         return self.events.pop(0) if self.events else None
 
-    def set_record(self, now: float, payload: bytes) -> int:
+    def set_record(self, now: float, payload: bytes, *, urgent: bool = False) -> int:
         self.events.append(RecordChanged(self.name, 1, payload, now))
         return 1
 

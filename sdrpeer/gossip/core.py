@@ -595,13 +595,19 @@ class Membership:
         for name in self._peers.names():
             self._out.append((self._members[name].addr, Gossip(self.name, (dead,), name)))
 
-    def set_record(self, now: float, payload: bytes) -> int:
-        """Publish a new version of our own record (spread to everyone); returns its version."""
+    def set_record(self, now: float, payload: bytes, *, urgent: bool = False) -> int:
+        """Publish a new version of our own record (spread to everyone); returns its version.
+        `urgent`: it carries a placement others wait for (an instance stood down, a plan
+        taken), so it goes out in an urgent round rather than the next regular one; a record
+        that only says what the robot is (its first, a link bound, its metrics' identity) waits
+        for the regular round, as the join storm of a large fleet must not raise a round per
+        robot per change."""
         self._now = now
         old = self._records.get(self.name)
         version = old[0] + 1 if old else self._first_version
         self._store_own_record(version, payload)
-        self._urgent_round()
+        if urgent:
+            self._urgent_round()
         return version
 
     def set_vitals(self, now: float, payload: bytes) -> int:

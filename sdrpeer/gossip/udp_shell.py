@@ -109,10 +109,10 @@ class GossipShell(asyncio.DatagramProtocol):
         self.core.leave(self._loop.time())
         self.flush()
 
-    def set_record(self, payload: bytes) -> int:
-        """Publish a new version of our record."""
+    def set_record(self, payload: bytes, *, urgent: bool = False) -> int:
+        """Publish a new version of our record (`urgent`: see `Membership.set_record`)."""
         assert self.core is not None
-        version = self.core.set_record(self._loop.time(), payload)
+        version = self.core.set_record(self._loop.time(), payload, urgent=urgent)
         self.flush()
         return version
 

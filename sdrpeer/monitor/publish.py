@@ -177,10 +177,14 @@ class Publisher:
         self.sent: RobotRecord | None = None
         """The last values sent, as a record or as vitals."""
         self._record_at = -1e18
+        self.urgent = False
+        """Whether the last RECORD decided carries a placement others wait for: an instance's
+        state or role changed, or the plan it holds (`_placement_changed`)."""
 
     def decide(self, now: float, new: RobotRecord, *, force: bool = False) -> str:
         """RECORD, VITALS or NONE for this sample; the caller publishes what it says."""
         last = self.record
+        self.urgent = last is not None and _placement_changed(last, new)
         if force or last is None or _identity_changed(last, new):
             return self._published(now, new)
         sent = self.sent
@@ -206,8 +210,9 @@ class Publisher:
 class RecordSink(Protocol):
     """Where a robot's record goes: its gossip shell (the agent) or a simulated core's adapter."""
 
-    def set_record(self, payload: bytes) -> int:
-        """Publish a new record version (spread to every robot); returns the version."""
+    def set_record(self, payload: bytes, *, urgent: bool = False) -> int:
+        """Publish a new record version (spread to every robot; `urgent`: at once, in a gossip
+        round of its own); returns the version."""
         ...
 
     def set_vitals(self, payload: bytes) -> int:
@@ -222,7 +227,7 @@ def publish(
     revision, 0 for NONE). The agent and the simulator's agents both publish through this."""
     decision = publisher.decide(now, record, force=force)
     if decision == RECORD:
-        return decision, sink.set_record(encode_record(record))
+        return decision, sink.set_record(encode_record(record), urgent=publisher.urgent)
     if decision == VITALS:
         return decision, sink.set_vitals(encode_vitals(vitals_of(record)))
     return decision, 0
@@ -242,6 +247,17 @@ def _identity_changed(a: RobotRecord, b: RobotRecord) -> bool:
         return True
     return [(i.name, i.component, i.state, i.role, i.data, i.out_refused) for i in a.instances] != [
         (i.name, i.component, i.state, i.role, i.data, i.out_refused) for i in b.instances
+    ]
+
+
+def _placement_changed(a: RobotRecord, b: RobotRecord) -> bool:
+    """Whether `b` says something about placements that `a` did not: an instance added,
+    removed, or changed in state or role, or another plan held (what a robot taking over a
+    component, or the allocator, waits for)."""
+    if a.plan != b.plan:
+        return True
+    return [(i.name, i.state, i.role) for i in a.instances] != [
+        (i.name, i.state, i.role) for i in b.instances
     ]
 
 

@@ -97,8 +97,8 @@ class _Sink:
         self.cluster = cluster
         self.name = name
 
-    def set_record(self, payload: bytes) -> int:
-        return self.cluster.set_record(self.name, payload)
+    def set_record(self, payload: bytes, *, urgent: bool = False) -> int:
+        return self.cluster.set_record(self.name, payload, urgent=urgent)
 
     def set_vitals(self, payload: bytes) -> int:
         return self.cluster.set_vitals(self.name, payload)
