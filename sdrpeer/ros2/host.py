@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import sys
 
+from sdrpeer.errors import LoadError
 from sdrpeer.host.config import HostConfig
 from sdrpeer.host.loader import load_component_class
 from sdrpeer.host.main import main as host_main
@@ -24,8 +25,12 @@ __all__ = ["load_ros2_class", "main"]
 
 
 def load_ros2_class(config: HostConfig) -> type:
-    """The Component class for the target: itself, or a node class wrapped in `Ros2Node`."""
-    from rclpy.node import Node  # noqa: PLC0415 - after the environment is right
+    """The Component class for the target: itself, or a node class wrapped in `Ros2Node`
+    (LoadError when ROS 2 is not installed here)."""
+    try:
+        from rclpy.node import Node  # noqa: PLC0415 - after the environment is right
+    except ImportError as exc:
+        raise LoadError(f"{config.target}: ROS 2 cannot be loaded here ({exc})") from None
 
     from sdrpeer.ros2.node import Ros2Node  # noqa: PLC0415
     from sdrpeer.sdk import Component  # noqa: PLC0415
