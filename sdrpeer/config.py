@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from sdrpeer.errors import ConfigError, shown
+from sdrpeer.launch.openrtm import available as openrtm_available
 from sdrpeer.launch.policy import DEFAULT_TARGETS, LaunchPolicy
 from sdrpeer.record.limits import check_int
 
@@ -113,8 +114,12 @@ class AgentConfig:
 
     @property
     def launch_policy(self) -> LaunchPolicy:
-        """What this agent lets its hosts run."""
-        return LaunchPolicy(("python", *self.allow_launchers), self.allow_targets)
+        """What this agent lets its hosts run: `openrtm` only where OpenRTM is installed
+        (sdrpeer.launch.openrtm), so the allocator places no RTC on a robot without it."""
+        offered = tuple(
+            n for n in self.allow_launchers if n != "openrtm" or openrtm_available() is None
+        )
+        return LaunchPolicy(("python", *offered), self.allow_targets)
 
     def __post_init__(self) -> None:
         expanded = Path(str(self.data_dir).replace("{name}", self.name)).expanduser()

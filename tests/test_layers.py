@@ -27,6 +27,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("primitives", {"keys", "launch", "control", "sdk", "client", "netlab"}),
     ("codecs and transports", {"record", "gossip", "dataplane"}),
     ("processes and settings", {"config", "runtime", "host"}),
+    ("hosts of other middleware's components", {"openrtm"}),
     ("system model", {"system"}),
     ("plans and elections", {"plan", "election"}),
     ("allocation", {"alloc"}),

@@ -325,6 +325,10 @@ class Agent:
         from sdrpeer.runtime.manager import InstanceManager  # noqa: PLC0415
 
         tuning = self.tuning
+        if "openrtm" in cfg.allow_launchers and "openrtm" not in cfg.launch_policy.launchers:
+            from sdrpeer.launch.openrtm import available  # noqa: PLC0415 - only to say why
+
+            log.warning("launcher 'openrtm' allowed but not offered: %s", available())
         instances = InstanceManager(
             cfg.data_dir,
             tuning.supervisor.with_(data_host=parse_hostport(cfg.bind)[0]),

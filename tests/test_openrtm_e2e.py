@@ -1,0 +1,135 @@
+"""An unmodified OpenRTM-aist RTC (tests/rtc_fixture.py) hosted by the `openrtm` launcher on
+real agents: ACTIVE, its DataPorts connected to sdrpeer components' ports both ways, its host
+killed and replaced, its onExecute's RTC_ERROR an sdrpeer ERROR that recovery acts on."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sdrpeer.launch.openrtm import available
+from tests.realnet import Agent, RealCluster
+from tests.test_recovery_e2e import deploy, status
+
+pytestmark = [
+    pytest.mark.realnet,
+    pytest.mark.skipif(available() is not None, reason=f"{available()}"),
+]
+
+RTC = "tests.rtc_fixture:Relay"
+FLAGS = ("--allow-launcher", "openrtm")
+
+SYSTEM = f"""\
+name: openrtm-e2e
+components:
+  - {{name: Pub, target: tests.rtc_peers:PosePub}}
+  - {{name: Relay, launcher: openrtm, target: "{RTC}"}}
+  - {{name: Counts, target: tests.components_fixture:Recorder}}
+  - {{name: Check, target: tests.rtc_peers:PoseCheck}}
+connections:
+  - {{from: Pub.out, to: Relay.pose}}
+  - {{from: Relay.count, to: Counts.inp}}
+  - {{from: Relay.echo, to: Check.inp}}
+"""
+
+
+def rows(agent: Agent) -> dict[str, dict[str, Any]]:
+    return {r["name"]: r for r in agent.get("/v1/instances")}
+
+
+def frames_in(agent: Agent, instance: str, port: str) -> int:
+    return int(rows(agent).get(instance, {}).get("ports", {}).get(port, {}).get("frames_in", 0))
+
+
+def test_an_rtc_goes_active_and_its_dataports_connect_both_ways(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    one = cluster.start("robot-1", flags=FLAGS)
+    path = tmp_path / "system.yaml"
+    path.write_text(SYSTEM)
+    doc = deploy(cluster, one, path)
+    assert {c["component"]: c["state"] for c in doc["components"]}["Relay"] == "active"
+    relay = cluster.wait_until(lambda: rows(one)["Relay"], lambda r: r["ports"], "port counters")
+    assert relay["state"] == "ACTIVE"
+    assert set(relay["ports"]) == {"pose", "count", "echo"}
+    # the RTC's OutPort (TimedLong) reaches an sdrpeer InPort
+    cluster.wait_until(lambda: frames_in(one, "Counts", "inp"), lambda n: n > 10, "RTC counts")
+    # sdrpeer's Poses reach the RTC's InPort (TimedPose2D) and come back from its OutPort as Poses
+    cluster.wait_until(lambda: frames_in(one, "Check", "inp"), lambda n: n > 10, "echoed poses")
+    assert frames_in(one, "Relay", "pose") > 0  # counted on the RTC host side too
+    assert rows(one)["Check"]["state"] == "ACTIVE"  # every echo held x*2, y, heading
+
+
+CRASHY = f"""\
+name: openrtm-crash
+components:
+  - name: Relay
+    launcher: openrtm
+    target: "{RTC}"
+    params: {{trigger: "{{trigger}}"}}
+    standby: {{{{same_robot: 1, mode: hot}}}}
+  - {{name: Counts, target: tests.components_fixture:Recorder}}
+connections:
+  - {{from: Relay.count, to: Counts.inp}}
+recovery:
+  rules:
+    - cause: component_error
+      actions: [standby_same_robot, restart, standby_other_robot, launch_other_robot]
+"""
+
+
+def _ready(d: dict[str, Any]) -> bool:
+    comps = d["components"]
+    return bool(comps) and all(
+        c["state"] == "active" and all(s["state"] == "inactive" for s in c["standbys"])
+        for c in comps
+    )
+
+
+def _deploy_crashy(cluster: RealCluster, tmp_path: Path) -> tuple[Agent, Path]:
+    one = cluster.start("robot-1", flags=FLAGS)
+    trigger = tmp_path / "trip"
+    path = tmp_path / "crashy.yaml"
+    path.write_text(CRASHY.replace("{trigger}", str(trigger)).replace("{{", "{").replace("}}", "}"))
+    deploy(cluster, one, path)
+    cluster.wait_until(lambda: status(one), _ready, "the RTC's standby ready")
+    return one, trigger
+
+
+def test_killing_an_rtcs_host_brings_its_standby_up(cluster: RealCluster, tmp_path: Path) -> None:
+    one, _ = _deploy_crashy(cluster, tmp_path)
+    os.kill(rows(one)["Relay"]["pid"], signal.SIGKILL)
+    doc = cluster.wait_until(
+        lambda: status(one),
+        lambda d: (
+            next(c for c in d["components"] if c["component"] == "Relay")["instance"] == "Relay-s1"
+            and _ready(d)
+        ),
+        "the RTC's standby active",
+    )
+    assert doc is not None
+    decisions = [e for e in one.events() if e["kind"] == "recovery.decision"]
+    assert decisions[0]["detail"]["action"] == "standby_same_robot"
+    n = frames_in(one, "Counts", "inp")
+    cluster.wait_until(lambda: frames_in(one, "Counts", "inp"), lambda v: v > n, "counts again")
+
+
+def test_an_rtc_returning_rtc_error_is_in_error_and_recovered(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    one, trigger = _deploy_crashy(cluster, tmp_path)
+    trigger.write_text("trip")  # every Relay's onExecute now returns RTC_ERROR
+    cluster.wait_until(
+        lambda: [e for e in one.events() if e["kind"] == "recovery.decision"],
+        bool,
+        "a recovery decision",
+    )
+    errors = [e for e in one.events() if "onExecute returned RTC_ERROR" in str(e)]
+    assert errors, "the RTC's RTC_ERROR is reported as sdrpeer ERROR"
+    decisions = [e for e in one.events() if e["kind"] == "recovery.decision"]
+    assert decisions[0]["detail"]["action"] == "standby_same_robot"
+    assert decisions[0]["detail"].get("cause", "component_error") == "component_error"
