@@ -133,3 +133,36 @@ def test_an_rtc_returning_rtc_error_is_in_error_and_recovered(
     decisions = [e for e in one.events() if e["kind"] == "recovery.decision"]
     assert decisions[0]["detail"]["action"] == "standby_same_robot"
     assert decisions[0]["detail"].get("cause", "component_error") == "component_error"
+
+
+PAPER = """\
+name: paper-rtcs
+components:
+  - {name: OmniCam, launcher: openrtm, target: components.openrtm.camera:OmnidirectionalCamera}
+  - {name: Cam, launcher: openrtm, target: components.openrtm.camera:Camera}
+  - {name: Detector, launcher: openrtm, target: components.openrtm.anomaly_detection}
+  - {name: Ctl, launcher: openrtm, target: components.openrtm.red_controller}
+  - {name: Est, launcher: openrtm, target: components.openrtm.position_estimation}
+  - {name: Cmds, target: tests.components_fixture:Recorder}
+connections:
+  - {from: OmniCam.image, to: Detector.image, policy: {push: new, buffer: 1}}
+  - {from: Cam.image, to: Detector.image, policy: {push: new, buffer: 1}}
+  - {from: Detector.alarm, to: Ctl.alarm, policy: {push: new}}
+  - {from: Ctl.odometry, to: Est.odometry}
+  - {from: Est.pose, to: Ctl.pose, policy: {push: new}}
+  - {from: Est.inside, to: Ctl.inside, policy: {push: new}}
+  - {from: Ctl.cmd, to: Cmds.inp}
+"""
+
+
+def test_the_papers_five_rtcs_run_unmodified_and_talk(cluster: RealCluster, tmp_path: Path) -> None:
+    one = cluster.start("robot-1", flags=FLAGS)
+    path = tmp_path / "paper.yaml"
+    path.write_text(PAPER)
+    deploy(cluster, one, path)
+    wired = (("Detector", "image"), ("Ctl", "alarm"), ("Est", "odometry"), ("Ctl", "inside"))
+    for instance, port in (*wired, ("Ctl", "pose"), ("Cmds", "inp")):
+        cluster.wait_until(
+            lambda i=instance, p=port: frames_in(one, i, p), lambda n: n > 5, f"{instance}.{port}"
+        )
+    assert all(r["state"] == "ACTIVE" for r in rows(one).values())
