@@ -162,7 +162,9 @@ def test_the_papers_five_rtcs_run_unmodified_and_talk(cluster: RealCluster, tmp_
     deploy(cluster, one, path)
     wired = (("Detector", "image"), ("Ctl", "alarm"), ("Est", "odometry"), ("Ctl", "inside"))
     for instance, port in (*wired, ("Ctl", "pose"), ("Cmds", "inp")):
-        cluster.wait_until(
-            lambda i=instance, p=port: frames_in(one, i, p), lambda n: n > 5, f"{instance}.{port}"
-        )
+
+        def count(i: str = instance, p: str = port) -> int:
+            return frames_in(one, i, p)
+
+        cluster.wait_until(count, lambda n: n > 5, f"{instance}.{port}")
     assert all(r["state"] == "ACTIVE" for r in rows(one).values())
