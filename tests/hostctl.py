@@ -61,8 +61,10 @@ class HostProc:
         run_dir: Path,
         env: dict[str, str] | None = None,
         control: bool = True,
+        module: str = "sdrpeer.host",
     ) -> HostProc:
-        """Start a host for `target` as the agent would."""
+        """Start a host for `target` as the agent would (`module`: the host's, e.g. the openrtm
+        launcher's `sdrpeer.openrtm`)."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         full_env = {k: v for k, v in os.environ.items() if not k.startswith("SDRPEER_")}
         full_env["PYTHONPATH"] = str(ROOT)
@@ -75,7 +77,7 @@ class HostProc:
         log = run_dir / f"{name}.log"
         with open(log, "wb") as err:
             proc = subprocess.Popen(
-                [sys.executable, "-m", "sdrpeer.host", target, *args],
+                [sys.executable, "-m", module, target, *args],
                 pass_fds=[theirs.fileno()] if control else [],
                 stdin=subprocess.DEVNULL,
                 stdout=err,

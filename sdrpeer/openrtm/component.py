@@ -15,6 +15,7 @@ RTC's execution rate. sdrpeer's runner then drives the RTC through its execution
 | each period in ERROR    | one `tick()` (onError)                                            |
 | reset                   | `reset_component` (onReset)                                       |
 | finalize                | the RTC exits (onFinalize), the manager shuts down                |
+| set params              | its active configuration set (as rtconf), applied after a period  |
 
 A callback whose RTC call does not end in the expected state raises `RtcError`, so the runner
 moves to ERROR and the agent's recovery acts: `onExecute` returning anything but RTC_OK, an
@@ -96,14 +97,18 @@ class RtcComponent(Component):
         self._forward_out()
         self._check("activate", ret, RTC.ACTIVE_STATE)
         if self.runtime.failed():
-            raise RtcError(f"{self.runtime.type_name}.onExecute returned {self.runtime._last_ret}")
+            raise RtcError(
+                f"{self.runtime.type_name}.onExecute returned {self.runtime.last_result}"
+            )
 
     async def on_execute(self) -> None:
         """sdrpeer's frames into the RTC, one onExecute, the RTC's data out."""
         await self._rtc(self._write_and_tick, self._inputs())
         self._forward_out()
         if self.runtime.failed():
-            raise RtcError(f"{self.runtime.type_name}.onExecute returned {self.runtime._last_ret}")
+            raise RtcError(
+                f"{self.runtime.type_name}.onExecute returned {self.runtime.last_result}"
+            )
         state = self.runtime.state()
         if state != RTC.ACTIVE_STATE:
             raise RtcError(f"{self.runtime.type_name} is {state}")
@@ -131,6 +136,10 @@ class RtcComponent(Component):
         ret = await self._rtc(self.runtime.reset)
         self._forward_out()
         self._check("reset", ret, RTC.INACTIVE_STATE)
+
+    async def on_params_changed(self, changed: dict[str, Any]) -> None:
+        """New configuration values into the RTC's active set (taken after its next period)."""
+        await self._rtc(self.runtime.configure, {k: str(v) for k, v in changed.items()})
 
     async def on_finalize(self) -> None:
         """The RTC exits (onFinalize); the manager shuts down."""

@@ -20,11 +20,12 @@ the bridge OutPort connected to the RTC's InPort `port` (it lands in that InPort
 once), `tick()` runs one period of the execution context (`onExecute`, or `onError` in ERROR, after
 any pending state change), `take()` returns what the RTC's OutPorts wrote since the last call,
 read from the bridge's InPorts. `activate`/`deactivate`/`reset` call the execution context's
-`activate_component` etc.; the synchronous context carries out the change with one tick
-(OpenRTM's own behaviour: the activating tick also runs the first `onExecute`). `state()` is the
-RTC's state in its context; `failed()` says whether the last `onExecute` returned something other
-than RTC_OK (the context moves the RTC to ERROR on its next tick). `close()` has the RTC exit
-(`onFinalize`) and shuts the manager down.
+`activate_component` etc. and `configure` sets configuration parameters through the RTC's
+SDO configuration interface (as rtconf does); the synchronous context carries out a change with
+one tick (OpenRTM's own behaviour: the activating tick also runs the first `onExecute`).
+`state()` is the RTC's state in its context; `failed()` says whether the last `onExecute`
+returned something other than RTC_OK (the context moves the RTC to ERROR on its next tick).
+`close()` has the RTC exit (`onFinalize`) and shuts the manager down.
 """
 
 from __future__ import annotations
@@ -285,9 +286,20 @@ class RtcRuntime:
         self._last_ret = RTC.RTC_OK
         self.ec.tick()
 
+    @property
+    def last_result(self) -> Any:
+        """What the last onExecute returned (RTC_OK before the first)."""
+        return self._last_ret
+
     def failed(self) -> bool:
         """Whether the last onExecute returned something other than RTC_OK."""
         return bool(self._last_ret != RTC.RTC_OK)
+
+    def configure(self, values: dict[str, str]) -> None:
+        """Set configuration parameters in the RTC's active set, as rtconf does; the RTC's bound
+        variables take them after its next execution (`on_state_update`)."""
+        for name, value in values.items():
+            OpenRTM_aist.CORBA_RTCUtil.set_active_configuration(self.ref, name, value)
 
     def state(self) -> Any:
         """The RTC's LifeCycleState in its execution context."""
