@@ -1,6 +1,7 @@
 """An unmodified OpenRTM-aist RTC (tests/rtc_fixture.py) hosted by the `openrtm` launcher on
 real agents: ACTIVE, its DataPorts connected to sdrpeer components' ports both ways, its host
-killed and replaced, its onExecute's RTC_ERROR an sdrpeer ERROR that recovery acts on."""
+killed and replaced, its onExecute's RTC_ERROR an sdrpeer ERROR that recovery acts on, moved to
+another robot; the paper's five RTCs (components/openrtm/) wired together."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from typing import Any
 import pytest
 
 from sdrpeer.launch.openrtm import available
-from tests.realnet import Agent, RealCluster
+from tests.realnet import Agent, RealCluster, http
 from tests.test_recovery_e2e import deploy, status
 
 pytestmark = [
@@ -168,3 +169,36 @@ def test_the_papers_five_rtcs_run_unmodified_and_talk(cluster: RealCluster, tmp_
 
         cluster.wait_until(count, lambda n: n > 5, f"{instance}.{port}")
     assert all(r["state"] == "ACTIVE" for r in rows(one).values())
+
+
+def test_a_planned_move_takes_an_rtc_to_another_robot_and_its_streams_with_it(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    one, two = cluster.start_many(2, flags=FLAGS)
+    path = tmp_path / "system.yaml"
+    path.write_text(SYSTEM)
+    doc = deploy(cluster, one, path)
+    origin = next(c["robot"] for c in doc["components"] if c["component"] == "Relay")
+    to = "robot-2" if origin == "robot-1" else "robot-1"
+    code, answer = http("POST", one.api + "/v1/move", {"component": "Relay", "to": to}, one.token)
+    assert code == 200, answer
+
+    def relay_on(d: dict[str, Any]) -> bool:
+        relay = next(c for c in d["components"] if c["component"] == "Relay")
+        return bool(relay["robot"] == to and relay["state"] == "active")
+
+    cluster.wait_until(lambda: status(one), relay_on, f"Relay ACTIVE on {to}")
+    agent = one if to == "robot-1" else two
+
+    def poses_in() -> int:
+        rows = [r for r in agent.get("/v1/instances") if r["component"] == "Relay"]
+        return sum(int(r.get("ports", {}).get("pose", {}).get("frames_in", 0)) for r in rows)
+
+    cluster.wait_until(poses_in, lambda n: n > 5, "poses into the moved RTC")
+    checks = {a.name: a for a in (one, two)}
+    check_robot = next(c["robot"] for c in status(one)["components"] if c["component"] == "Check")
+    n = frames_in(checks[check_robot], "Check", "inp")
+    cluster.wait_until(
+        lambda: frames_in(checks[check_robot], "Check", "inp"), lambda v: v > n + 5, "echoes"
+    )
+    assert rows(checks[check_robot])["Check"]["state"] == "ACTIVE"
