@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import pytest
 
 from sdrpeer.config import AgentConfig
-from sdrpeer.errors import LauncherError
+from sdrpeer.errors import LauncherError, RtcDataError
 from sdrpeer.launch import openrtm
 from sdrpeer.launch.launchers import get_launcher, known_launchers
 from sdrpeer.sdk import Pose, Velocity
@@ -118,7 +118,7 @@ def test_simple_timed_types_are_their_data(repo: str, value: object) -> None:
 
 @needs_openrtm
 def test_other_structs_are_maps_of_their_fields_with_times_in_seconds() -> None:
-    from sdrpeer.openrtm.values import DataTypeError, from_sdrpeer, to_sdrpeer  # noqa: PLC0415
+    from sdrpeer.openrtm.values import from_sdrpeer, to_sdrpeer  # noqa: PLC0415
 
     value = {"tm": 12.5, "data": {"x": 1.0, "y": 2.0, "z": 3.0}}
     data = from_sdrpeer(value, "IDL:RTC/TimedPoint3D:1.0")
@@ -127,5 +127,5 @@ def test_other_structs_are_maps_of_their_fields_with_times_in_seconds() -> None:
         from_sdrpeer({"data": {"x": 1.0}}, "IDL:RTC/TimedPoint3D:1.0"), "IDL:RTC/TimedPoint3D:1.0"
     )
     assert missing["data"] == {"x": 1.0, "y": 0.0, "z": 0.0}
-    with pytest.raises(DataTypeError, match="TimedLong"):
+    with pytest.raises(RtcDataError, match="TimedLong"):
         from_sdrpeer("not a number", "IDL:RTC/TimedLong:1.0")

@@ -32,6 +32,7 @@ from typing import Any, ClassVar
 
 import RTC
 
+from sdrpeer.errors import RtcError
 from sdrpeer.openrtm.runtime import RtcRuntime
 from sdrpeer.openrtm.values import MAPPED_TYPES, from_sdrpeer, to_sdrpeer
 from sdrpeer.sdk import Component, InPort, OutPort, Param
@@ -42,10 +43,6 @@ log = logging.getLogger("sdrpeer.openrtm.component")
 
 MAX_INPUT_PER_PERIOD = 1024
 """Frames taken from one sdrpeer InPort per period (the rest wait for the next period)."""
-
-
-class RtcError(RuntimeError):
-    """The RTC did not do what its lifecycle call asked (it is in ERROR, or refused)."""
 
 
 class RtcComponent(Component):

@@ -28,6 +28,7 @@ from typing import Any
 import omniORB
 from omniORB import tcInternal as tc
 
+from sdrpeer.errors import RtcDataError
 from sdrpeer.sdk.robot_types import Pose, Velocity
 
 TIME_ID = "IDL:RTC/Time:1.0"
@@ -39,10 +40,6 @@ MAPPED_TYPES: dict[str, type] = {POSE2D_ID: Pose, VELOCITY2D_ID: Velocity}
 
 _INTS = {tc.tv_short, tc.tv_long, tc.tv_ushort, tc.tv_ulong, tc.tv_longlong, tc.tv_ulonglong}
 _FLOATS = {tc.tv_float, tc.tv_double, tc.tv_longdouble}
-
-
-class DataTypeError(ValueError):
-    """A value does not fit the OpenRTM data type it should be written as."""
 
 
 def descriptor(repo_id: str) -> Any:
@@ -202,7 +199,7 @@ def _idl(value: Any, desc: Any, where: str) -> Any:
         if kind == tc.tv_enum:
             return next(e for e in desc[3] if str(e) == str(value) or e._v == value)
     except (TypeError, ValueError, StopIteration) as exc:
-        raise DataTypeError(f"{where}: {value!r} does not fit: {exc}") from None
+        raise RtcDataError(f"{where}: {value!r} does not fit: {exc}") from None
     return value
 
 
