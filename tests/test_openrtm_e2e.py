@@ -202,3 +202,40 @@ def test_a_planned_move_takes_an_rtc_to_another_robot_and_its_streams_with_it(
         lambda: frames_in(checks[check_robot], "Check", "inp"), lambda v: v > n + 5, "echoes"
     )
     assert rows(checks[check_robot])["Check"]["state"] == "ACTIVE"
+
+
+HANGS = f"""\
+name: openrtm-hangs
+components:
+  - name: Relay
+    launcher: openrtm
+    target: "{RTC}"
+    params: {{{{hang: "{{hang}}"}}}}
+    standby: {{{{same_robot: 1, mode: hot}}}}
+    watchdog: 3s
+recovery:
+  rules:
+    - cause: component_error
+      actions: [standby_same_robot, restart, standby_other_robot, launch_other_robot]
+"""
+
+
+def test_an_rtc_stuck_in_onexecute_is_killed_by_the_watchdog_and_replaced(
+    cluster: RealCluster, tmp_path: Path
+) -> None:
+    one = cluster.start("robot-1", flags=FLAGS)
+    hang = tmp_path / "hang"
+    path = tmp_path / "hangs.yaml"
+    path.write_text(HANGS.replace("{hang}", str(hang)).replace("{{", "{").replace("}}", "}"))
+    deploy(cluster, one, path)
+    cluster.wait_until(lambda: status(one), _ready, "the RTC's standby ready")
+    pid = rows(one)["Relay"]["pid"]
+    hang.write_text(f"{pid}\n")  # that host's onExecute never returns from now on
+
+    def replaced(d: dict[str, Any]) -> bool:
+        relay = d["components"][0]
+        return bool(relay["instance"] == "Relay-s1" and relay["state"] == "active")
+
+    cluster.wait_until(lambda: status(one), replaced, "the standby active")
+    faults = [e["detail"] for e in one.events() if e["kind"] == "instance.fault"]
+    assert any(f["instance"] == "Relay" and f["detail"].startswith("hung: ") for f in faults)

@@ -24,7 +24,7 @@ def test_an_rtc_follows_sdrpeers_lifecycle(hosts: HostPool, tmp_path: Path) -> N
     )
     assert hello["component"] == "Relay"
     assert hello["ports"] == {"in": ["pose"], "out": ["count", "echo"]}
-    assert hello["params"] == {"trigger": str(trigger)}  # its configuration, as given
+    assert hello["params"] == {"trigger": str(trigger), "hang": "none"}  # its configuration
     assert host.command("activate")["ok"]
     host.wait_state("ACTIVE")
 

@@ -19,14 +19,14 @@ RTC's execution rate. sdrpeer's runner then drives the RTC through its execution
 
 A callback whose RTC call does not end in the expected state raises `RtcError`, so the runner
 moves to ERROR and the agent's recovery acts: `onExecute` returning anything but RTC_OK, an
-`onActivated` that fails, an RTC found in ERROR_STATE. Every RTC call runs in a worker thread
-(`asyncio.to_thread`; one at a time, under the runner's lock), so a slow `onExecute` never holds
-up the control channel; values cross to sdrpeer's ports on the loop's thread.
+`onActivated` that fails, an RTC found in ERROR_STATE. The RTC's callbacks run on the host's loop
+thread, as a plain `on_execute` of an SDK component does: a slow `onExecute` delays the control
+channel and the heartbeats by as much, and one that never returns stops them, so the agent's
+watchdog kills the host and recovery replaces it (the host is "hung", as any other).
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from typing import Any, ClassVar
 
@@ -49,9 +49,6 @@ class RtcComponent(Component):
     """Base of the classes `component_class` builds; `runtime` is set on each of them."""
 
     runtime: ClassVar[RtcRuntime]
-
-    async def _rtc(self, fn: Any, *args: Any) -> Any:
-        return await asyncio.to_thread(fn, *args)
 
     def _check(self, what: str, ret: Any, want: Any) -> None:
         state = self.runtime.state()
@@ -88,9 +85,9 @@ class RtcComponent(Component):
             self.runtime.write(port, data)
         self.runtime.tick()
 
-    async def on_activated(self) -> None:
+    def on_activated(self) -> None:
         """activate_component: onActivated and the first onExecute."""
-        ret = await self._rtc(self.runtime.activate)
+        ret = self.runtime.activate()
         self._forward_out()
         self._check("activate", ret, RTC.ACTIVE_STATE)
         if self.runtime.failed():
@@ -98,9 +95,9 @@ class RtcComponent(Component):
                 f"{self.runtime.type_name}.onExecute returned {self.runtime.last_result}"
             )
 
-    async def on_execute(self) -> None:
+    def on_execute(self) -> None:
         """sdrpeer's frames into the RTC, one onExecute, the RTC's data out."""
-        await self._rtc(self._write_and_tick, self._inputs())
+        self._write_and_tick(self._inputs())
         self._forward_out()
         if self.runtime.failed():
             raise RtcError(
@@ -110,37 +107,37 @@ class RtcComponent(Component):
         if state != RTC.ACTIVE_STATE:
             raise RtcError(f"{self.runtime.type_name} is {state}")
 
-    async def on_aborting(self) -> None:
+    def on_aborting(self) -> None:
         """The context's next tick moves the RTC to ERROR (onAborting) if it is not there."""
         if self.runtime.state() != RTC.ERROR_STATE:
-            await self._rtc(self.runtime.tick)
+            self.runtime.tick()
             self._forward_out()
 
-    async def on_error(self) -> None:
+    def on_error(self) -> None:
         """One tick in ERROR: onError."""
-        await self._rtc(self.runtime.tick)
+        self.runtime.tick()
         self._forward_out()
 
-    async def on_deactivated(self) -> None:
+    def on_deactivated(self) -> None:
         """deactivate_component: onDeactivated."""
         if self.runtime.state() == RTC.ACTIVE_STATE:
-            ret = await self._rtc(self.runtime.deactivate)
+            ret = self.runtime.deactivate()
             self._forward_out()
             self._check("deactivate", ret, RTC.INACTIVE_STATE)
 
-    async def on_reset(self) -> None:
+    def on_reset(self) -> None:
         """reset_component: onReset."""
-        ret = await self._rtc(self.runtime.reset)
+        ret = self.runtime.reset()
         self._forward_out()
         self._check("reset", ret, RTC.INACTIVE_STATE)
 
-    async def on_params_changed(self, changed: dict[str, Any]) -> None:
+    def on_params_changed(self, changed: dict[str, Any]) -> None:
         """New configuration values into the RTC's active set (taken after its next period)."""
-        await self._rtc(self.runtime.configure, {k: str(v) for k, v in changed.items()})
+        self.runtime.configure({k: str(v) for k, v in changed.items()})
 
-    async def on_finalize(self) -> None:
+    def on_finalize(self) -> None:
         """The RTC exits (onFinalize); the manager shuts down."""
-        await self._rtc(self.runtime.close)
+        self.runtime.close()
 
     _types: ClassVar[dict[str, str]] = {}
     _in_names: ClassVar[frozenset[str]] = frozenset()

@@ -282,9 +282,15 @@ class RtcRuntime:
         return out
 
     def tick(self) -> None:
-        """One period of the execution context."""
+        """One period of the execution context: pending state changes, then onExecute (onError in
+        ERROR), then onStateUpdate (its configuration updated). What `OpenHRPExecutionContext.tick`
+        does, without the sleep it takes once per 1000 ticks to keep its own period (sdrpeer's
+        context keeps the period; that sleep would stall the host's loop at low rates)."""
         self._last_ret = RTC.RTC_OK
-        self.ec.tick()
+        if self.ec.isRunning():
+            self.ec.invokeWorkerPreDo()
+            self.ec.invokeWorkerDo()
+            self.ec.invokeWorkerPostDo()
 
     @property
     def last_result(self) -> Any:
