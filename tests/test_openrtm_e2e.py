@@ -91,18 +91,22 @@ def _ready(d: dict[str, Any]) -> bool:
     )
 
 
-def _deploy_crashy(cluster: RealCluster, tmp_path: Path) -> tuple[Agent, Path]:
+def _deploy_with_standby(
+    cluster: RealCluster, tmp_path: Path, template: str = "", key: str = "trigger"
+) -> tuple[Agent, Path]:
+    """One robot running `template` (CRASHY) with its `{key}` a file path; the standby ready."""
     one = cluster.start("robot-1", flags=FLAGS)
-    trigger = tmp_path / "trip"
-    path = tmp_path / "crashy.yaml"
-    path.write_text(CRASHY.replace("{trigger}", str(trigger)).replace("{{", "{").replace("}}", "}"))
+    file = tmp_path / key
+    path = tmp_path / "system.yaml"
+    text = (template or CRASHY).replace("{" + key + "}", str(file))
+    path.write_text(text.replace("{{", "{").replace("}}", "}"))
     deploy(cluster, one, path)
     cluster.wait_until(lambda: status(one), _ready, "the RTC's standby ready")
-    return one, trigger
+    return one, file
 
 
 def test_killing_an_rtcs_host_brings_its_standby_up(cluster: RealCluster, tmp_path: Path) -> None:
-    one, _ = _deploy_crashy(cluster, tmp_path)
+    one, _ = _deploy_with_standby(cluster, tmp_path)
     os.kill(rows(one)["Relay"]["pid"], signal.SIGKILL)
     doc = cluster.wait_until(
         lambda: status(one),
@@ -122,7 +126,7 @@ def test_killing_an_rtcs_host_brings_its_standby_up(cluster: RealCluster, tmp_pa
 def test_an_rtc_returning_rtc_error_is_in_error_and_recovered(
     cluster: RealCluster, tmp_path: Path
 ) -> None:
-    one, trigger = _deploy_crashy(cluster, tmp_path)
+    one, trigger = _deploy_with_standby(cluster, tmp_path)
     trigger.write_text("trip")  # every Relay's onExecute now returns RTC_ERROR
     cluster.wait_until(
         lambda: [e for e in one.events() if e["kind"] == "recovery.decision"],
@@ -223,12 +227,7 @@ recovery:
 def test_an_rtc_stuck_in_onexecute_is_killed_by_the_watchdog_and_replaced(
     cluster: RealCluster, tmp_path: Path
 ) -> None:
-    one = cluster.start("robot-1", flags=FLAGS)
-    hang = tmp_path / "hang"
-    path = tmp_path / "hangs.yaml"
-    path.write_text(HANGS.replace("{hang}", str(hang)).replace("{{", "{").replace("}}", "}"))
-    deploy(cluster, one, path)
-    cluster.wait_until(lambda: status(one), _ready, "the RTC's standby ready")
+    one, hang = _deploy_with_standby(cluster, tmp_path, HANGS, "hang")
     pid = rows(one)["Relay"]["pid"]
     hang.write_text(f"{pid}\n")  # that host's onExecute never returns from now on
 
