@@ -118,7 +118,8 @@ class AgentConfig:
 
     @property
     def launch_policy(self) -> LaunchPolicy:
-        """What this agent lets its hosts run."""
+        """What this agent's configuration lets its hosts run (the agent offers less when a
+        launcher cannot run here: `sdrpeer.launch.launchers.offered`)."""
         return LaunchPolicy(("python", *self.allow_launchers), self.allow_targets)
 
     def __post_init__(self) -> None:

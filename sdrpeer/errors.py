@@ -24,6 +24,8 @@ SdrpeerError
 ├── NotAllocator               this robot is not the allocator
 ├── MoveError                  a planned move cannot be asked for
 ├── LoadError, HandoffError    a host cannot load its target / hand over a state
+├── RtcError                   a hosted OpenRTM RTC did not do what its lifecycle call asked
+├── RtcDataError               a value does not fit an RTC DataPort's OpenRTM data type
 ├── ProfileError               a component could not be profiled
 └── ElectionError              the election core tried a move its table forbids
 ```
@@ -244,6 +246,17 @@ class MoveError(SdrpeerError, ValueError):
 
 class LoadError(SdrpeerError):
     """The host's target could not be loaded (the message names the target and the reason)."""
+
+
+class RtcError(SdrpeerError):
+    """A hosted OpenRTM RTC did not do what its lifecycle call asked (its onExecute returned an
+    error, it is in ERROR_STATE, or its execution context refused): the sdrpeer component's ERROR
+    (sdrpeer.openrtm.component)."""
+
+
+class RtcDataError(SdrpeerError, ValueError):
+    """A value does not fit the OpenRTM data type it should be written as (the message names
+    the type and the field)."""
 
 
 class HandoffError(SdrpeerError):

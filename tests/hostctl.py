@@ -63,8 +63,8 @@ class HostProc:
         control: bool = True,
         module: str = "sdrpeer.host",
     ) -> HostProc:
-        """Start a host for `target` as the agent would (`module`: sdrpeer.ros2.host for a
-        ROS 2 host)."""
+        """Start a host for `target` as the agent would (`module`: the host's module, e.g.
+        `sdrpeer.ros2.host` or the openrtm launcher's `sdrpeer.openrtm`)."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         full_env = {k: v for k, v in os.environ.items() if not k.startswith("SDRPEER_")}
         full_env["PYTHONPATH"] = str(ROOT)

@@ -255,12 +255,12 @@ class RealCluster:
         agent.pid = int(info["pid"])
         return agent
 
-    def start_many(self, n: int) -> list[Agent]:
+    def start_many(self, n: int, flags: Sequence[str] = ()) -> list[Agent]:
         """robot-1 .. robot-n, the others joining robot-1, and wait until all see n alive and
         hold every robot's record. The others start side by side (each waits only for robot-1's
-        address)."""
-        first = self.start("robot-1")
-        spawned = [self.spawn(f"robot-{i}", join=[first]) for i in range(2, n + 1)]
+        address). `flags`: more `sdrpeer agent` flags for every one."""
+        first = self.start("robot-1", flags=flags)
+        spawned = [self.spawn(f"robot-{i}", join=[first], flags=flags) for i in range(2, n + 1)]
         others = [self.started(agent) for agent in spawned]
         agents = [first, *others]
         names = {a.name for a in agents}

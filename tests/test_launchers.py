@@ -73,7 +73,7 @@ def test_unknown_launcher_lists_known() -> None:
     with pytest.raises(LauncherError) as info:
         get_launcher("docker")
     assert "unknown launcher 'docker'" in str(info.value)
-    assert "exec, python, ros2, script" in str(info.value)
+    assert "exec, openrtm, python, ros2, script" in str(info.value)
     assert {"exec", "python", "script"} <= set(known_launchers())
 
 
@@ -124,7 +124,7 @@ def test_plugins_from_entry_points(monkeypatch: pytest.MonkeyPatch) -> None:
         get_launcher("broken")
     with pytest.raises(LauncherError, match=r"launcher 'bogus' is a object, not a Launcher"):
         get_launcher("bogus")
-    known = "known: bogus, broken, composite, exec, nix, python, script"
+    known = "known: bogus, broken, composite, exec, nix, openrtm, python, script"
     with pytest.raises(LauncherError, match=known):
         get_launcher("other")
 

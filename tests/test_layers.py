@@ -27,7 +27,7 @@ LAYERS: list[tuple[str, set[str]]] = [
     ("primitives", {"keys", "launch", "control", "sdk", "client", "netlab"}),
     ("codecs and transports", {"record", "gossip", "dataplane"}),
     ("processes and settings", {"config", "runtime", "host"}),
-    ("ROS 2 hosting and mapping", {"ros2"}),
+    ("hosts of other middleware's components", {"ros2", "openrtm"}),
     ("system model", {"system"}),
     ("plans and elections", {"plan", "election"}),
     ("allocation", {"alloc"}),

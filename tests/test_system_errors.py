@@ -48,7 +48,8 @@ CASES: list[tuple[str, str, str]] = [
     (
         "unknown launcher",
         HEAD + f"  - {{name: E, target: {CAM}, launcher: docker}}\n",
-        "sys.yaml:5: field 'components[2].launcher': expected one of composite, exec, python",
+        "sys.yaml:5: field 'components[2].launcher': expected one of composite, exec, openrtm, "
+        "python",
     ),
     (
         "python target form",

@@ -5,7 +5,9 @@ than the robot that will lose its signal); run 2 gives it to robot-1, the paper'
 (its load-balancing service sat on robot-1, which is why its recovery took ~11 s). Each run is
 `sdrpeer.demo.experiment.run` in its own folder under `--out`; the table compares the runs with
 the paper. `--fast` (for CI): 50 MB reserves instead of 500, the RSSI rule held 2 s instead of
-6 s, the signal falls 12 s after start instead of 45 s.
+6 s, the signal falls 12 s after start instead of 45 s. `--openrtm`: each run twice, the SDK
+components and then their OpenRTM-aist RT-Component versions (components/openrtm/, the `openrtm`
+launcher, examples/paper/system-openrtm.yaml), side by side in the table.
 """
 
 from __future__ import annotations
@@ -45,16 +47,30 @@ def add_demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default="both",
         help="first: allocator off robot-1; second: allocator on robot-1 (default both)",
     )
+    p.add_argument(
+        "--openrtm",
+        action="store_true",
+        help="also run the RT-Component versions (OpenRTM-aist API, the openrtm launcher) "
+        "and compare",
+    )
     p.set_defaults(func=cmd_demo)
 
 
-def options(out: Path, allocator_on: str, *, fast: bool) -> RunOptions:
-    """The run's options (full: the paper's 500 MB and 6 s)."""
+def options(out: Path, allocator_on: str, *, fast: bool, openrtm: bool = False) -> RunOptions:
+    """The run's options (full: the paper's 500 MB and 6 s; `openrtm`: the RTC versions)."""
     from sdrpeer.demo.experiment import RunOptions  # noqa: PLC0415 - a lab, the loader: only here
 
     if fast:
-        return RunOptions(out, allocator_on, reserve_mb=50, sustain_s=2.0, drop_at=12.0, after_s=3)
-    return RunOptions(out, allocator_on)
+        return RunOptions(
+            out,
+            allocator_on,
+            reserve_mb=50,
+            sustain_s=2.0,
+            drop_at=12.0,
+            after_s=3,
+            openrtm=openrtm,
+        )
+    return RunOptions(out, allocator_on, openrtm=openrtm)
 
 
 def table(results: dict[str, RunResult]) -> str:
@@ -83,13 +99,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
     runs = {"first": "robot-2", "second": "robot-1"}
     chosen = list(runs) if args.runs == "both" else [args.runs]
     results: dict[str, RunResult] = {}
+    kinds = (False, True) if args.openrtm else (False,)
     for name in chosen:
-        out = args.out / f"run-{name}"
-        shutil.rmtree(out, ignore_errors=True)
-        where = "robot-1 (the robot that loses its signal)" if name == "second" else runs[name]
-        print(f"run {name}: allocator first on {where}; output in {out}", flush=True)
-        result = run(options(out, runs[name], fast=args.fast), say=lambda s: print(s, flush=True))
-        results[f"{name} (alloc {runs[name]})"] = result
+        for rtc in kinds:
+            out = args.out / (f"run-{name}-openrtm" if rtc else f"run-{name}")
+            shutil.rmtree(out, ignore_errors=True)
+            where = "robot-1 (the robot that loses its signal)" if name == "second" else runs[name]
+            what = " (OpenRTM RTCs)" if rtc else ""
+            print(f"run {name}{what}: allocator first on {where}; output in {out}", flush=True)
+            opts = options(out, runs[name], fast=args.fast, openrtm=rtc)
+            result = run(opts, say=lambda s: print(s, flush=True))
+            label = f"{name} RTC" if rtc else name
+            results[f"{label} (alloc {runs[name]})"] = result
     text = table(results)
     print()
     print(text)

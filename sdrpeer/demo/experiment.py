@@ -53,6 +53,15 @@ class RunOptions:
     after_s: float = 8.0
     """How long to keep recording once recovery is done (the figures' tail)."""
     timeout: float = 120.0
+    openrtm: bool = False
+    """Deploy the RT-Component versions (examples/paper/system-openrtm.yaml, components/openrtm/,
+    the `openrtm` launcher allowed on every robot) instead of the SDK components."""
+
+    @property
+    def system_file(self) -> Path:
+        """The system file this run deploys."""
+        name = "system-openrtm.yaml" if self.openrtm else "system.yaml"
+        return REPO / "examples/paper" / name
 
 
 @dataclass(slots=True)
@@ -70,9 +79,10 @@ class RunResult:
     figures: list[str] = field(default_factory=list)
 
 
-def system_text(reserve_mb: int, sustain_s: float) -> str:
-    """examples/paper/system.yaml with its reserve and the RSSI rule's sustain changed."""
-    text = (REPO / "examples/paper/system.yaml").read_text()
+def system_text(reserve_mb: int, sustain_s: float, path: Path | None = None) -> str:
+    """examples/paper/system.yaml (or `path`) with its reserve and the RSSI rule's sustain
+    changed."""
+    text = (path or REPO / "examples/paper/system.yaml").read_text()
     text = text.replace("reserve_mb: 500", f"reserve_mb: {reserve_mb}")
     return text.replace("for: 6s", f"for: {sustain_s:g}s")
 
@@ -112,11 +122,17 @@ def _all_active(off: str | None = None) -> Callable[[dict[str, Any]], bool]:
 def run(opts: RunOptions, say: Callable[[str], None] = print) -> RunResult:
     """Run the experiment once; everything is written under `opts.out`."""
     robots, scenario = prepare(opts)
-    paper = REPO / "examples/paper/system.yaml"
-    system = parse_system(system_text(opts.reserve_mb, opts.sustain_s), str(paper))
+    paper = opts.system_file
+    system = parse_system(system_text(opts.reserve_mb, opts.sustain_s, paper), str(paper))
     result = RunResult()
     lab_options = UpOptions(
-        3, opts.out / "lab", preset="lan", robot_files=robots, scenario=scenario, timeout=30
+        3,
+        opts.out / "lab",
+        preset="lan",
+        robot_files=robots,
+        scenario=scenario,
+        timeout=30,
+        allow_launchers=("openrtm",) if opts.openrtm else (),
     )
     lab = start_lab(lab_options, say=lambda _: None)
     apis = {r.name: str(r.api) for r in lab.lab.robots}

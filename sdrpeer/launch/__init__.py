@@ -1,2 +1,3 @@
-"""How an instance spec becomes a host command: the launchers (launchers.py, a plugin registry)
-and what an agent lets run (policy.py)."""
+"""How an instance spec becomes a host command: the launchers (launchers.py, a plugin registry),
+what an agent lets run (policy.py) and whether OpenRTM is here for the openrtm launcher
+(openrtm.py)."""

@@ -1,9 +1,11 @@
 """Launchers: how an agent turns an instance spec into the command that starts its host.
 
 How it works: a launcher is any object with a `name` and `command(target, params, *, python)`
-returning an argv (docs/protocol.md, section 3). Four are built in: `python` (`pkg.mod:Class`)
+returning an argv (docs/protocol.md, section 3). Five are built in: `python` (`pkg.mod:Class`)
 and `script` (`path/to/file.py[:Class]`), both `python -m sdrpeer.host TARGET --param k=v ...`,
-`composite` (several member classes in one host, sdrpeer.launch.composite) and `exec` (an argv
+`composite` (several member classes in one host, sdrpeer.launch.composite), `openrtm` (an
+unmodified OpenRTM-aist RTC module, `python -m sdrpeer.openrtm`, docs/openrtm.md) and `exec` (an
+argv
 list run as is; it must speak the control channel itself, and gets its params as
 `SDRPEER_PARAMS`, a JSON map, in its environment). Plugins come from the entry point group
 `sdrpeer.launchers`; each entry point loads a launcher class (instantiated with no
@@ -21,6 +23,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from sdrpeer.errors import LauncherError
 from sdrpeer.launch.composite import parse_composite
+from sdrpeer.launch.openrtm import available as openrtm_available
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.plugins.registry import Registry
 
@@ -130,12 +133,33 @@ class ExecLauncher:
         return list(target)
 
 
+class OpenRtmLauncher:
+    """`python -m sdrpeer.openrtm path/to/Module.py[:TypeName]`: an unmodified OpenRTM-aist
+    RT-Component (sdrpeer.openrtm; the `openrtm` extra, sdrpeer.launch.openrtm)."""
+
+    name = "openrtm"
+
+    def command(self, target: str | list[str], params: dict[str, Any], *, python: str) -> list[str]:
+        """The host command for an RTC module target; params are its configuration parameters."""
+        text = _str_target(
+            self.name, target, "'path/to/Module.py[:TypeName]' or 'package.module[:TypeName]'"
+        )
+        missing = openrtm_available()
+        if missing is not None:
+            raise LauncherError(f"launcher 'openrtm': {missing}")
+        return [python, "-m", "sdrpeer.openrtm", text, *param_args(params)]
+
+    def available(self) -> str | None:
+        """None if OpenRTM-aist-Python is installed here, else why not (`offered`)."""
+        return openrtm_available()
+
+
 LAUNCHERS: Registry[Launcher] = Registry(
     ENTRY_POINT_GROUP, (Launcher,), "launcher", error=LauncherError
 )
 """Every launcher by name: the built-ins (registered, so they win over a plugin of their name)
 and the plugins of the entry point group."""
-for _builtin in (PythonLauncher, ScriptLauncher, ExecLauncher, CompositeLauncher):
+for _builtin in (PythonLauncher, ScriptLauncher, ExecLauncher, CompositeLauncher, OpenRtmLauncher):
     LAUNCHERS.register(_builtin.name, _builtin)
 
 
