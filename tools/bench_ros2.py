@@ -25,9 +25,10 @@ $ROS_DOMAIN_ID else 90, discovery kept on the machine):
   /v1/events) and kill -> the first pose from the new pipeline at the probe (a /pose publisher
   it had not heard before the kill, or a pose stamped after the kill by a node it had).
 - move, record: one 3-robot lab with the same system and a probe on /odom and /pose. record:
-  `sdrpeer port record --format ros2` (sdrpeer.cli.port.record) of `OdomToPose.odom` and
-  `OdomToPose.pose` for `--record-seconds`, every message then decoded by rclpy's
-  `deserialize_message` with the class its schema names. move: `--moves` planned moves of
+  `sdrpeer port record --format ros2` (sdrpeer.cli.port.record) of `ros2-odom-sub.out` (what
+  `OdomToPose.odom` takes: an in-port cannot be tapped) and `OdomToPose.pose` for
+  `--record-seconds`, every message then decoded by rclpy's `deserialize_message` with the
+  class its schema names. move: `--moves` planned moves of
   `Odometry` (POST /v1/move, what `sdrpeer move Odometry --to R` does) to the robot of its
   standby; per move, on /odom: each node life is one publisher GID (the new node restarts its
   count at 0; the count is position.x * rate / speed), lost = count gaps within a life, dup =
@@ -69,6 +70,9 @@ PEERS = ROOT / "tools" / "bench_ros2_peers.py"
 SYSTEM = ROOT / "examples" / "ros2" / "system.yaml"
 ODOM_RATE = 50.0  # examples/ros2/system.yaml's rate_hz; the publisher's speed is 1 m/s
 WARM_S = 0.5
+RECORDED = ("ros2-odom-sub.out", "OdomToPose.pose")
+"""What the record phase taps: the frames OdomToPose.odom takes (an in-port cannot be tapped: the
+out-port of the bridge that feeds it) and OdomToPose's output."""
 TARGETS = {
     "throughput": "bridge >= 0.8x direct",
     "latency": "added p50 <= 0.5 ms",
@@ -610,7 +614,7 @@ def system_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                 path = tmp / "bridged.mcap"
                 body = {"duration": args.record_seconds, "policy": RECORD_POLICY}
                 first = next(iter(clients.values()))
-                done = record(first, ["OdomToPose.odom", "OdomToPose.pose"], path, body, "ros2")
+                done = record(first, list(RECORDED), path, body, "ros2")
                 dec = decode_recording(path)
                 decoded = sum(c["decoded"] for c in dec["per_channel"].values())
                 failed = sum(c["failed"] for c in dec["per_channel"].values())
@@ -716,7 +720,7 @@ def report(r: dict[str, Any]) -> None:
     if "record" in r:
         rc = r["record"]
         table(
-            f"record: OdomToPose.odom + OdomToPose.pose, --format ros2, {rc['seconds']:g} s",
+            f"record: {' + '.join(RECORDED)}, --format ros2, {rc['seconds']:g} s",
             [
                 ("messages recorded", rc["recorded"]),
                 ("decoded by rclpy", f"{rc['decoded']} (failed {rc['failed']})"),
