@@ -49,7 +49,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -64,6 +63,7 @@ from sdrpeer.errors import ApiError  # noqa: E402
 from sdrpeer.lab.up import RunningLab, UpOptions, start_lab  # noqa: E402
 from sdrpeer.ros2.env import process_env  # noqa: E402
 from sdrpeer.system.loader import load_system, parse_system  # noqa: E402
+from tests.ros2_probe import Probe  # noqa: E402 - loads rclpy: after the bootstrap
 
 PHASES = ("throughput", "latency", "failover", "move", "record")
 PEERS = ROOT / "tools" / "bench_ros2_peers.py"
@@ -192,7 +192,9 @@ def counted(path: Path, pub: dict[str, Any]) -> dict[str, Any]:
     return {"per_s": round(rate, 1), "lat": lat}
 
 
-def direct_run(topic: str, out: Path, seconds: float, rate: float, args: argparse.Namespace):
+def direct_run(
+    topic: str, out: Path, seconds: float, rate: float, args: argparse.Namespace
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """A subscriber process and a publisher: what the subscriber took."""
     out.unlink(missing_ok=True)
     sub = subprocess.Popen(
@@ -281,7 +283,10 @@ def bridge_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                 drained(sink_out)
                 pub_b = publish("/bench_bridge", args.latency_seconds, args.latency_rate, args)
                 bridge = counted_after(sink_out, pub_b, args)
-                r = {"direct_n": len(direct["lat"]), "bridge_n": len(bridge["lat"])}
+                r: dict[str, float] = {
+                    "direct_n": len(direct["lat"]),
+                    "bridge_n": len(bridge["lat"]),
+                }
                 for q in (50, 90, 99):
                     r[f"direct_p{q}_ms"] = pct(direct["lat"], q)
                     r[f"bridge_p{q}_ms"] = pct(bridge["lat"], q)
@@ -313,7 +318,7 @@ def drained(sink_out: Path, quiet: float = 1.0, within: float = 60.0) -> None:
     raise RuntimeError(f"the sink still takes frames {within:g} s on")
 
 
-def counted_after(sink_out: Path, pub: dict[str, Any], args: argparse.Namespace):
+def counted_after(sink_out: Path, pub: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """The sink's lines over a publisher's run, once it has flushed past its end (bounded)."""
     deadline = time.monotonic() + 10 + args.seconds
 
@@ -329,67 +334,6 @@ def counted_after(sink_out: Path, pub: dict[str, Any], args: argparse.Namespace)
 
 
 # ---- the probe -----------------------------------------------------------------------------
-
-
-class Probe:
-    """A ROS 2 listener in this process: (arrival, publisher GID, message) per message."""
-
-    def __init__(self) -> None:
-        import rclpy  # noqa: PLC0415 - after the environment is set
-        from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
-        from rclpy.node import Node  # noqa: PLC0415
-
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = Node("bench_probe", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.got: dict[str, list[tuple[float, bytes, Any]]] = {}
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while not self._stop.is_set() and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def listen(self, topic: str, msg_type: type) -> None:
-        got = self.got.setdefault(topic, [])
-
-        def heard(msg: Any, info: Any) -> None:
-            gid = bytes((info.get("publisher_gid") or {}).get("data", b""))
-            with self._lock:
-                got.append((time.time(), gid, msg))
-
-        done = threading.Event()
-
-        def make() -> None:
-            self.node.create_subscription(msg_type, topic, heard, 100)
-            done.set()
-
-        self.executor.create_task(make)
-        if not done.wait(5.0):
-            raise RuntimeError("the probe's executor did not make the subscription")
-
-    def messages(self, topic: str, since: float = 0.0) -> list[tuple[float, bytes, Any]]:
-        with self._lock:
-            return [m for m in self.got.get(topic, []) if m[0] > since]
-
-    def clear(self) -> None:
-        with self._lock:
-            for got in self.got.values():
-                got.clear()
-
-    def close(self) -> None:
-        import rclpy  # noqa: PLC0415
-
-        self._stop.set()
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        if self.context.ok():
-            rclpy.shutdown(context=self.context)
 
 
 def stamp_of(msg: Any) -> int:
@@ -412,13 +356,13 @@ def failover_round(i: int, tmp: Path, system_json: dict[str, Any]) -> dict[str, 
         with running_lab(3, tmp / f"lab-failover-{i}") as lab:
             clients = clients_of(lab)
             deploy(clients, system_json, 90)
-            until("poses at the probe", lambda: probe.messages("/pose"), lambda m: len(m) >= 50, 60)
+            until("poses at the probe", lambda: probe.heard("/pose"), lambda m: len(m) >= 50, 60)
             victim = row(status_of(clients), "Odometry")["robot"]
             survivors = {n: c for n, c in clients.items() if n != victim}
             last_id = {n: max([e["id"] for e in c.events()] or [0]) for n, c in survivors.items()}
             pid = next(r.pid for r in lab.lab.robots if r.name == victim)
             assert pid is not None
-            before = {gid for _, gid, _ in probe.messages("/pose")}
+            before = {gid for _, gid, _ in probe.heard("/pose")}
             os.kill(pid, signal.SIGKILL)
             killed = time.time()
             kill_ns = int(killed * 1e9)
@@ -439,19 +383,19 @@ def failover_round(i: int, tmp: Path, system_json: dict[str, Any]) -> dict[str, 
                         and e["ts"] > killed
                     ]
                     if hits:
-                        return min(hits)
+                        return float(min(hits))
                 return None
 
             def fresh() -> list[tuple[float, bytes, Any]]:
                 return [
                     m
-                    for m in probe.messages("/pose", since=killed)
+                    for m in probe.heard("/pose", since=killed)
                     if m[1] not in before or stamp_of(m[2]) > kill_ns
                 ]
 
             active = until("Odometry ACTIVE on a survivor", active_at, lambda t: t is not None, 60)
             first = until("fresh poses", fresh, lambda m: len(m) >= 1, 60)[0]
-            old_after = [m for m in probe.messages("/pose", since=killed + 0.5) if m[1] in before]
+            old_after = [m for m in probe.heard("/pose", since=killed + 0.5) if m[1] in before]
             dead = [
                 e
                 for c in survivors.values()
@@ -492,7 +436,7 @@ def failover(args: argparse.Namespace, tmp: Path) -> dict[str, Any]:
 
 def odom_count(msg: Any) -> int:
     """The Odometry publisher's own count (components/ros2/odometry.py: x = n * speed / rate)."""
-    return round(msg.pose.pose.position.x * ODOM_RATE)
+    return round(float(msg.pose.pose.position.x) * ODOM_RATE)
 
 
 def lives(messages: list[tuple[float, bytes, int]]) -> dict[bytes, list[tuple[float, int]]]:
@@ -521,7 +465,7 @@ def move_once(clients: dict[str, AgentClient], probe: Probe, t_from: float) -> d
     to = next((s["robot"] for s in odo.get("standbys", [])), None) or next(
         n for n in clients if n != origin
     )
-    old = {gid for _, gid, _ in probe.messages("/odom", since=time.time() - 1.0)}
+    old = {gid for _, gid, _ in probe.heard("/odom", since=time.time() - 1.0)}
     t0 = time.time()
     post_when_elected(clients[origin], "/v1/move", {"component": "Odometry", "to": to}, 30)
     until(
@@ -533,12 +477,12 @@ def move_once(clients: dict[str, AgentClient], probe: Probe, t_from: float) -> d
     done_s = time.time() - t0
 
     def new_msgs() -> list[Any]:
-        return [m for m in probe.messages("/odom", since=t0) if m[1] not in old]
+        return [m for m in probe.heard("/odom", since=t0) if m[1] not in old]
 
     until("/odom from the new node for 1 s", new_msgs, lambda m: m and m[-1][0] - m[0][0] >= 1, 30)
     until("the system settled", lambda: status_of(clients), settled, 90)
     t1 = time.time()
-    odom = [(t, gid, odom_count(m)) for t, gid, m in probe.messages("/odom", since=t_from)]
+    odom = [(t, gid, odom_count(m)) for t, gid, m in probe.heard("/odom", since=t_from)]
     by_life = lives([m for m in odom if m[0] <= t1])
     old_lives = [g for g in by_life if g in old]
     new_lives = [g for g in by_life if g not in old]
@@ -550,10 +494,8 @@ def move_once(clients: dict[str, AgentClient], probe: Probe, t_from: float) -> d
     first_new = min((by_life[g][0][0] for g in new_lives), default=t1)
     silent = first_new - last_old
     # the poses that should have come of the /odom frames the probe heard (by header.stamp)
-    odom_stamps = {
-        stamp_of(m) for t, _, m in probe.messages("/odom", since=t_from) if t <= t1 - 0.5
-    }
-    poses = [stamp_of(m) for t, _, m in probe.messages("/pose", since=t_from) if t <= t1]
+    odom_stamps = {stamp_of(m) for t, _, m in probe.heard("/odom", since=t_from) if t <= t1 - 0.5}
+    poses = [stamp_of(m) for t, _, m in probe.heard("/pose", since=t_from) if t <= t1]
     pose_stamps = set(poses)
     return {
         "from": origin,
@@ -585,7 +527,8 @@ def decode_recording(path: Path) -> dict[str, Any]:
         for schema, channel, message in reader.iter_messages(log_time_order=False):
             counts = per.setdefault(channel.topic, {"decoded": 0, "failed": 0})
             try:
-                deserialize_message(message.data, import_ros_type(schema.name))
+                name = schema.name if schema is not None else "?"
+                deserialize_message(message.data, import_ros_type(name))
             except Exception as exc:  # counted: the figure is how many decode
                 counts["failed"] += 1
                 if len(failures) < 5:
@@ -609,7 +552,7 @@ def system_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
         with running_lab(3, tmp / "lab-system") as lab:
             clients = clients_of(lab)
             deploy(clients, load_system(SYSTEM).to_json(), 90)
-            until("poses at the probe", lambda: probe.messages("/pose"), lambda m: len(m) >= 50, 60)
+            until("poses at the probe", lambda: probe.heard("/pose"), lambda m: len(m) >= 50, 60)
             if "record" in which:
                 path = tmp / "bridged.mcap"
                 body = {"duration": args.record_seconds, "policy": RECORD_POLICY}
