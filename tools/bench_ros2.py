@@ -248,6 +248,7 @@ def bridge_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                 drained(sink_out)
                 pub_b = publish("/bench_bridge", args.seconds, 0.0, args)
                 bridge = counted_after(sink_out, pub_b, args)
+                state = bridge_state(clients)
                 rounds.append(
                     {
                         "direct_per_s": direct["per_s"],
@@ -255,6 +256,7 @@ def bridge_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                         "sent_per_s_direct": round(pub_d["sent"] / args.seconds, 1),
                         "sent_per_s_bridge": round(pub_b["sent"] / args.seconds, 1),
                         "bytes": pub_b["bytes"],
+                        "bridge_state": state,
                     }
                 )
                 say(f"  throughput round {i + 1}: {rounds[-1]}")
@@ -283,9 +285,10 @@ def bridge_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                 drained(sink_out)
                 pub_b = publish("/bench_bridge", args.latency_seconds, args.latency_rate, args)
                 bridge = counted_after(sink_out, pub_b, args)
-                r: dict[str, float] = {
+                r: dict[str, Any] = {
                     "direct_n": len(direct["lat"]),
                     "bridge_n": len(bridge["lat"]),
+                    "bridge_state": bridge_state(clients),
                 }
                 for q in (50, 90, 99):
                     r[f"direct_p{q}_ms"] = pct(direct["lat"], q)
@@ -305,6 +308,14 @@ def bridge_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                 "target": TARGETS["latency"],
             }
     return out
+
+
+def bridge_state(clients: dict[str, AgentClient]) -> str:
+    """The bridge's state now, and its last error if it has one (a flood may put it in ERROR)."""
+    rows = next(iter(clients.values())).get("/v1/instances")
+    bridge: dict[str, Any] = next((i for i in rows if i["name"].startswith("ros2-")), {})
+    error = bridge.get("last_error")
+    return str(bridge.get("state")) + (f" ({error})" if error else "")
 
 
 def drained(sink_out: Path, quiet: float = 1.0, within: float = 60.0) -> None:
@@ -494,7 +505,10 @@ def move_once(clients: dict[str, AgentClient], probe: Probe, t_from: float) -> d
     first_new = min((by_life[g][0][0] for g in new_lives), default=t1)
     silent = first_new - last_old
     # the poses that should have come of the /odom frames the probe heard (by header.stamp)
-    odom_stamps = {stamp_of(m) for t, _, m in probe.heard("/odom", since=t_from) if t <= t1 - 0.5}
+    heard = [
+        (gid, stamp_of(m)) for t, gid, m in probe.heard("/odom", since=t_from) if t <= t1 - 0.5
+    ]
+    odom_stamps = {st for _, st in heard}
     poses = [stamp_of(m) for t, _, m in probe.heard("/pose", since=t_from) if t <= t1]
     pose_stamps = set(poses)
     return {
@@ -509,6 +523,10 @@ def move_once(clients: dict[str, AgentClient], probe: Probe, t_from: float) -> d
         "overlap_old_after_new": sum(1 for g in old_lives for t, _ in by_life[g] if t > first_new),
         "new_first_count": min((by_life[g][0][1] for g in new_lives), default=-1),
         "pose_missing_of_odom_heard": len(odom_stamps - pose_stamps),
+        "pose_missing_old_life": sum(1 for g, st in heard if g in old and st not in pose_stamps),
+        "pose_missing_new_life": sum(
+            1 for g, st in heard if g not in old and st not in pose_stamps
+        ),
         "pose_dup": len(poses) - len(pose_stamps),
         "pose_heard": len(poses),
     }
@@ -588,6 +606,8 @@ def system_bench(args: argparse.Namespace, tmp: Path, which: list[str]) -> dict[
                             "odom_lost_in_life",
                             "odom_dup_in_life",
                             "pose_missing_of_odom_heard",
+                            "pose_missing_old_life",
+                            "pose_missing_new_life",
                         )
                     },
                     "target": TARGETS["move"],
@@ -621,6 +641,7 @@ def report(r: dict[str, Any]) -> None:
                 ("rclpy pub -> rclpy sub (EventsExecutor)", f"{t['direct_per_s']:,.0f} msg/s"),
                 ("rclpy pub -> FromRosPose -> sdrpeer sink", f"{t['bridge_per_s']:,.0f} msg/s"),
                 ("ratio", f"{t['ratio']:.2f}   target: {t['target']}"),
+                ("bridge after each round", "; ".join(r["bridge_state"] for r in t["rounds"])),
             ],
         )
     if "latency" in r:
@@ -656,7 +677,12 @@ def report(r: dict[str, Any]) -> None:
                 ("/odom count lost within a node life", f"{m['totals']['odom_lost_in_life']}"),
                 ("/odom taken twice within a life", f"{m['totals']['odom_dup_in_life']}"),
                 ("new node's first count heard", f"{m['new_first_count']}"),
-                ("/odom heard, no pose made of it", f"{m['totals']['pose_missing_of_odom_heard']}"),
+                (
+                    "/odom heard, no pose made of it (old node; new node)",
+                    f"{m['totals']['pose_missing_of_odom_heard']} "
+                    f"({m['totals']['pose_missing_old_life']}; "
+                    f"{m['totals']['pose_missing_new_life']})",
+                ),
                 ("target", m["target"]),
             ],
         )
