@@ -10,9 +10,10 @@ $ROS_DOMAIN_ID else 90, discovery kept on the machine):
 - throughput: a plain rclpy publisher (tools/bench_ros2_peers.py) sends PoseStamped padded to
   `--size` serialized bytes as fast as it can for `--seconds`, QoS reliable / keep last
   `--depth` / volatile, to (a) a plain rclpy subscriber process on an EventsExecutor, and (b) a
-  one-robot lab's system `{from: {ros2: /bench_bridge, qos: {depth: D}}, to: Sink.pose}`: the
-  `FromRosPose` bridge (its own host, an EventsExecutor) writing to components.pose_sink:PoseSink
-  over an ordinary sdrpeer connection. Each counts what it takes (JSON lines every 0.25 s);
+  one-robot lab's system `{from: {ros2: /bench_bridge}, to: Sink.pose, policy: {buffer: D}}`:
+  the `FromRosPose` bridge (its own host, an EventsExecutor; QoS reliable, keep last D, from
+  the policy) writing to components.pose_sink:PoseSink over an ordinary sdrpeer connection
+  (push all, buffer D, overwrite when full). Each counts what it takes (JSON lines every 0.25 s);
   the rate is taken over the publisher's run, its first 0.5 s left out. `--rounds` times, (a)
   and (b) alternating, each with a new publisher; medians and bridge / direct.
 - latency: the same two paths, the publisher at `--latency-rate` Hz for `--latency-seconds`,
@@ -227,7 +228,7 @@ components:
     target: components.pose_sink:PoseSink
     params: {{out: {json.dumps(str(sink_out))}}}
 connections:
-  - {{from: {{ros2: {topic}, qos: {{depth: {depth}, reliability: reliable}}}}, to: Sink.pose}}
+  - {{from: {{ros2: {topic}}}, to: Sink.pose, policy: {{buffer: {depth}}}}}
 """
     return parse_system(text, "ros2-bench.yaml").to_json()
 
