@@ -1,8 +1,10 @@
 """PoseSink: counts the `Pose` frames it takes and how old each is, for tools/bench_ros2.py.
 
-Every quarter of a second of input (and at finalize) it appends one JSON line to the file `out`:
-`{"t": wall time, "n": frames taken so far, "lat": [now - frame stamp, ms, per frame since the
-last line]}`; a bench reads the count's rate and the latencies from those lines. The stamp is the
+Every quarter of a second of input, before a frame that follows a pause of as long, and at
+finalize, it appends one JSON line to the file `out`: `{"t": when the last of its frames was
+taken, "n": frames taken so far, "lat": [taken - frame stamp, ms, per frame since the last
+line]}`; a bench reads the count's rate and the latencies from those lines (the line before a
+pause keeps its own time, so one run's last frames never count in the next). The stamp is the
 frame's own (a bridged ROS 2 message's header.stamp), so latencies need one clock: a bench on one
 machine."""
 
@@ -28,28 +30,30 @@ class PoseSink(Component):
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.taken = 0
         self._lat: list[float] = []
-        self._flushed = time.time()
+        self._flushed = self._last = time.time()
 
     def on_execute(self) -> None:
         port = self.inport("pose")
-        lat = self._lat
         while True:
             try:
                 p: Pose = port.get_nowait()
             except NoData:
                 break
             now = time.time()
+            if self._lat and now - self._last >= FLUSH_S:  # a pause: what came before is a line
+                self._flush()
             self.taken += 1
-            lat.append(round((now - p.stamp) * 1e3, 4))
-        if time.time() - self._flushed >= FLUSH_S:
+            self._lat.append(round((now - p.stamp) * 1e3, 4))
+            self._last = now
+        if self._lat and time.time() - self._flushed >= FLUSH_S:
             self._flush()
 
     def _flush(self) -> None:
         path = str(self.param_values()["out"])
-        self._flushed = now = time.time()
+        self._flushed = time.time()
         if path:
             with open(path, "a", encoding="utf-8") as f:
-                f.write(json.dumps({"t": now, "n": self.taken, "lat": self._lat}) + "\n")
+                f.write(json.dumps({"t": self._last, "n": self.taken, "lat": self._lat}) + "\n")
         self._lat = []
 
     def on_finalize(self) -> None:
