@@ -3,7 +3,9 @@ ROS 2 tool on the robot would, with its own rclpy context spun in a thread.
 
 How it works: `Probe()` makes a context and a node (`sdrpeer_probe`) in the domain the test
 process has (tests/conftest.py gives each test run its own ROS_DOMAIN_ID, discovery kept on the
-machine); `listen(topic, type)` records `(arrival time, message)` of every message;
+machine); `listen(topic, type)` records `(arrival time, publisher GID, message)` of every message
+(`messages` gives the messages, `heard` the triples; tools/bench_ros2.py tells node lives apart
+by the GID);
 `node_names()` and `call(service, type, request)` ask the graph and services. `close()` ends it.
 Every wait in a test that uses it is bounded (tests.wait.until).
 """
@@ -28,7 +30,7 @@ class Probe:
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.got: dict[str, list[tuple[float, Any]]] = {}
+        self.got: dict[str, list[tuple[float, bytes, Any]]] = {}
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -42,9 +44,10 @@ class Probe:
         """Record every message on `topic` from now on."""
         self.got.setdefault(topic, [])
 
-        def heard(msg: Any) -> None:
+        def heard(msg: Any, info: Any) -> None:
+            gid = bytes((info.get("publisher_gid") or {}).get("data", b""))
             with self._lock:
-                self.got[topic].append((time.time(), msg))
+                self.got[topic].append((time.time(), gid, msg))
 
         done = threading.Event()
 
@@ -57,8 +60,12 @@ class Probe:
 
     def messages(self, topic: str, since: float = 0.0) -> list[Any]:
         """The messages heard on `topic` that arrived after `since` (unix seconds)."""
+        return [m for _, _, m in self.heard(topic, since)]
+
+    def heard(self, topic: str, since: float = 0.0) -> list[tuple[float, bytes, Any]]:
+        """(arrival time, publisher GID, message) of what arrived on `topic` after `since`."""
         with self._lock:
-            return [m for t, m in self.got.get(topic, []) if t > since]
+            return [h for h in self.got.get(topic, []) if h[0] > since]
 
     def node_names(self) -> list[str]:
         """The nodes the graph knows now."""

@@ -7,18 +7,20 @@ RTC lifecycle drives the node:
 
 | sdrpeer                  | plain `Node`                 | `LifecycleNode`                       |
 |--------------------------|------------------------------|---------------------------------------|
-| initialize (INACTIVE)    | rclpy up, class imported     | node made, `configure`d: inactive     |
+| initialize (INACTIVE)    | rclpy up, class imported (*) | node made, `configure`d: inactive     |
 | activate                 | node made and spun           | `activate`                            |
 | deactivate / aborting    | node destroyed               | `deactivate`                          |
 | finalize                 | context shut down            | `cleanup`, `shutdown`, destroyed      |
 
-So a standby is a warm interpreter with rclpy loaded (a plain node) or a configured, inactive
-lifecycle node, and activating it takes milliseconds. A lifecycle transition that returns
-FAILURE or ERROR, a node whose constructor raises, an executor that stopped (a callback raised)
-and one stuck in a callback for `stuck_after` seconds all put the component in ERROR, which the
-agent's recovery handles. The component's params other than its own (`executor`,
-`stuck_after`) are the node's ROS parameters: given at start as parameter overrides (`--ros-args
--p name:=value`) and set on the running node when they change.
+(*) with a hidden node, `_sdrpeer_<instance>`, that holds the DDS participant (rmw_fastrtps makes
+it with the first node), so the fleet has discovered a standby before it activates. So a standby
+is a warm interpreter with rclpy loaded and its participant known (a plain node) or a
+configured, inactive lifecycle node, and activating it takes milliseconds. A lifecycle
+transition that returns FAILURE or ERROR, a node whose constructor raises, an executor that
+stopped (a callback raised) and one stuck in a callback for `stuck_after` seconds all put the
+component in ERROR, which the agent's recovery handles. The component's params other than its
+own (`executor`, `stuck_after`) are the node's ROS parameters: given at start as parameter
+overrides (`--ros-args -p name:=value`) and set on the running node when they change.
 
 Traffic: every publisher's `publish` and every subscription's callback the node made (ROS 2's
 own `/rosout`, `/parameter_events` and parameter/lifecycle services left out) is counted;
@@ -146,6 +148,7 @@ class Ros2Node(Component):
         self._timer: Any = None
         self._endpoints: dict[str, _Counted] = {}
         self._wrapped: set[int] = set()  # ids of the endpoints already counted
+        self._keeper: Any = None
 
     def convert_params(self, values: Mapping[str, Any]) -> dict[str, Any]:
         """Own params converted as usual; the rest kept as ROS parameters (see the doc)."""
@@ -169,6 +172,8 @@ class Ros2Node(Component):
         if self.lifecycle:
             await self._spinner.call(self._make)
             await self._transition("configure")
+        else:
+            await self._spinner.call(self._keep)
 
     async def on_activated(self) -> None:
         if self.lifecycle:
@@ -195,6 +200,9 @@ class Ros2Node(Component):
                 for name in ("deactivate", "cleanup", "shutdown"):
                     await spinner.call(lambda n=name: self._trigger(n, strict=False))
             await spinner.call(self._destroy)
+        keeper, self._keeper = self._keeper, None
+        if keeper is not None and spinner.alive:
+            await spinner.call(keeper.destroy_node)
         spinner.close()
         self._spinner = None
 
@@ -219,6 +227,16 @@ class Ros2Node(Component):
         self._timer = self._spinner.watch(node)
         node.create_timer(RESCAN, self._count)  # endpoints made later (on_configure, ...)
         self._spinner.executor.add_node(node)
+
+    def _keep(self) -> None:
+        """A hidden node (`_sdrpeer_<instance>`) from initialize to finalize, for a plain node's
+        host: rmw_fastrtps makes the context's DDS participant with its first node, so without
+        it a standby's participant is born when it activates and the fleet's other participants
+        discover it only then (a failover's or a move's first messages go unheard meanwhile)."""
+        from rclpy.node import Node  # noqa: PLC0415
+
+        name = "".join(c if c.isalnum() else "_" for c in self.instance_name)
+        self._keeper = Node(f"_sdrpeer_{name}")
 
     def _destroy(self) -> None:
         node, self.node = self.node, None

@@ -9,9 +9,11 @@ rclpy's fastest, or the `SingleThreadedExecutor` that `rclpy.spin` uses) spun in
 Everything that touches rclpy objects runs in that
 thread: `call(fn)` hands `fn` to the executor as a task (rclpy wakes at once) and returns an
 `asyncio` future of its result, so node construction, lifecycle transitions and destruction
-never race the callbacks. `watch(node)` puts a 10 Hz timer on a node: `stuck_for()` is how long
-the executor has not come round to it (a callback that blocks, the ROS 2 form of a hung
-`on_execute`); the hosting component turns that into an error.
+never race the callbacks. `stuck_for()` is how long the executor has been in one callback (the
+ROS 2 form of a hung `on_execute`; the hosting component turns it into an error): the spin loop
+notes the time each `spin_once` returns (it runs one callback, or returns after 0.1 s idle), and
+`watch(node)`'s 10 Hz timer on a node notes it too. A flood of messages, which can keep that
+timer queued behind thousands of callbacks for seconds, is not a stuck executor.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class Spinner:
         try:
             while not self._stop.is_set() and self.context.ok():
                 self.executor.spin_once(timeout_sec=_TICK)
+                self._ticked = time.monotonic()  # back from a callback (or idle): not stuck
         except (ExternalShutdownException, rclpy.executors.ShutdownException):
             pass
         except Exception:  # a callback raised: rclpy re-raises it here
@@ -85,8 +88,8 @@ class Spinner:
         return asyncio.wrap_future(done)
 
     def watch(self, node: Any) -> Any:
-        """A 10 Hz timer on `node` that tells `stuck_for` the executor comes round (the timer;
-        destroy it with the node)."""
+        """A 10 Hz timer on `node` that also tells `stuck_for` the executor comes round (the
+        timer; destroy it with the node)."""
         self._ticked = time.monotonic()
         return node.create_timer(_TICK, self._tick)
 
@@ -94,7 +97,7 @@ class Spinner:
         self._ticked = time.monotonic()
 
     def stuck_for(self) -> float:
-        """Seconds since the watched timer last ran (0 while it keeps time)."""
+        """Seconds the executor has been in one callback (0 while it keeps coming back)."""
         late = time.monotonic() - self._ticked - _TICK
         return max(0.0, late)
 

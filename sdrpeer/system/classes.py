@@ -6,7 +6,10 @@ of each typed port), service ports (with their interface ids) and params are rea
 class, without creating an instance; a `composite` target's class is built from its members'
 the way its host builds it (`Member.port` ports). Other launchers (`script`, `exec`, plugins)
 run code we do not import at load time: `inspect_target` returns None for them and their ports
-and params are taken on trust (the host reports them when it starts). A class that cannot be
+and params are taken on trust (the host reports them when it starts). The one exception is the
+`ros2` launcher's bridges (`sdrpeer.ros2.bridge:FromRos<Type>`, `ToRos<Type>`): sdrpeer's own
+classes, importable without ROS 2, read like a `python` target's (their typed ports are what
+`port record --format ros2` needs). A class that cannot be
 imported is a `ValueError` naming the target and the reason. `check_params` converts each param
 with the class's own `Param.convert` (types, choices, min and max), so a bad value fails at load
 time rather than when the host starts.
@@ -21,6 +24,9 @@ from sdrpeer.errors import SdrpeerError
 from sdrpeer.host.loader import load_component_class, load_composite_class
 from sdrpeer.sdk import Component
 from sdrpeer.system.model import SystemDef
+
+ROS2_BRIDGES = "sdrpeer.ros2.bridge:"
+"""The `ros2` launcher's targets read like `python` ones: sdrpeer's bridges (no ROS 2 imported)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,7 +82,9 @@ def inspect_target(launcher: str, target: str | tuple[str, ...]) -> ClassInfo | 
             return class_info(load_composite_class("Composite", target))
         except SdrpeerError as e:
             raise ValueError(f"cannot build the composite: {e}") from None
-    if launcher != "python" or not isinstance(target, str):
+    if not isinstance(target, str) or not (
+        launcher == "python" or (launcher == "ros2" and target.startswith(ROS2_BRIDGES))
+    ):
         return None
     try:
         cls = load_component_class(target, Component)
