@@ -12,7 +12,9 @@ The ROS side lives from initialize to finalize: a standby already has its subscr
 publisher matched with the topic's other ends, so a failover does not wait for DDS discovery; a
 `FromRos` bridge writes to its port only while ACTIVE, a `ToRos` bridge publishes only what
 arrives while ACTIVE. Received messages cross from rclpy's executor thread to the host's asyncio
-loop in batches (one wake-up for all that arrived meanwhile). QoS comes from the params
+loop in batches (one wake-up for all that arrived meanwhile); a `Pose`, `Velocity` or `Odometry`
+bridge takes the serialized bytes and decodes them itself (sdrpeer.ros2.cdr), never building
+rclpy's message objects. QoS comes from the params
 `reliability` (reliable, best_effort), `depth` (keep last N) and `durability` (volatile,
 transient_local); the system file derives them from the connection's policy (docs/ros2.md).
 """
@@ -23,8 +25,10 @@ import asyncio
 import importlib
 import logging
 from collections import deque
+from collections.abc import Callable
 from typing import Any, ClassVar
 
+from sdrpeer.ros2.cdr import decoder_for
 from sdrpeer.ros2.types import fill, mapping_for, message_to_map
 from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Periodic
 from sdrpeer.sdk.errors import NoData
@@ -193,6 +197,7 @@ class _FromRos(_Bridge):
         super().__init__(name, params)
         self._batch: deque[Any] = deque()
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._decode_raw: Callable[[bytes], Any] = bytes
         self._active = False
 
     async def on_initialize(self) -> None:
@@ -200,14 +205,27 @@ class _FromRos(_Bridge):
         await super().on_initialize()
 
     def _endpoint(self, node: Any, ros_class: type) -> None:
-        node.create_subscription(ros_class, self.param_values()["topic"], self._heard, self._qos())
+        topic, qos = self.param_values()["topic"], self._qos()
+        raw = decoder_for(self.kind)
+        if raw is None:
+            node.create_subscription(ros_class, topic, self._heard, qos)
+        else:  # the bytes DDS delivered, decoded here (sdrpeer.ros2.cdr): no rclpy message
+            node.create_subscription(ros_class, topic, self._heard_raw, qos, raw=True)
+            self._decode_raw = raw
+
+    def _heard_raw(self, data: bytes) -> None:
+        """In the executor thread: a raw message of a fixed-layout type."""
+        if self._active:
+            self._queue(self._decode_raw(data))
 
     def _heard(self, msg: Any) -> None:
         """In the executor thread: queue the converted value; wake the loop once per batch."""
         if not self._active:
             return
         mapping = self._mapping
-        value = message_to_map(msg) if mapping is None else mapping.from_ros(msg)
+        self._queue(message_to_map(msg) if mapping is None else mapping.from_ros(msg))
+
+    def _queue(self, value: Any) -> None:
         batch = self._batch
         batch.append(value)
         if len(batch) == 1 and self._loop is not None:
