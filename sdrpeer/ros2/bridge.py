@@ -29,8 +29,9 @@ from collections.abc import Callable
 from typing import Any, ClassVar
 
 from sdrpeer.ros2.cdr import decoder_for
+from sdrpeer.ros2.endpoint import RosEndpoint
 from sdrpeer.ros2.types import fill, mapping_for, message_to_map
-from sdrpeer.sdk import Component, InPort, OnInput, OutPort, Param, Periodic
+from sdrpeer.sdk import InPort, OnInput, OutPort, Param, Periodic
 from sdrpeer.sdk.errors import NoData
 from sdrpeer.sdk.robot_types import BatteryState, Image, Odometry, Pose, RangeScan, Velocity
 
@@ -82,7 +83,7 @@ def bridge_class_name(direction: str, kind: str | None) -> str:
     return ("FromRos" if direction == "from" else "ToRos") + (kind or "")
 
 
-class _Bridge(Component):
+class _Bridge(RosEndpoint):
     """What both directions share: the topic, the QoS, the executor."""
 
     topic = Param(str, "", "the ROS 2 topic (absolute, e.g. /odom)")
@@ -90,15 +91,12 @@ class _Bridge(Component):
     reliability = Param(str, "reliable", "ROS 2 QoS reliability", choices=RELIABILITY)
     depth = Param(int, 10, "ROS 2 QoS history depth (keep last N)", min=1)
     durability = Param(str, "volatile", "ROS 2 QoS durability", choices=DURABILITY)
-    stuck_after = Param(float, 2.0, "seconds rclpy's executor may sit in a callback", min=0.1)
     kind: ClassVar[type | None] = None
     """The standard robot type of the port (None: untyped maps)."""
 
     def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
         super().__init__(name, params)
         self._mapping = None if self.kind is None else mapping_for(self.kind)
-        self._spinner: Any = None
-        self._node: Any = None
         self.frames = 0
         self.bytes_hint = 0
 
@@ -130,40 +128,14 @@ class _Bridge(Component):
         )
 
     async def on_initialize(self) -> None:
-        from sdrpeer.ros2.spin import Spinner  # noqa: PLC0415 - loads rclpy
-
         topic = self.param_values()["topic"]
         if not topic.startswith("/"):
             raise ValueError(f"{self.instance_name}: topic {topic!r} must be absolute (/name)")
         ros_class = self._ros_class()
-        self._spinner = Spinner(executor="events")
-        await self._spinner.call(lambda: self._make(ros_class))
-
-    def _make(self, ros_class: type) -> None:
-        """In the executor thread: the node and the endpoint."""
-        from rclpy.node import Node  # noqa: PLC0415
-
-        node = Node(_node_name(self.instance_name))
-        self._node = node
-        self._spinner.watch(node)
-        self._endpoint(node, ros_class)
-        self._spinner.executor.add_node(node)
+        await self._start(lambda node: self._endpoint(node, ros_class))
 
     def _endpoint(self, node: Any, ros_class: type) -> None:
         raise NotImplementedError
-
-    def on_execute(self) -> None:
-        if self._spinner is not None:
-            self._spinner.check(float(self.param_values()["stuck_after"]))
-
-    async def on_finalize(self) -> None:
-        spinner, self._spinner = self._spinner, None
-        if spinner is None:
-            return
-        if spinner.alive and self._node is not None:
-            node = self._node
-            await spinner.call(lambda: (spinner.executor.remove_node(node), node.destroy_node()))
-        spinner.close()
 
     def endpoints(self) -> dict[str, list[str]]:
         """The bridged topic: name -> [direction, ROS type] (shown by `sdrpeer port list`)."""
@@ -178,12 +150,6 @@ class _Bridge(Component):
         key = "in" if self._direction == "subscribes" else "out"
         out[self.param_values()["topic"]] = {f"frames_{key}": self.frames}
         return out
-
-
-def _node_name(instance: str) -> str:
-    """A valid ROS 2 node name for an instance (letters, digits and underscores)."""
-    name = "".join(c if c.isalnum() else "_" for c in instance)
-    return name if name[:1].isalpha() else f"n_{name}"
 
 
 class _FromRos(_Bridge):

@@ -21,8 +21,9 @@ import logging
 from typing import Any
 
 from sdrpeer.ros2.bridge import import_ros_type
+from sdrpeer.ros2.endpoint import RosEndpoint
 from sdrpeer.ros2.types import fill, message_to_map
-from sdrpeer.sdk import Component, Param, Periodic
+from sdrpeer.sdk import Param, Periodic
 from sdrpeer.sdk.services import Interface, ServiceCallError, ServiceConsumer, ServiceProvider
 
 __all__ = ["ROS2_SERVICE", "FromRosService", "ToRosService"]
@@ -32,56 +33,27 @@ ROS2_SERVICE = Interface.of("ros2/Service", "call")
 """A ROS 2 service call: the request's fields in, the response's fields out."""
 
 
-class _ServiceBridge(Component):
+class _ServiceBridge(RosEndpoint):
     execution = Periodic(hz=4.0)  # only watches rclpy's executor
+    executor = "single"
     service = Param(str, "", "the ROS 2 service (absolute, e.g. /reset)")
     srv_type = Param(str, "", "the ROS 2 service type (pkg/srv/Name)")
     timeout = Param(float, 5.0, "seconds a call may take", min=0.01)
-    stuck_after = Param(float, 2.0, "seconds rclpy's executor may sit in a callback", min=0.1)
     _direction = ""
 
     def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
         super().__init__(name, params)
-        self._spinner: Any = None
-        self._node: Any = None
         self.calls = 0
 
     async def on_initialize(self) -> None:
-        from rclpy.node import Node  # noqa: PLC0415 - a ROS 2 host only
-
-        from sdrpeer.ros2.bridge import _node_name  # noqa: PLC0415
-        from sdrpeer.ros2.spin import Spinner  # noqa: PLC0415
-
         p = self.param_values()
         if not p["service"].startswith("/"):
             raise ValueError(f"{self.instance_name}: service {p['service']!r} must be absolute")
         srv = import_ros_type(p["srv_type"], kind="srv")
-        self._spinner = Spinner(executor="single")
-
-        def make() -> None:
-            node = Node(_node_name(self.instance_name))
-            self._node = node
-            self._spinner.watch(node)
-            self._endpoint(node, srv)
-            self._spinner.executor.add_node(node)
-
-        await self._spinner.call(make)
+        await self._start(lambda node: self._endpoint(node, srv))
 
     def _endpoint(self, node: Any, srv: type) -> None:
         raise NotImplementedError
-
-    def on_execute(self) -> None:
-        if self._spinner is not None:
-            self._spinner.check(float(self.param_values()["stuck_after"]))
-
-    async def on_finalize(self) -> None:
-        spinner, self._spinner = self._spinner, None
-        if spinner is None:
-            return
-        node = self._node
-        if spinner.alive and node is not None:
-            await spinner.call(lambda: (spinner.executor.remove_node(node), node.destroy_node()))
-        spinner.close()
 
     def endpoints(self) -> dict[str, list[str]]:
         """The bridged service: name -> [direction, ROS type] (shown by `sdrpeer port list`)."""
