@@ -116,7 +116,8 @@ def test_decisions(new: RobotRecord, expected: str) -> None:
         # what the robot is: the next regular round (a join storm raises no extra rounds)
         (replace(BASE, priority=5), False),
         (metrics(mem_total=8 * GB), False),
-        (replace(BASE, election=ElectionInfo(1, "robot-1", True)), False),
+        (replace(BASE, election=ElectionInfo(1, "robot-1", True)), True),  # a claim
+        (replace(BASE, election=ElectionInfo(1, "robot-2", False)), False),  # a belief
         (instance(data="tcp://127.0.0.1:9"), False),
         (metrics(battery_pct=19.9), False),
     ],

@@ -120,6 +120,41 @@ def test_a_node_that_raises_or_blocks_goes_to_error(
     assert host.command("activate")["ok"] is True
     report = host.wait_for(lambda m: m["t"] == "state" and m["state"] == "ERROR", WITHIN, "ERROR")
     assert error in report["error"]
+    # a dead or stuck executor cannot be reset (recovery restarts the host instead), and
+    # neither the reset nor the exit waits behind the callback that never returns
+    assert host.command("reset", timeout=WITHIN)["ok"] is False
+    assert host.command("exit", timeout=WITHIN)["ok"] is True
+    assert host.wait_exit(WITHIN) in (0, 1)
+
+
+def test_a_service_bridge_offers_its_service_only_while_active(
+    hosts: HostPool, probe: Probe
+) -> None:
+    host, _ = hosts.ready(
+        "sdrpeer.ros2.services:FromRosService",
+        "--param",
+        "service=/standby_test",
+        "--param",
+        "srv_type=std_srvs/srv/SetBool",
+        name="Svc",
+        module=ROS,
+    )
+
+    def services() -> list[str]:
+        if "Svc" not in probe.node_names():
+            return ["(node not seen yet)"]
+        return [n for n, _ in probe.node.get_service_names_and_types_by_node("Svc", "/")]
+
+    assert "/standby_test" not in until(
+        "the standby's node in the graph",
+        services,
+        lambda s: "(node not seen yet)" not in s,
+        within=WITHIN,
+    )
+    assert host.command("activate")["ok"] is True
+    until("the service offered", services, lambda s: "/standby_test" in s, within=WITHIN)
+    assert host.command("deactivate")["ok"] is True
+    until("the service withdrawn", services, lambda s: "/standby_test" not in s, within=WITHIN)
 
 
 def test_a_node_that_cannot_be_made_refuses_to_activate(hosts: HostPool) -> None:

@@ -14,6 +14,7 @@ from sdrpeer.launch.launchers import LAUNCHERS, offered
 from sdrpeer.launch.policy import LaunchPolicy
 from sdrpeer.ros2 import env
 from sdrpeer.ros2.launcher import Ros2Launcher
+from sdrpeer.sdk.robot_types import Pose
 from sdrpeer.system.loader import parse_system
 from sdrpeer.system.model import SystemDef
 
@@ -214,3 +215,29 @@ def test_a_fleets_default_domain_is_stable_and_never_zero() -> None:
     domains = {env.default_domain(name) for name in ("sdrpeer", "a", "b", "lava-tube")}
     assert all(1 <= d <= env.DOMAIN_MAX for d in domains)
     assert env.default_domain("sdrpeer") == env.default_domain("sdrpeer")
+
+
+def test_a_ros2_file_target_needs_the_script_launcher_too() -> None:
+    policy = LaunchPolicy(("python", "ros2"))
+    why = policy.refusal("ros2", "/tmp/anything.py:Node")
+    assert why is not None
+    assert "needs the script launcher allowed too" in why
+    assert policy.refusal("ros2", "nodes/talker.py") is not None
+    assert LaunchPolicy(("python", "ros2", "script")).refusal("ros2", "nodes/talker.py") is None
+    assert policy.refusal("ros2", "components.ros2.odometry:OdometryPublisher") is None
+
+
+def test_a_bridge_drops_and_counts_a_message_that_does_not_decode() -> None:
+    from sdrpeer.ros2.bridge import FromRosPose  # noqa: PLC0415 - imports no rclpy
+    from sdrpeer.ros2.cdr import decoder_for  # noqa: PLC0415
+
+    bridge = FromRosPose("B", {"topic": "/p"})
+    decode = decoder_for(Pose)
+    assert decode is not None
+    bridge._decode_raw = decode
+    bridge._active = True
+    bridge._heard_raw(b"\x00\x01\x00\x00garbage")  # in rclpy's thread this must not raise
+    bridge._heard_raw(b"\x00\x01\x00\x00" + bytes(12) + b"\xff\xff\xff\x7f")  # a string too long
+    assert bridge.malformed == 2
+    assert not bridge._batch
+    assert bridge.port_counters()["/p"] == {"frames_in": 0, "malformed": 2}

@@ -658,16 +658,18 @@ class Agent:
             self.coordinator.wake()
 
     def _launch_env(self, spec: InstanceSpec) -> dict[str, str]:
-        """A `ros2` host's fleet discovery settings (sdrpeer.ros2.env): the fleet's domain, the
-        other alive robots' addresses as static DDS peers; nothing for other launchers."""
+        """A `ros2` host's fleet discovery settings (sdrpeer.ros2.env): the fleet's domain (an
+        inherited ROS_DOMAIN_ID outside 0..101 is not taken), the other alive robots' addresses
+        as static DDS peers; nothing for other launchers."""
         if spec.launcher != "ros2":
             return {}
-        from sdrpeer.ros2.env import Ros2Net, default_domain, process_env  # noqa: PLC0415
+        from sdrpeer.ros2.env import DOMAIN_MAX, Ros2Net, default_domain  # noqa: PLC0415
 
         domain = self.config.ros2_domain
         if domain is None:
             inherited = os.environ.get("ROS_DOMAIN_ID", "")
-            domain = int(inherited) if inherited.isdigit() else default_domain("sdrpeer")
+            ok = inherited.isdigit() and int(inherited) <= DOMAIN_MAX
+            domain = int(inherited) if ok else default_domain("sdrpeer")
         peers: list[str] = []
         if self.core is not None:
             peers = [
@@ -675,7 +677,7 @@ class Agent:
                 for m in self.core.members()
                 if m.state == MemberState.ALIVE and m.name != self.name
             ]
-        return process_env({}, Ros2Net(domain, tuple(peers)))
+        return Ros2Net(domain, tuple(peers)).env()  # the host fixes its library path itself
 
     def _remote_data_address(self, instance: str) -> str | None:
         """The TCP data address another alive robot's record gives for `instance` (None: no

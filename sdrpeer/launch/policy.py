@@ -58,6 +58,14 @@ class LaunchPolicy:
                 f"enable it in the agent's configuration: allow_launchers: "
                 f"[{', '.join((*extra, launcher))}] (or --allow-launcher {launcher})"
             )
+        if launcher == "ros2" and isinstance(target, str) and _is_file(target):
+            if "script" not in self.launchers:  # a file runs whatever it holds, as `script`
+                return (
+                    f"ros2 target {target!r} is a file: a file runs anything the agent's user "
+                    "can, so it needs the script launcher allowed too (allow_launchers: "
+                    "[ros2, script]); or name an installed module (package.module:Class)"
+                )
+            return None
         if launcher in PYTHON_LAUNCHERS and isinstance(target, str):
             return self._target_refusal(target, launcher)
         if launcher == "composite":  # allowed by name: its members are still python classes
@@ -87,6 +95,12 @@ class LaunchPolicy:
             if why is not None:
                 return f"composite member {member}: {why}"
         return None
+
+
+def _is_file(target: str) -> bool:
+    """Whether a python-style target names a file (`path/to/file.py[:Class]`)."""
+    where = target.rpartition(":")[0] if target.rpartition(":")[2].isidentifier() else target
+    return where.endswith(".py") or "/" in where
 
 
 DEFAULT_POLICY = LaunchPolicy()

@@ -179,7 +179,8 @@ class Publisher:
         self._record_at = -1e18
         self.urgent = False
         """Whether the last RECORD decided carries a placement others wait for: an instance's
-        state or role changed, or the plan it holds (`_placement_changed`)."""
+        state or role changed, the plan it holds, its claim of the allocator role
+        (`_placement_changed`)."""
 
     def decide(self, now: float, new: RobotRecord, *, force: bool = False) -> str:
         """RECORD, VITALS or NONE for this sample; the caller publishes what it says."""
@@ -252,9 +253,13 @@ def _identity_changed(a: RobotRecord, b: RobotRecord) -> bool:
 
 def _placement_changed(a: RobotRecord, b: RobotRecord) -> bool:
     """Whether `b` says something about placements that `a` did not: an instance added,
-    removed, or changed in state or role, or another plan held (what a robot taking over a
-    component, or the allocator, waits for)."""
+    removed, or changed in state or role, another plan held, or a claim of the allocator role
+    made or dropped (what a robot taking over a component, or the fleet, waits for)."""
     if a.plan != b.plan:
+        return True
+    if (a.election is not None and a.election.claiming) != (
+        b.election is not None and b.election.claiming
+    ):  # a claim of the allocator role (one robot's record, not every follower's belief)
         return True
     return [(i.name, i.state, i.role) for i in a.instances] != [
         (i.name, i.state, i.role) for i in b.instances

@@ -74,7 +74,7 @@ class RtcComponent(Component):
                 value = source.get_nowait()
                 try:
                     out.append((port, from_sdrpeer(value, repo)))
-                except ValueError as exc:
+                except (ValueError, TypeError) as exc:  # a frame of the wrong shape: dropped
                     log.warning(
                         "%s: %s: frame not written to the RTC: %s", self.instance_name, port, exc
                     )

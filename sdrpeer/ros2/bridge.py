@@ -55,6 +55,9 @@ __all__ = [
 ]
 
 log = logging.getLogger("sdrpeer.ros2.bridge")
+QUEUE_MAX = 4096
+"""Messages a FromRos bridge holds for its loop at most (a flood the loop cannot keep up with
+drops the oldest, as DDS's keep-last does, rather than growing without bound)."""
 RELIABILITY = ("reliable", "best_effort")
 DURABILITY = ("volatile", "transient_local")
 
@@ -148,8 +151,13 @@ class _Bridge(RosEndpoint):
     def port_counters(self) -> dict[str, dict[str, int]]:
         out = super().port_counters()
         key = "in" if self._direction == "subscribes" else "out"
-        out[self.param_values()["topic"]] = {f"frames_{key}": self.frames}
+        counts = {f"frames_{key}": self.frames}
+        counts.update({k: v for k, v in self._drops().items() if v})
+        out[self.param_values()["topic"]] = counts
         return out
+
+    def _drops(self) -> dict[str, int]:
+        return {}
 
 
 class _FromRos(_Bridge):
@@ -164,6 +172,10 @@ class _FromRos(_Bridge):
         self._batch: deque[Any] = deque()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._decode_raw: Callable[[bytes], Any] = bytes
+        self.malformed = 0
+        """Messages that did not decode (dropped)."""
+        self.overflowed = 0
+        """Messages dropped because `QUEUE_MAX` waited for the loop already."""
         self._active = False
 
     async def on_initialize(self) -> None:
@@ -180,29 +192,59 @@ class _FromRos(_Bridge):
             self._decode_raw = raw
 
     def _heard_raw(self, data: bytes) -> None:
-        """In the executor thread: a raw message of a fixed-layout type."""
-        if self._active:
-            self._queue(self._decode_raw(data))
+        """In the executor thread: a raw message of a fixed-layout type (one that does not
+        decode is dropped and counted: any participant of the domain may send it)."""
+        if not self._active:
+            return
+        try:
+            value = self._decode_raw(data)
+        except ValueError as exc:
+            self._malformed(exc)
+            return
+        self._queue(value)
 
     def _heard(self, msg: Any) -> None:
         """In the executor thread: queue the converted value; wake the loop once per batch."""
         if not self._active:
             return
         mapping = self._mapping
-        self._queue(message_to_map(msg) if mapping is None else mapping.from_ros(msg))
+        try:
+            value = message_to_map(msg) if mapping is None else mapping.from_ros(msg)
+        except (ValueError, TypeError, AttributeError) as exc:
+            self._malformed(exc)
+            return
+        self._queue(value)
+
+    def _malformed(self, exc: Exception) -> None:
+        self.malformed += 1
+        if self.malformed in (1, 10, 100) or self.malformed % 1000 == 0:
+            log.warning(
+                "%s: %d malformed message(s) dropped: %s", self.instance_name, self.malformed, exc
+            )
 
     def _queue(self, value: Any) -> None:
+        """Hand a value to the loop; past `QUEUE_MAX` waiting the oldest is dropped (counted)."""
         batch = self._batch
+        if len(batch) >= QUEUE_MAX:
+            batch.popleft()
+            self.overflowed += 1
         batch.append(value)
         if len(batch) == 1 and self._loop is not None:
             self._loop.call_soon_threadsafe(self._flush)
 
     def _flush(self) -> None:
-        """On the loop: write everything that arrived."""
+        """On the loop: write everything that arrived (nothing once no longer ACTIVE)."""
         batch, out = self._batch, self.outport("out")
-        while batch:
-            out.write(batch.popleft())
-            self.frames += 1
+        try:
+            while batch and self._active:
+                out.write(batch.popleft())
+                self.frames += 1
+        finally:
+            if batch and self._active and self._loop is not None:  # a write raised: go on later
+                self._loop.call_soon(self._flush)
+
+    def _drops(self) -> dict[str, int]:
+        return {"malformed": self.malformed, "overflowed": self.overflowed}
 
     def on_activated(self) -> None:
         self._active = True

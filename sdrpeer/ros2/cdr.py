@@ -9,7 +9,7 @@ implementations write it: a 4-byte encapsulation header (its second byte 1: litt
 big-endian), then the fields, each aligned to its own size counted from the end of that header
 (a string: a uint32 length with its terminating NUL, the bytes, no alignment of its own). Types
 with sequences (`RangeScan`, `Image`) or many optional fields (`BatteryState`) keep rclpy's own
-deserializer (`decoder_for` is None for them). A message that is too short is a ValueError.
+deserializer (`decoder_for` is None for them). Bytes that are not such a message are a ValueError.
 """
 
 from __future__ import annotations
@@ -96,5 +96,16 @@ _DECODERS: Final[dict[type, Callable[[bytes], Any]]] = {
 
 
 def decoder_for(kind: type | None) -> Callable[[bytes], Any] | None:
-    """The raw decoder of a standard type with a fixed layout, None for the others."""
-    return None if kind is None else _DECODERS.get(kind)
+    """The raw decoder of a standard type with a fixed layout (ValueError for bytes that are
+    not one), None for the others."""
+    decode = None if kind is None else _DECODERS.get(kind)
+    if decode is None:
+        return None
+
+    def checked(data: bytes) -> Any:
+        try:
+            return decode(data)
+        except struct.error as exc:
+            raise ValueError(f"not a serialized {kind.__name__ if kind else ''}: {exc}") from None
+
+    return checked

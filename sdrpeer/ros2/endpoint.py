@@ -3,9 +3,11 @@
 
 How it works: `_start(make)` initialises rclpy in a `Spinner` (sdrpeer.ros2.spin) and, in its
 thread, makes a node named after the instance, puts the watch timer on it, lets `make(node)` add
-the subscription, publisher, client or service, and spins it; `on_execute` turns a stopped or
-stuck executor into an error (ERROR for recovery); `on_finalize` destroys the node and shuts
-rclpy down. Subclasses choose the executor (`executor`: events or single).
+the subscription, publisher, client or service, and spins it; `on_execute` turns a stopped or stuck
+executor into an error (ERROR for recovery), and `on_reset` refuses to clear it (the host is
+restarted instead); `on_finalize` destroys the node (unless the executor sits in a callback) and
+shuts rclpy down. A callback of a subclass must not raise: rclpy would end the executor's thread.
+Subclasses choose the executor (`executor`: events or single).
 """
 
 from __future__ import annotations
@@ -15,7 +17,10 @@ from typing import Any, ClassVar
 
 from sdrpeer.sdk import Component, Param
 
-__all__ = ["RosEndpoint", "node_name"]
+__all__ = ["TEARDOWN", "RosEndpoint", "node_name"]
+
+TEARDOWN = 3.0
+"""Seconds a teardown step waits for rclpy's executor (it skips rclpy when stuck)."""
 
 
 def node_name(instance: str) -> str:
@@ -41,6 +46,8 @@ class RosEndpoint(Component):
 
         from sdrpeer.ros2.spin import Spinner  # noqa: PLC0415 - loads rclpy
 
+        if self._spinner is not None:  # a reset after a failed initialize: rclpy again
+            await self.on_finalize()
         spinner = self._spinner = Spinner(executor=self.executor)
 
         def made() -> None:
@@ -50,17 +57,35 @@ class RosEndpoint(Component):
             make(node)
             spinner.executor.add_node(node)
 
-        await spinner.call(made)
+        try:
+            await spinner.call(made)
+        except BaseException:
+            await self.on_finalize()
+            raise
+
+    def stuck_limit(self) -> float:
+        """Seconds the executor may sit in one callback before the component is in ERROR."""
+        return float(self.param_values()["stuck_after"])
 
     def on_execute(self) -> None:
         if self._spinner is not None:
-            self._spinner.check(float(self.param_values()["stuck_after"]))
+            self._spinner.check(self.stuck_limit())
+
+    def on_reset(self) -> None:
+        """A stopped or stuck executor cannot be reset: the error stays (recovery restarts the
+        host)."""
+        if self._spinner is not None:
+            self._spinner.check(self.stuck_limit())
 
     async def on_finalize(self) -> None:
         spinner, self._spinner = self._spinner, None
         if spinner is None:
             return
-        node = self._node
-        if spinner.alive and node is not None:
-            await spinner.call(lambda: (spinner.executor.remove_node(node), node.destroy_node()))
-        spinner.close()
+        node, self._node = self._node, None
+        try:
+            if spinner.usable and node is not None:
+                await spinner.call(
+                    lambda: (spinner.executor.remove_node(node), node.destroy_node()), TEARDOWN
+                )
+        finally:
+            spinner.close()

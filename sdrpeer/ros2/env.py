@@ -10,9 +10,10 @@ Python process once to set it); `process_env` sets it, marks the bootstrap done 
 re-executes, and points `AMENT_PREFIX_PATH` at the prefix (the message packages' index).
 
 DDS discovery (`Ros2Net`): a fleet is one ROS 2 domain (`ROS_DOMAIN_ID`, 0..101: the agent's
-`ros2_domain` setting, by default one derived from the cluster's name so two fleets on one network
-do not mix). Automatic discovery is kept on the robot's own machine (`ROS_AUTOMATIC_DISCOVERY_RANGE
-=LOCALHOST`: no multicast onto the lab's Wi-Fi) and the other robots are named as static peers
+`ros2_domain` setting; by default the agent's own ROS_DOMAIN_ID, else `default_domain("sdrpeer")`,
+a fixed domain other than 0, so stock ROS 2 nodes on a robot do not join the fleet's graph).
+Automatic discovery is kept on the robot's own machine (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`:
+no multicast onto the lab's Wi-Fi) and the other robots are named as static peers
 (`ROS_STATIC_PEERS`, their addresses from the membership), so a fleet's nodes on different robots
 find each other and nothing else does.
 """

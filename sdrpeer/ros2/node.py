@@ -41,6 +41,8 @@ from sdrpeer.sdk import Component, Param, Periodic
 __all__ = ["HIDDEN_SERVICES", "HIDDEN_TOPICS", "Ros2Node", "ros_type_name"]
 
 log = logging.getLogger("sdrpeer.ros2.node")
+TEARDOWN: Final = 3.0
+"""Seconds a deactivation or teardown step waits for rclpy's executor."""
 RESCAN: Final = 1.0
 """Seconds between looks for endpoints the node made after it was constructed."""
 SAMPLE: Final = 32
@@ -147,7 +149,6 @@ class Ros2Node(Component):
         self._spinner: Any = None
         self._timer: Any = None
         self._endpoints: dict[str, _Counted] = {}
-        self._wrapped: set[int] = set()  # ids of the endpoints already counted
         self._keeper: Any = None
 
     def convert_params(self, values: Mapping[str, Any]) -> dict[str, Any]:
@@ -163,17 +164,23 @@ class Ros2Node(Component):
     async def on_initialize(self) -> None:
         from sdrpeer.ros2.spin import Spinner  # noqa: PLC0415 - loads rclpy
 
+        if self._spinner is not None:  # a reset after a failed initialize: rclpy again
+            await self._close()
         args: list[str] = []
         for k, v in sorted(self.ros_params.items()):
             args += ["-p", f"{k}:={json.dumps(v) if not isinstance(v, str) else v}"]
         self._spinner = Spinner(
             args=["--ros-args", *args] if args else (), executor=self.param_values()["executor"]
         )
-        if self.lifecycle:
-            await self._spinner.call(self._make)
-            await self._transition("configure")
-        else:
-            await self._spinner.call(self._keep)
+        try:
+            if self.lifecycle:
+                await self._spinner.call(self._make)
+                await self._transition("configure")
+            else:
+                await self._spinner.call(self._keep)
+        except BaseException:
+            await self._close()
+            raise
 
     async def on_activated(self) -> None:
         if self.lifecycle:
@@ -188,23 +195,39 @@ class Ros2Node(Component):
         await self._stop()
 
     async def on_reset(self) -> None:
-        if self._spinner is not None and not self._spinner.alive:
-            raise RuntimeError("the rclpy executor stopped; the host must restart")
-
-    async def on_finalize(self) -> None:
+        """ERROR -> INACTIVE: a stopped or stuck executor cannot be reset (the error stays and
+        recovery restarts the host); a lifecycle node is made and configured afresh (after a
+        transition that returned ERROR, rclpy leaves it unconfigured or finalized)."""
         spinner = self._spinner
         if spinner is None:
             return
-        if self.node is not None and spinner.alive:
-            if self.lifecycle:
-                for name in ("deactivate", "cleanup", "shutdown"):
-                    await spinner.call(lambda n=name: self._trigger(n, strict=False))
-            await spinner.call(self._destroy)
-        keeper, self._keeper = self._keeper, None
-        if keeper is not None and spinner.alive:
-            await spinner.call(keeper.destroy_node)
-        spinner.close()
-        self._spinner = None
+        spinner.check(float(self.param_values()["stuck_after"]))
+        if self.lifecycle:
+            await spinner.call(self._destroy, TEARDOWN)
+            await spinner.call(self._make)
+            await self._transition("configure")
+
+    async def on_finalize(self) -> None:
+        await self._close()
+
+    async def _close(self) -> None:
+        """The node and the hidden one destroyed (when the executor can still do it), rclpy
+        shut down."""
+        spinner = self._spinner
+        if spinner is None:
+            return
+        try:
+            if self.node is not None and spinner.usable:
+                if self.lifecycle:
+                    for name in ("deactivate", "cleanup", "shutdown"):
+                        await spinner.call(lambda n=name: self._trigger(n, strict=False), TEARDOWN)
+                await spinner.call(self._destroy, TEARDOWN)
+            keeper, self._keeper = self._keeper, None
+            if keeper is not None and spinner.usable:
+                await spinner.call(keeper.destroy_node, TEARDOWN)
+        finally:
+            self._spinner = None
+            spinner.close()
 
     def on_execute(self) -> None:
         if self._spinner is not None and self.node is not None:
@@ -245,15 +268,17 @@ class Ros2Node(Component):
         self._spinner.executor.remove_node(node)
         node.destroy_node()
         self._endpoints.clear()
-        self._wrapped.clear()
 
     async def _stop(self) -> None:
-        if self._spinner is None or not self._spinner.alive or self.node is None:
+        """Deactivate or destroy the node; nothing when the executor sits in a callback (it
+        would wait behind it: the component is in ERROR and its host restarted by recovery)."""
+        spinner = self._spinner
+        if spinner is None or not spinner.usable or self.node is None:
             return
         if self.lifecycle:
-            await self._spinner.call(lambda: self._trigger("deactivate", strict=False))
+            await spinner.call(lambda: self._trigger("deactivate", strict=False), TEARDOWN)
         else:
-            await self._spinner.call(self._destroy)
+            await spinner.call(self._destroy, TEARDOWN)
 
     async def _transition(self, name: str) -> None:
         await self._spinner.call(lambda: self._trigger(name, strict=True))
@@ -310,11 +335,11 @@ class Ros2Node(Component):
             srv.callback = _counting_callback(srv.callback, c, sized=False)
 
     def _new(self, endpoint: Any) -> bool:
-        """True the first time an endpoint is seen (it is then counted)."""
-        key = id(endpoint)
-        if key in self._wrapped:
+        """True the first time an endpoint is seen (it is then counted); the mark is on the
+        endpoint itself (an id could be reused by a later one)."""
+        if getattr(endpoint, "_sdrpeer_counted", False):
             return False
-        self._wrapped.add(key)
+        endpoint._sdrpeer_counted = True
         return True
 
     # -- what the agent sees --------------------------------------------------------------

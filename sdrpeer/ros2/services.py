@@ -8,9 +8,10 @@ services declares `ServiceConsumer(ROS2_SERVICE)` and binds it (`from: Comp.port
 fills the request message, calls the ROS 2 service (`timeout` seconds) and answers with the
 response's fields. A component that serves ROS 2 clients provides `ServiceProvider(ROS2_SERVICE)`
 with a `call(request) -> response` handler and is bound from a `ros2_service:` end: the bridge
-`FromRosService` offers the ROS 2 service and hands each request to the component (the answer
-fills the response; a failure is logged and answers an empty response, since ROS 2 services have
-no error reply). Both are `ros2`-launcher components like the topic bridges (sdrpeer.ros2.bridge).
+`FromRosService` offers the ROS 2 service while ACTIVE (a standby offers nothing, so ROS 2 clients
+never reach two servers) and hands each request to the component (the answer fills the response;
+a failure is logged and answers the response's defaults, since ROS 2 services have no error
+reply). Both are `ros2`-launcher components like the topic bridges (sdrpeer.ros2.bridge).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import logging
 from typing import Any
 
 from sdrpeer.ros2.bridge import import_ros_type
-from sdrpeer.ros2.endpoint import RosEndpoint
+from sdrpeer.ros2.endpoint import TEARDOWN, RosEndpoint
 from sdrpeer.ros2.types import fill, message_to_map
 from sdrpeer.sdk import Param, Periodic
 from sdrpeer.sdk.services import Interface, ServiceCallError, ServiceConsumer, ServiceProvider
@@ -93,8 +94,12 @@ class ToRosService(_ServiceBridge):
             loop.call_soon_threadsafe(_settle, done, f)
 
         future.add_done_callback(settled)
-        async with asyncio.timeout(float(p["timeout"])):
-            response = await done
+        try:
+            async with asyncio.timeout(float(p["timeout"])):
+                response = await done
+        except TimeoutError:
+            client.remove_pending_request(future)  # its answer, if it comes, goes nowhere
+            raise
         return message_to_map(response)
 
 
@@ -114,26 +119,57 @@ class FromRosService(_ServiceBridge):
     ros = ServiceConsumer(ROS2_SERVICE, "the component that answers the ROS 2 service")
     _direction = "serves"
 
+    def __init__(self, name: str | None = None, params: dict[str, Any] | None = None) -> None:
+        super().__init__(name, params)
+        self._server: Any = None
+        self._srv: type | None = None
+
     async def on_initialize(self) -> None:
         self._loop = asyncio.get_running_loop()
         await super().on_initialize()
 
     def _endpoint(self, node: Any, srv: type) -> None:
-        node.create_service(srv, self.param_values()["service"], self._serve)
+        self._srv = srv  # the service itself exists only while ACTIVE: a standby answers nobody
+
+    async def on_activated(self) -> None:
+        node, srv, service = self._node, self._srv, self.param_values()["service"]
+        self._server = await self._spinner.call(
+            lambda: node.create_service(srv, service, self._serve)
+        )
+
+    async def on_deactivated(self) -> None:
+        server, self._server = self._server, None
+        spinner = self._spinner
+        if server is not None and spinner is not None and spinner.usable:
+            await spinner.call(lambda: self._node.destroy_service(server), TEARDOWN)
+
+    async def on_aborting(self) -> None:
+        await self.on_deactivated()
+
+    def stuck_limit(self) -> float:
+        """A request waits up to `timeout` (+1 s) for the component in rclpy's thread: that is
+        not a stuck executor."""
+        p = self.param_values()
+        return max(float(p["stuck_after"]), float(p["timeout"]) + 2.0)
 
     def _serve(self, request: Any, response: Any) -> Any:
-        """In rclpy's executor thread: ask the component, wait for its answer (bounded)."""
+        """In rclpy's executor thread: ask the component, wait for its answer (bounded). A
+        request it cannot answer is answered with the response's defaults (ROS 2 services have
+        no error reply) and logged; nothing raised here reaches rclpy's thread."""
         self.calls += 1
         timeout = float(self.param_values()["timeout"])
-        caller = self.consumer("ros")
-        job = asyncio.run_coroutine_threadsafe(
-            caller.call("call", message_to_map(request), timeout=timeout), self._loop
-        )
         try:
+            caller = self.consumer("ros")
+            job = asyncio.run_coroutine_threadsafe(
+                caller.call("call", message_to_map(request), timeout=timeout), self._loop
+            )
             answer = job.result(timeout + 1.0)
+            if isinstance(answer, dict):
+                fill(response, answer)
         except (ServiceCallError, concurrent.futures.TimeoutError) as exc:
             log.warning("%s: the component did not answer: %s", self.instance_name, exc)
-            return response
-        if isinstance(answer, dict):
-            fill(response, answer)
+        except Exception as exc:  # a wrong answer (a field the response lacks), a closed loop
+            log.warning(
+                "%s: answered with defaults: %s: %s", self.instance_name, type(exc).__name__, exc
+            )
         return response

@@ -6,14 +6,14 @@ lifecycle); rclpy runs its callbacks in an executor that blocks while it waits. 
 initialises rclpy's default context (node classes make their nodes there; one per host process)
 with the ROS arguments it is given (parameter overrides), and an executor (`EventsExecutor`,
 rclpy's fastest, or the `SingleThreadedExecutor` that `rclpy.spin` uses) spun in a daemon thread.
-Everything that touches rclpy objects runs in that
-thread: `call(fn)` hands `fn` to the executor as a task (rclpy wakes at once) and returns an
-`asyncio` future of its result, so node construction, lifecycle transitions and destruction
-never race the callbacks. `stuck_for()` is how long the executor has been in one callback (the
-ROS 2 form of a hung `on_execute`; the hosting component turns it into an error): the spin loop
-notes the time each `spin_once` returns (it runs one callback, or returns after 0.1 s idle), and
-`watch(node)`'s 10 Hz timer on a node notes it too. A flood of messages, which can keep that
-timer queued behind thousands of callbacks for seconds, is not a stuck executor.
+Everything that touches rclpy objects runs in that thread: `await call(fn)` hands `fn` to the
+executor as a task (rclpy wakes at once) and returns its result, bounded in time, so node
+construction, lifecycle transitions and destruction never race the callbacks and never wait for
+ever behind a stuck one. `stuck_for()` is how long the executor has been in one callback (the ROS 2
+form of a hung `on_execute`; the hosting component turns it into an error): the spin loop notes the
+time each `spin_once` returns (it runs one callback, or returns after 0.1 s idle), and
+`watch(node)`'s 10 Hz timer on a node notes it too. A flood of messages, which can keep that timer
+queued behind thousands of callbacks for seconds, is not a stuck executor.
 """
 
 from __future__ import annotations
@@ -36,6 +36,11 @@ T = TypeVar("T")
 log = logging.getLogger("sdrpeer.ros2.spin")
 EXECUTORS = ("events", "single")
 _TICK = 0.1
+CALL_TIMEOUT = 30.0
+"""Seconds `call` waits for the executor by default (a node's constructor or `configure` may
+load a model)."""
+STUCK_SKIP = 0.5
+"""An executor this late coming back from a callback is not handed teardown work."""
 
 
 class Spinner:
@@ -69,8 +74,14 @@ class Spinner:
         """Whether the executor thread still runs."""
         return self._thread.is_alive()
 
-    def call(self, fn: Callable[[], T]) -> asyncio.Future[T]:
-        """Run `fn` in the executor's thread; its result (or exception) as an asyncio future."""
+    async def call(
+        self,
+        fn: Callable[[], T],
+        timeout: float = CALL_TIMEOUT,  # noqa: ASYNC109 - the bound is the call's contract
+    ) -> T:
+        """Run `fn` in the executor's thread and return its result (or raise its exception);
+        RuntimeError when the executor has stopped, or has not run it within `timeout` seconds
+        (it sits in a callback: the caller must not wait for it for ever)."""
         done: concurrent.futures.Future[T] = concurrent.futures.Future()
 
         def run() -> None:
@@ -82,10 +93,22 @@ class Spinner:
                 done.set_exception(exc)
 
         if not self.alive:
-            done.set_exception(RuntimeError("the rclpy executor has stopped"))
-        else:
-            self.executor.create_task(run)
-        return asyncio.wrap_future(done)
+            raise RuntimeError("the rclpy executor has stopped")
+        self.executor.create_task(run)
+        try:
+            async with asyncio.timeout(timeout):
+                return await asyncio.wrap_future(done)
+        except TimeoutError:
+            done.cancel()  # if it has not started, it never will
+            raise RuntimeError(
+                f"rclpy's executor did not get to it within {timeout:g} s (stuck in a callback)"
+            ) from None
+
+    @property
+    def usable(self) -> bool:
+        """Whether work handed to the executor will run: it is alive and not sitting in a
+        callback (teardown skips rclpy when it is not, rather than wait behind that callback)."""
+        return self.alive and self.stuck_for() < STUCK_SKIP
 
     def watch(self, node: Any) -> Any:
         """A 10 Hz timer on `node` that also tells `stuck_for` the executor comes round (the
