@@ -7,6 +7,9 @@ import os
 import socket
 import time
 from pathlib import Path
+from typing import Any
+
+import pytest
 
 from sdrpeer.runtime.launch import listening_unix_paths, sweep_private_dirs
 
@@ -43,3 +46,26 @@ def test_only_old_directories_whose_socket_is_gone_are_removed(tmp_path: Path) -
 
 def test_without_the_kernels_table_nothing_is_called_stale(tmp_path: Path) -> None:
     assert listening_unix_paths(str(tmp_path / "no-such-table")) is None
+
+
+def test_a_directory_another_agent_swept_first_is_no_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Agents share the base directory and sweep it as they start (a lab starts three at once):
+    # one may remove a stale directory between another's check and its own removal.
+    dead, _ = host_dir(tmp_path, "Dead", listening=False, age=600)
+    real_iterdir = Path.iterdir
+    calls = {"n": 0}
+
+    def iterdir_then_gone(self: Path) -> Any:
+        if self == dead:
+            calls["n"] += 1
+            if calls["n"] == 2:  # after the sweep's check: the other agent removes it now
+                for child in real_iterdir(self):
+                    child.unlink()
+                self.rmdir()
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir_then_gone)
+    assert sweep_private_dirs(time.time(), min_age=60, base=str(tmp_path)) == 1
+    assert not dead.exists()

@@ -183,8 +183,13 @@ def sweep_private_dirs(now: float, min_age: float = 60.0, base: str | None = Non
 
 
 def remove_dir(path: Path) -> None:
-    """Remove a host's private directory and what it left in it (best effort)."""
-    for child in path.iterdir():
+    """Remove a host's private directory and what it left in it (best effort: one already gone,
+    another agent's sweep being first, is no error)."""
+    try:
+        children = list(path.iterdir())
+    except OSError:
+        return
+    for child in children:
         with contextlib.suppress(OSError):
             child.unlink()
     with contextlib.suppress(OSError):
