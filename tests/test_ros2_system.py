@@ -138,6 +138,12 @@ def test_qos_given_on_the_end_wins() -> None:
             "field 'connections[0].to': OdomToPose has no port 'nope'",
         ),
         (
+            "  - {from: {ros2: /robot/odom}, to: F.odom}\n"
+            "  - {from: {ros2: /robot_odom}, to: F.odom}\n",
+            "sys.yaml:7: field 'connections[1].from': /robot_odom and /robot/odom (line 6) make "
+            "one bridge name, ros2-robot_odom-sub",
+        ),
+        (
             "  - {from: {ros2: /odom}, to: F.odom}\n"
             "  - {from: {ros2: /odom, qos: {depth: 2}}, to: F.odom}\n",
             "sys.yaml:7: field 'connections[1].from': /odom is bridged from ROS 2 at line 6 with "

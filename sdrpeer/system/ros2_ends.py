@@ -199,6 +199,15 @@ def bridge_for(
     )
     have = components.get(name)
     if have is not None and have.definition is not None:
+        other_topic = have.definition.params_map().get("topic")
+        if other_topic != end.topic:
+            p.add(
+                end.node,
+                field,
+                f"{end.topic} and {other_topic} (line {have.node.start_mark.line + 1}) make one "
+                f"bridge name, {name}; a system bridges only one of them (rename a topic in ROS 2)",
+            )
+            return MISSING, MISSING
         if replace(have.definition, standby=definition.standby) != definition:
             p.add(
                 end.node,
