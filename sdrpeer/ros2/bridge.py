@@ -101,7 +101,6 @@ class _Bridge(RosEndpoint):
         super().__init__(name, params)
         self._mapping = None if self.kind is None else mapping_for(self.kind)
         self.frames = 0
-        self.bytes_hint = 0
 
     def _ros_class(self) -> type:
         p = self.param_values()

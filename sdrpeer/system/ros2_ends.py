@@ -146,10 +146,43 @@ def _valid_type(kind: str) -> bool:
     return all(part.isidentifier() for part in parts) and len(parts) in (1, 2, 3)
 
 
-def bridge_name(topic: str, key: str) -> str:
-    """`ros2-odom-sub` for `from: {ros2: /odom}`, `ros2-robot1_pose-pub` for a `to:` end."""
-    body = topic.strip("/").replace("/", "_")
-    return f"ros2-{body}-{'sub' if key == 'from' else 'pub'}"
+def bridge_name(end: Ros2End, key: str) -> str:
+    """`ros2-odom-sub` for `from: {ros2: /odom}`, `ros2-robot1_pose-pub` for a `to:` end;
+    `-server` / `-client` for a service end."""
+    body = end.topic.strip("/").replace("/", "_")
+    roles = ("server", "client") if end.service else ("sub", "pub")
+    return f"ros2-{body}-{roles[0] if key == 'from' else roles[1]}"
+
+
+def _definition(
+    name: str, target: str, params: dict[str, Any], standby: StandbySpec | None
+) -> ComponentDef:
+    """A bridge component: the ros2 launcher, a ROS 2 process's needs, its peer's standbys."""
+    return ComponentDef(
+        name,
+        "ros2",
+        target,
+        tuple(sorted(params.items())),
+        requires=BRIDGE_NEEDS,
+        standby=standby or StandbySpec(),
+    )
+
+
+def _same_name(p: Problems, end: Ros2End, field: str, have: ComponentEntry, name: str) -> bool:
+    """False (recorded) when the bridge already called `name` serves another topic or service
+    (`/a/b` and `/a_b` make one name)."""
+    assert have.definition is not None
+    params = have.definition.params_map()
+    other = params.get("service" if end.service else "topic")
+    if other == end.topic:
+        return True
+    p.add(
+        end.node,
+        field,
+        f"{end.topic} and {other} (line {have.node.start_mark.line + 1}) make one bridge name, "
+        f"{name}; a system bridges only one of them (rename one in ROS 2)",
+    )
+    return False
 
 
 def bridge_for(
@@ -171,7 +204,7 @@ def bridge_for(
     keeps the standbys of the component at the sdrpeer end (`standby`), so that it fails over
     as fast as that component does."""
     if end.service:
-        return _service_bridge(p, end, key, components, standby)
+        return _service_bridge(p, end, key, field=field, components=components, standby=standby)
     settled = _settle_type(p, end, field, peer_type)
     if settled is None:
         return MISSING, MISSING
@@ -188,25 +221,11 @@ def bridge_for(
     from sdrpeer.ros2 import bridge  # noqa: PLC0415 - its classes by name
 
     cls_name = bridge_class_name(key, kind)
-    name = bridge_name(end.topic, key)
-    definition = ComponentDef(
-        name,
-        "ros2",
-        f"sdrpeer.ros2.bridge:{cls_name}",
-        tuple(sorted(params.items())),
-        requires=BRIDGE_NEEDS,
-        standby=standby or StandbySpec(),
-    )
+    name = bridge_name(end, key)
+    definition = _definition(name, f"sdrpeer.ros2.bridge:{cls_name}", params, standby)
     have = components.get(name)
     if have is not None and have.definition is not None:
-        other_topic = have.definition.params_map().get("topic")
-        if other_topic != end.topic:
-            p.add(
-                end.node,
-                field,
-                f"{end.topic} and {other_topic} (line {have.node.start_mark.line + 1}) make one "
-                f"bridge name, {name}; a system bridges only one of them (rename a topic in ROS 2)",
-            )
+        if not _same_name(p, end, field, have, name):
             return MISSING, MISSING
         if replace(have.definition, standby=definition.standby) != definition:
             p.add(
@@ -229,6 +248,8 @@ def _service_bridge(
     p: Problems,
     end: Ros2End,
     key: str,
+    *,
+    field: str,
     components: dict[str, ComponentEntry],
     standby: StandbySpec | None,
 ) -> tuple[str, str]:
@@ -236,19 +257,13 @@ def _service_bridge(
     from sdrpeer.ros2 import services  # noqa: PLC0415 - its classes by name
 
     cls_name = "FromRosService" if key == "from" else "ToRosService"
-    body = end.topic.strip("/").replace("/", "_")
-    name = f"ros2-{body}-{'server' if key == 'from' else 'client'}"
+    name = bridge_name(end, key)
     params = {"service": end.topic, "srv_type": end.type}
-    definition = ComponentDef(
-        name,
-        "ros2",
-        f"sdrpeer.ros2.services:{cls_name}",
-        tuple(sorted(params.items())),
-        requires=BRIDGE_NEEDS,
-        standby=standby or StandbySpec(),
-    )
+    definition = _definition(name, f"sdrpeer.ros2.services:{cls_name}", params, standby)
     have = components.get(name)
-    if have is not None:
+    if have is not None and have.definition is not None:
+        if not _same_name(p, end, field, have, name):
+            return MISSING, MISSING
         if key == "from":
             p.add(end.node, "connections", f"{end.topic} is served by one component only")
             return MISSING, MISSING
